@@ -1,0 +1,234 @@
+"""Validated scene configuration (pydantic v2, extra="forbid", SI units in field names).
+
+A scene = pad geometry + indenter + loading protocol + sampling + sensor physics + generation settings.
+Every value is SI; strings with units ("5 mm", "1.85 MPa") are converted on load (scenes.units).
+Defaults without a source in the papers are marked `# estimate`.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from scenes.units import parse_quantity
+
+PositiveFloat = Annotated[float, Field(gt=0)]
+NonNegFloat = Annotated[float, Field(ge=0)]
+Fraction = Annotated[float, Field(ge=0, le=1)]
+
+
+class Strict(BaseModel):
+    """Base: unknown fields are errors, values with units are converted to SI before validation."""
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True, frozen=False)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _units(cls, data: object) -> object:
+        if isinstance(data, dict):
+            return {k: parse_quantity(k, v) if isinstance(k, str) else v for k, v in data.items()}
+        return data
+
+
+class PadConfig(Strict):
+    """The sensing pad: a box of elastomer with a regular taxel grid on its top surface."""
+
+    size_x_m: PositiveFloat = 0.030  # cnt_pdms Table 1
+    size_y_m: PositiveFloat = 0.030  # cnt_pdms Table 1
+    thickness_m: PositiveFloat = 0.005  # cnt_pdms Table 1
+    taxels_x: Annotated[int, Field(ge=1, le=1024)] = 15  # estimate: 2 mm pitch
+    taxels_y: Annotated[int, Field(ge=1, le=1024)] = 15  # estimate
+    youngs_modulus_pa: PositiveFloat = 1.85e6  # cnt_pdms Table 1
+    poisson_ratio: Annotated[float, Field(ge=0.0, lt=0.5)] = 0.49  # estimate: near-incompressible PDMS
+    density_kg_per_m3: PositiveFloat = 1030.0  # estimate: Sylgard 184
+    spread_length_m: PositiveFloat = 0.0015  # estimate: elastic-layer kernel width ~ 0.3 x thickness
+
+    @property
+    def n_taxels(self) -> int:
+        return self.taxels_x * self.taxels_y
+
+
+class IndenterConfig(Strict):
+    """A rigid indenter on a vertical slide joint (with x/y set per episode)."""
+
+    shape: Literal["box", "sphere"] = "box"
+    size_x_m: PositiveFloat = 0.010  # estimate: 10 x 10 mm flat punch
+    size_y_m: PositiveFloat = 0.010  # estimate
+    radius_m: PositiveFloat = 0.005  # used when shape == "sphere"
+    mass_kg: PositiveFloat = 0.05  # estimate
+    friction: NonNegFloat = 0.8  # estimate: PDMS on steel
+    position_jitter_m: NonNegFloat = 0.003  # estimate: random x/y offset of the press per episode
+    start_gap_m: NonNegFloat = 0.0  # gap between indenter and pad at t=0
+
+
+class ProtocolConfig(Strict):
+    """Loading protocol.
+
+    kind = "sinusoid": d(t) = d0 [1 - cos(2 pi f t)] / 2 (cnt_pdms sect. 3.2), displacement or force amplitude.
+    kind = "hold": ramp to a level in `ramp_s`, hold for the rest of the episode (creep / relaxation).
+    """
+
+    kind: Literal["sinusoid", "hold"] = "sinusoid"
+    control: Literal["displacement", "force"] = "displacement"
+    frequencies_hz: list[PositiveFloat] = Field(default_factory=lambda: [0.1, 0.5, 1.0, 2.0])  # cnt_pdms
+    cycles: Annotated[int, Field(ge=1, le=1000)] = 3  # estimate
+    amplitude_min: NonNegFloat = 4.0e-5  # m (displacement) or N (force); estimate: spans 0-Fmax
+    amplitude_max: PositiveFloat = 1.6e-4  # m or N; estimate: Fmax ~ 5 N (cnt_pdms R^2/RMSE imply ~1.2 N std)
+    ramp_s: PositiveFloat = 0.5  # for kind="hold"
+    duration_s: PositiveFloat = 20.0  # for kind="hold"; sinusoids last cycles / f
+    settle_s: NonNegFloat = 0.2  # rest before loading starts
+
+    @model_validator(mode="after")
+    def _check(self) -> "ProtocolConfig":
+        if self.amplitude_min > self.amplitude_max:
+            raise ValueError(
+                f"protocol.amplitude_min ({self.amplitude_min}) must be <= protocol.amplitude_max ({self.amplitude_max})"
+            )
+        if not self.frequencies_hz:
+            raise ValueError("protocol.frequencies_hz must list at least one frequency")
+        return self
+
+
+class SamplingConfig(Strict):
+    sample_rate_hz: PositiveFloat = 100.0  # cnt_pdms Table 1
+    physics_timestep_s: PositiveFloat = 0.001  # MuJoCo step; estimate
+
+    @model_validator(mode="after")
+    def _check(self) -> "SamplingConfig":
+        ratio = 1.0 / (self.sample_rate_hz * self.physics_timestep_s)
+        if abs(ratio - round(ratio)) > 1e-6 or round(ratio) < 1:
+            raise ValueError(
+                f"sampling.physics_timestep_s ({self.physics_timestep_s}) must divide the sample period "
+                f"1/sample_rate_hz ({1.0 / self.sample_rate_hz}) a whole number of times"
+            )
+        return self
+
+    @property
+    def substeps(self) -> int:
+        return int(round(1.0 / (self.sample_rate_hz * self.physics_timestep_s)))
+
+
+class MechanicsConfig(Strict):
+    """Nonlinear elastic law + generalized Maxwell (Prony) series. Source: Ferry, Viscoelastic Properties of Polymers (1980)."""
+
+    lock_strain: Annotated[float, Field(gt=0, le=1)] = 0.5  # estimate: sigma = E e / (1 - e/e_lock)
+    prony_fractions: list[NonNegFloat] = Field(default_factory=lambda: [0.35, 0.25, 0.15])  # estimate
+    prony_times_s: list[PositiveFloat] = Field(default_factory=lambda: [0.08, 0.8, 8.0])  # estimate
+
+    @model_validator(mode="after")
+    def _check(self) -> "MechanicsConfig":
+        if len(self.prony_fractions) != len(self.prony_times_s):
+            raise ValueError("sensor.mechanics.prony_fractions and prony_times_s must have the same length")
+        if len(self.prony_fractions) > 8:
+            raise ValueError("sensor.mechanics allows at most 8 Prony terms")
+        return self
+
+
+class HysteresisConfig(Strict):
+    """Prandtl-Ishlinskii play bank on the network strain. Source: Brokate & Sprekels, Hysteresis and Phase Transitions (1996)."""
+
+    play_thresholds: list[NonNegFloat] = Field(default_factory=lambda: [0.001, 0.002, 0.004, 0.008])  # estimate, strain
+    play_weights: list[NonNegFloat] = Field(default_factory=lambda: [0.08, 0.08, 0.08, 0.08])  # estimate
+    recovery_time_s: PositiveFloat = 30.0  # estimate: slow relaxation of play states toward the input at rest
+
+    @model_validator(mode="after")
+    def _check(self) -> "HysteresisConfig":
+        if len(self.play_thresholds) != len(self.play_weights):
+            raise ValueError("sensor.hysteresis.play_thresholds and play_weights must have the same length")
+        if len(self.play_weights) > 16:
+            raise ValueError("sensor.hysteresis allows at most 16 play operators")
+        if sum(self.play_weights) >= 1.0:
+            raise ValueError("sensor.hysteresis.play_weights must sum to < 1 (the rest is the direct path)")
+        return self
+
+
+class TunnelingConfig(Strict):
+    """Tunneling/percolation resistance R = R0 (1 - e) exp(-gamma s0 e). Source: Simmons, J. Appl. Phys. 34, 1793 (1963)."""
+
+    conductivity_s_per_m: PositiveFloat = 0.12  # cnt_pdms Table 1
+    gamma_s0: PositiveFloat = 20.0  # estimate: tunneling barrier x initial gap
+    gap_time_s: PositiveFloat = 0.12  # estimate: network gap strain lags the mechanical strain
+
+
+class ElectronicsConfig(Strict):
+    """Wheatstone bridge + in-amp + ADC + digital Butterworth. Source: cnt_pdms sect. 2.2; NI USB-6009 datasheet."""
+
+    excitation_v: PositiveFloat = 1.0  # estimate
+    bridge_resistance_ohm: PositiveFloat | None = None  # None: balanced at the unloaded sensor resistance
+    amp_gain: PositiveFloat = 40.0  # estimate
+    amp_offset_v: float = 0.0
+    white_noise_v: NonNegFloat = 5e-4  # estimate: rms at the ADC input
+    pink_noise_v: NonNegFloat = 5e-4  # estimate: rms of the 1/f component at the ADC input
+    adc_bits: Annotated[int, Field(ge=4, le=24)] = 14  # cnt_pdms Table 1 (NI USB-6009)
+    adc_range_v: PositiveFloat = 10.0  # NI USB-6009 differential +-10 V
+    filter_order: Annotated[int, Field(ge=0, le=8)] = 4  # cnt_pdms sect. 2.2 (0 disables)
+    filter_cutoff_hz: PositiveFloat = 10.0  # cnt_pdms sect. 2.2
+
+    @field_validator("filter_order")
+    @classmethod
+    def _even(cls, v: int) -> int:
+        if v % 2:
+            raise ValueError(f"sensor.electronics.filter_order must be even (0, 2, 4, 6, 8); got {v}")
+        return v
+
+
+class CntPdmsSensorConfig(Strict):
+    family: Literal["cnt_pdms"] = "cnt_pdms"
+    mechanics: MechanicsConfig = Field(default_factory=MechanicsConfig)
+    hysteresis: HysteresisConfig = Field(default_factory=HysteresisConfig)
+    tunneling: TunnelingConfig = Field(default_factory=TunnelingConfig)
+    electronics: ElectronicsConfig = Field(default_factory=ElectronicsConfig)
+
+
+class GenerationConfig(Strict):
+    episodes: Annotated[int, Field(ge=1, le=10_000_000)] = 32
+    episodes_per_shard: Annotated[int, Field(ge=1)] = 16
+    root_seed: Annotated[int, Field(ge=0, lt=2**63)] = 0
+    compression: Literal["lzf", "gzip", "none"] = "lzf"
+    threads: Annotated[int, Field(ge=1, le=256)] = 2
+    device: Literal["cpu", "cuda", "auto"] = "cpu"
+
+
+class SceneConfig(Strict):
+    """The whole scene: what `piezotwin generate` reads."""
+
+    name: str = "cnt_pdms"
+    paper: str = "cnt_pdms"
+    pad: PadConfig = Field(default_factory=PadConfig)
+    indenter: IndenterConfig = Field(default_factory=IndenterConfig)
+    protocol: ProtocolConfig = Field(default_factory=ProtocolConfig)
+    sampling: SamplingConfig = Field(default_factory=SamplingConfig)
+    sensor: CntPdmsSensorConfig = Field(default_factory=CntPdmsSensorConfig)
+    generation: GenerationConfig = Field(default_factory=GenerationConfig)
+
+    @model_validator(mode="after")
+    def _cross(self) -> "SceneConfig":
+        nyq = self.sampling.sample_rate_hz / 2.0
+        for f in self.protocol.frequencies_hz:
+            if f >= nyq / 5.0:
+                raise ValueError(
+                    f"protocol.frequencies_hz: {f} Hz cannot be resolved at sampling.sample_rate_hz="
+                    f"{self.sampling.sample_rate_hz} Hz (allowed: 0 < f < {nyq / 5.0:g} Hz, 10 samples per cycle)"
+                )
+        fc = self.sensor.electronics.filter_cutoff_hz
+        if self.sensor.electronics.filter_order and fc >= nyq:
+            raise ValueError(
+                f"sensor.electronics.filter_cutoff_hz: {fc} Hz must be below the Nyquist frequency {nyq:g} Hz"
+            )
+        if self.indenter.shape == "box" and (
+            self.indenter.size_x_m > self.pad.size_x_m * 2 or self.indenter.size_y_m > self.pad.size_y_m * 2
+        ):
+            raise ValueError("indenter.size_x_m/size_y_m: a box indenter may be at most twice the pad size")
+        if self.protocol.control == "displacement" and self.protocol.amplitude_max >= self.pad.thickness_m:
+            raise ValueError(
+                f"protocol.amplitude_max: {self.protocol.amplitude_max} m is a displacement >= pad.thickness_m "
+                f"({self.pad.thickness_m} m); allowed: < pad thickness"
+            )
+        return self
+
+    def episode_duration_s(self, frequency_hz: float) -> float:
+        p = self.protocol
+        if p.kind == "sinusoid":
+            return p.settle_s + p.cycles / frequency_hz
+        return p.settle_s + p.duration_s

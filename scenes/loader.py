@@ -1,0 +1,117 @@
+"""Load a scene: a preset name or a YAML file, plus `key=value` overrides, validated into SceneConfig.
+
+Errors come out as ConfigError with one line that names the field and what is allowed.
+"""
+
+from __future__ import annotations
+
+import difflib
+import json
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pydantic import BaseModel, ValidationError
+
+from scenes.config import SceneConfig
+
+PRESET_DIR = Path(__file__).parent / "presets"
+
+
+class ConfigError(ValueError):
+    """A scene config that cannot be used; str() is one line naming the field."""
+
+
+def list_presets() -> list[str]:
+    return sorted(p.stem for p in PRESET_DIR.glob("*.yaml"))
+
+
+def _read_source(source: str | Path) -> dict[str, Any]:
+    path = Path(source)
+    if path.suffix in (".yaml", ".yml") or path.exists():
+        if not path.is_file():
+            raise ConfigError(f"scene file '{source}' does not exist")
+        text = path.read_text()
+    else:
+        preset = PRESET_DIR / f"{source}.yaml"
+        if not preset.is_file():
+            raise ConfigError(f"unknown preset '{source}' (allowed: {', '.join(list_presets())}, or a .yaml file)")
+        text = preset.read_text()
+    try:
+        data = yaml.safe_load(text) or {}
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"scene file '{source}' is not valid YAML: {str(exc).splitlines()[0]}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"scene file '{source}' must hold a mapping at the top level")
+    return data
+
+
+def _fields_at(path: list[str]) -> list[str]:
+    """Allowed field names at a dotted path inside SceneConfig (for error messages)."""
+    model: type[BaseModel] | None = SceneConfig
+    for part in path:
+        if model is None or part not in model.model_fields:
+            return []
+        ann = model.model_fields[part].annotation
+        model = ann if isinstance(ann, type) and issubclass(ann, BaseModel) else None
+    return sorted(model.model_fields) if model is not None else []
+
+
+def apply_overrides(data: dict[str, Any], overrides: list[str] | None) -> dict[str, Any]:
+    """Apply `a.b.c=value` overrides (value parsed as YAML: numbers, lists, "5 mm")."""
+    for item in overrides or []:
+        if "=" not in item:
+            raise ConfigError(f"override '{item}' must look like key.path=value")
+        key, raw = item.split("=", 1)
+        parts = key.strip().split(".")
+        node = data
+        for i, part in enumerate(parts[:-1]):
+            allowed = _fields_at(parts[:i])
+            if allowed and part not in allowed:
+                raise ConfigError(_unknown(".".join(parts[: i + 1]), part, allowed))
+            node = node.setdefault(part, {})
+            if not isinstance(node, dict):
+                raise ConfigError(f"override '{key}': '{'.'.join(parts[: i + 1])}' is not a section")
+        try:
+            value = yaml.safe_load(raw)
+        except yaml.YAMLError:
+            value = raw
+        node[parts[-1]] = value
+    return data
+
+
+def _unknown(loc: str, name: str, allowed: list[str]) -> str:
+    close = difflib.get_close_matches(name, allowed, n=1)
+    hint = f" (did you mean '{close[0]}'?)" if close else ""
+    return f"unknown field '{loc}'{hint}; allowed: {', '.join(allowed)}"
+
+
+def format_validation_error(exc: ValidationError) -> str:
+    """One line naming the first offending field and the allowed values."""
+    err = exc.errors()[0]
+    loc = [str(p) for p in err["loc"] if not isinstance(p, int)]
+    dotted = ".".join(loc) or "<root>"
+    if err["type"] == "extra_forbidden":
+        return _unknown(dotted, loc[-1], _fields_at(loc[:-1]))
+    msg = err["msg"].removeprefix("Value error, ")
+    if err["type"] == "literal_error":
+        return f"field '{dotted}': {msg} (got {err.get('input')!r})"
+    if dotted == "<root>" or msg.startswith(loc[-1] if loc else "\0") or "'" in msg[:40]:
+        return msg if dotted == "<root>" else f"field '{dotted}': {msg}"
+    return f"field '{dotted}': {msg} (got {err.get('input')!r})"
+
+
+def load_scene(source: str | Path, overrides: list[str] | None = None) -> SceneConfig:
+    """Preset name or YAML path + overrides -> validated SceneConfig. Raises ConfigError."""
+    data = apply_overrides(_read_source(source), overrides)
+    try:
+        return SceneConfig.model_validate(data)
+    except ValidationError as exc:
+        raise ConfigError(format_validation_error(exc)) from None
+    except ValueError as exc:  # from unit parsing inside validators
+        raise ConfigError(str(exc).splitlines()[0]) from None
+
+
+def config_json(cfg: SceneConfig) -> str:
+    """Canonical JSON of a resolved config (sorted keys), as embedded in recordings."""
+    return json.dumps(cfg.model_dump(mode="json"), sort_keys=True, separators=(",", ":"))
