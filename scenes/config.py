@@ -113,8 +113,8 @@ class MechanicsConfig(Strict):
     """Nonlinear elastic law + generalized Maxwell (Prony) series. Source: Ferry, Viscoelastic Properties of Polymers (1980)."""
 
     lock_strain: Annotated[float, Field(gt=0, le=1)] = 0.5  # estimate: sigma = E e / (1 - e/e_lock)
-    prony_fractions: list[NonNegFloat] = Field(default_factory=lambda: [0.35, 0.25, 0.15])  # estimate
-    prony_times_s: list[PositiveFloat] = Field(default_factory=lambda: [0.08, 0.8, 8.0])  # estimate
+    prony_fractions: list[NonNegFloat] = Field(default_factory=lambda: [0.01, 0.01, 0.02])  # estimate: small, see README (filter lag dominates)
+    prony_times_s: list[PositiveFloat] = Field(default_factory=lambda: [0.05, 0.5, 5.0])  # estimate: one per decade over 0.1-2 Hz
 
     @model_validator(mode="after")
     def _check(self) -> "MechanicsConfig":
@@ -128,8 +128,8 @@ class MechanicsConfig(Strict):
 class HysteresisConfig(Strict):
     """Prandtl-Ishlinskii play bank on the network strain. Source: Brokate & Sprekels, Hysteresis and Phase Transitions (1996)."""
 
-    play_thresholds: list[NonNegFloat] = Field(default_factory=lambda: [0.001, 0.002, 0.004, 0.008])  # estimate, strain
-    play_weights: list[NonNegFloat] = Field(default_factory=lambda: [0.08, 0.08, 0.08, 0.08])  # estimate
+    play_thresholds: list[NonNegFloat] = Field(default_factory=lambda: [0.0005, 0.001, 0.002, 0.004])  # estimate, strain
+    play_weights: list[NonNegFloat] = Field(default_factory=lambda: [0.006, 0.006, 0.006, 0.006])  # estimate
     recovery_time_s: PositiveFloat = 30.0  # estimate: slow relaxation of play states toward the input at rest
 
     @model_validator(mode="after")
@@ -148,7 +148,7 @@ class TunnelingConfig(Strict):
 
     conductivity_s_per_m: PositiveFloat = 0.12  # cnt_pdms Table 1
     gamma_s0: PositiveFloat = 20.0  # estimate: tunneling barrier x initial gap
-    gap_time_s: PositiveFloat = 0.12  # estimate: network gap strain lags the mechanical strain
+    gap_time_s: PositiveFloat = 0.001  # estimate: network gap strain lags the mechanical strain
 
 
 class ElectronicsConfig(Strict):
@@ -156,7 +156,7 @@ class ElectronicsConfig(Strict):
 
     excitation_v: PositiveFloat = 1.0  # estimate
     bridge_resistance_ohm: PositiveFloat | None = None  # None: balanced at the unloaded sensor resistance
-    amp_gain: PositiveFloat = 40.0  # estimate
+    amp_gain: PositiveFloat = 300.0  # estimate: ~75 % of the ADC range at F_max
     amp_offset_v: float = 0.0
     white_noise_v: NonNegFloat = 5e-4  # estimate: rms at the ADC input
     pink_noise_v: NonNegFloat = 5e-4  # estimate: rms of the 1/f component at the ADC input

@@ -1,0 +1,121 @@
+"""CNT-PDMS soft tactile sensor (paper key cnt_pdms): the whole transduction chain over (episode x taxel).
+
+Pipeline (ground truth and measurement both kept, as in Genesis' sensors):
+  drive [E,T,N] (strain from the deformation field, or pressure)  -> taxel chain (sensors/taxel_*.py):
+  strain, stress, conductance per taxel -> columns in parallel per channel + total force (label, from the
+  viscoelastic stress) -> bridge, in-amp, noise, ADC, Butterworth (sensors/electronics.py).
+backend "warp" runs the Warp kernels on `device` ("cpu" or "cuda:0"); backend "numpy" runs the reference.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from scenes.config import SceneConfig
+from sensors import electronics as el
+from sensors.params import MODE_DISPLACEMENT, MODE_FORCE, electronics_params, taxel_params
+from sensors.taxel_ref import TaxelState, taxel_chain_numpy
+
+
+@dataclass(frozen=True)
+class ChannelSpec:
+    """How an output is stored: units and dimension names (first dim after episode is time)."""
+
+    units: str
+    dims: tuple[str, ...]
+    description: str
+
+
+OUTPUTS: dict[str, ChannelSpec] = {
+    "strain": ChannelSpec("1", ("time", "taxel"), "compressive strain per taxel (ground truth)"),
+    "force_taxel": ChannelSpec("N", ("time", "taxel"), "viscoelastic stress x taxel area (ground truth)"),
+    "force": ChannelSpec("N", ("time",), "total normal force from the viscoelastic stress (reference label)"),
+    "resistance": ChannelSpec("ohm", ("time", "channel"), "true sensor resistance (taxel columns in parallel)"),
+    "bridge_v": ChannelSpec("V", ("time", "channel"), "noise-free Wheatstone bridge output"),
+    "adc": ChannelSpec("counts", ("time", "channel"), "ADC codes of the amplified, noisy bridge voltage"),
+    "voltage": ChannelSpec("V", ("time", "channel"), "ADC voltage after the digital Butterworth filter"),
+    "resistance_measured": ChannelSpec("ohm", ("time", "channel"), "resistance inferred from the filtered voltage"),
+}
+
+
+class CntPdmsSensor:
+    """Batched CNT-PDMS sensor. Shapes: E episodes, T samples, N taxels, C = 1 channel (whole pad)."""
+
+    family = "cnt_pdms"
+
+    def __init__(self, cfg: SceneConfig, backend: str = "warp", device: str = "cpu"):
+        if backend not in ("warp", "numpy"):
+            raise ValueError(f"backend must be 'warp' or 'numpy'; got {backend!r}")
+        self.cfg, self.backend, self.device = cfg, backend, device
+        self.tp = taxel_params(cfg)
+        self.ep = electronics_params(cfg)
+        self.n_taxels = cfg.pad.n_taxels
+        self.n_channels = 1
+        self.taxel_channel = np.zeros(self.n_taxels, np.int32)
+        self.mode = MODE_FORCE if cfg.protocol.control == "force" else MODE_DISPLACEMENT
+
+    def drive_from_load(self, deformation_m: np.ndarray, pressure_pa: np.ndarray) -> np.ndarray:
+        """The chain's input [E,T,N]: strain = deformation / thickness (displacement control) or pressure (force control)."""
+        if self.mode == MODE_FORCE:
+            return np.ascontiguousarray(pressure_pa, np.float32)
+        return np.ascontiguousarray(deformation_m / self.cfg.pad.thickness_m, np.float32)
+
+    def noise(self, seeds: list[int], n_steps: int) -> np.ndarray:
+        e = self.cfg.sensor.electronics
+        return np.stack([el.readout_noise_v(s, n_steps, self.n_channels, e.white_noise_v, e.pink_noise_v) for s in seeds])
+
+    def run(self, drive: np.ndarray, seeds: list[int]) -> dict[str, np.ndarray]:
+        """drive [E,T,N] float32 -> dict of outputs (see OUTPUTS), each [E, T, ...]."""
+        E, T, N = drive.shape
+        if N != self.n_taxels:
+            raise ValueError(f"drive has {N} taxels; the pad has {self.n_taxels}")
+        if len(seeds) != E:
+            raise ValueError(f"need one seed per episode ({E}); got {len(seeds)}")
+        noise = self.noise(seeds, T)
+        if self.backend == "numpy":
+            strain, stress, cond, _ = taxel_chain_numpy(drive, self.mode, self.tp, TaxelState.zeros(E * N))
+            g, force = el.sum_channels_numpy(cond, stress, self.taxel_channel, self.n_channels, self.tp.taxel_area_m2)
+            ro, _ = el.readout_numpy(g, noise, self.ep)
+        else:
+            import warp as wp
+
+            from sensors.taxel_warp import TaxelChainWarp
+
+            chain = TaxelChainWarp(self.tp, E, N, self.device)
+            d = wp.array(np.ascontiguousarray(drive, np.float32).reshape(-1), dtype=wp.float32, device=self.device)
+            s_d, st_d, c_d = chain.run_device(d, T, self.mode)
+            ro, force, _ = el.readout_warp(
+                c_d, st_d, self.taxel_channel, self.n_channels, self.tp.taxel_area_m2, (E, T, N), noise, self.ep, None,
+                self.device,
+            )
+            strain, stress = s_d.numpy().reshape(E, T, N), st_d.numpy().reshape(E, T, N)
+        return {
+            "strain": strain,
+            "force_taxel": (stress * np.float32(self.tp.taxel_area_m2)).astype(np.float32),
+            "force": force.astype(np.float32),
+            "resistance": ro["resistance"].astype(np.float32),
+            "bridge_v": ro["bridge_v"].astype(np.float32),
+            "adc": ro["adc"].astype(np.int16 if self.ep.adc_bits <= 16 else np.int32),
+            "voltage": ro["filtered_v"].astype(np.float32),
+            "resistance_measured": ro["resistance_measured"].astype(np.float32),
+        }
+
+    def attrs(self) -> dict:
+        """/sensor attrs for recordings."""
+        e = self.cfg.sensor.electronics
+        return {
+            "family": self.family,
+            "paper": "cnt_pdms",
+            "sample_rate_hz": self.cfg.sampling.sample_rate_hz,
+            "adc_bits": e.adc_bits,
+            "adc_range_v": e.adc_range_v,
+            "n_taxels": self.n_taxels,
+            "n_channels": self.n_channels,
+            "taxel_channel": self.taxel_channel,
+            "taxel_area_m2": self.tp.taxel_area_m2,
+            "bridge_resistance_ohm": self.ep.bridge_resistance_ohm,
+            "rest_resistance_ohm": 1.0 / (self.n_taxels / self.tp.rest_resistance_ohm),
+            "control": self.cfg.protocol.control,
+        }

@@ -1,0 +1,129 @@
+"""Flat numeric parameters of the CNT-PDMS transduction chain, derived once from a SceneConfig.
+
+The kernels (Warp and the numpy reference) read only these arrays, never the pydantic config.
+Prony and play banks are padded to fixed lengths (N_PRONY, N_PLAY) with inert terms so that a
+kernel can keep the whole state in registers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from scenes.config import SceneConfig
+
+N_PRONY = 8  # max Prony terms (MechanicsConfig allows up to 8)
+N_PLAY = 16  # max play operators (HysteresisConfig allows up to 16)
+
+MODE_DISPLACEMENT = 0  # drive = compressive strain (-)
+MODE_FORCE = 1  # drive = compressive stress (Pa)
+
+
+@dataclass(frozen=True)
+class TaxelParams:
+    """Per-taxel mechanics, hysteresis and conduction constants (SI). Shapes in brackets."""
+
+    dt_s: float
+    youngs_modulus_pa: float  # relaxed (long-time) modulus E_inf
+    lock_strain: float  # nonlinear law sigma_eq = E_inf e / (1 - e/e_lock)
+    prony_decay: np.ndarray  # [N_PRONY] a_i = exp(-dt/tau_i)
+    prony_gain: np.ndarray  # [N_PRONY] b_i = tau_i/dt (1 - a_i): exact for piecewise-linear strain
+    prony_modulus_pa: np.ndarray  # [N_PRONY] E_i = g_i E_inf (0 for padding)
+    gap_decay: float  # a = exp(-dt/tau_gap)
+    gap_gain: float  # b = tau_gap/dt (1 - a)
+    play_threshold: np.ndarray  # [N_PLAY] r_k (strain)
+    play_weight: np.ndarray  # [N_PLAY] w_k (0 for padding)
+    recovery_decay: float  # exp(-dt/T_recovery) pulling play states toward the input
+    gamma_s0: float  # tunneling exponent factor
+    taxel_area_m2: float
+    rest_resistance_ohm: float  # one taxel's through-thickness resistance at rest: h / (sigma0 A)
+
+
+@dataclass(frozen=True)
+class ElectronicsParams:
+    """Bridge, amplifier, ADC and digital filter constants (SI)."""
+
+    excitation_v: float
+    bridge_resistance_ohm: float
+    amp_gain: float
+    amp_offset_v: float
+    adc_bits: int
+    adc_range_v: float
+    sos: np.ndarray = field(repr=False)  # [n_sections, 6] Butterworth second-order sections (b0 b1 b2 a0 a1 a2)
+    sos_zi: np.ndarray = field(repr=False)  # [n_sections, 2] steady-state filter state for a unit input
+
+    @property
+    def lsb_v(self) -> float:
+        return 2.0 * self.adc_range_v / float(2**self.adc_bits)
+
+    @property
+    def code_min(self) -> int:
+        return -(2 ** (self.adc_bits - 1))
+
+    @property
+    def code_max(self) -> int:
+        return 2 ** (self.adc_bits - 1) - 1
+
+
+def taxel_params(cfg: SceneConfig) -> TaxelParams:
+    dt = 1.0 / cfg.sampling.sample_rate_hz
+    mech, hyst, tun = cfg.sensor.mechanics, cfg.sensor.hysteresis, cfg.sensor.tunneling
+    tau = np.ones(N_PRONY)
+    g = np.zeros(N_PRONY)
+    tau[: len(mech.prony_times_s)] = mech.prony_times_s
+    g[: len(mech.prony_fractions)] = mech.prony_fractions
+    a = np.exp(-dt / tau)
+    b = tau / dt * (1.0 - a)
+    r = np.zeros(N_PLAY)
+    w = np.zeros(N_PLAY)
+    r[: len(hyst.play_thresholds)] = hyst.play_thresholds
+    w[: len(hyst.play_weights)] = hyst.play_weights
+    a_gap = float(np.exp(-dt / tun.gap_time_s))
+    area = cfg.pad.size_x_m * cfg.pad.size_y_m / cfg.pad.n_taxels
+    return TaxelParams(
+        dt_s=dt,
+        youngs_modulus_pa=cfg.pad.youngs_modulus_pa,
+        lock_strain=mech.lock_strain,
+        prony_decay=a,
+        prony_gain=b,
+        prony_modulus_pa=g * cfg.pad.youngs_modulus_pa,
+        gap_decay=a_gap,
+        gap_gain=tun.gap_time_s / dt * (1.0 - a_gap),
+        play_threshold=r,
+        play_weight=w,
+        recovery_decay=float(np.exp(-dt / hyst.recovery_time_s)),
+        gamma_s0=tun.gamma_s0,
+        taxel_area_m2=area,
+        rest_resistance_ohm=cfg.pad.thickness_m / (tun.conductivity_s_per_m * area),
+    )
+
+
+def rest_sensor_resistance_ohm(cfg: SceneConfig) -> float:
+    """Whole-pad resistance at rest: all taxel columns in parallel, h / (sigma0 A_pad)."""
+    area = cfg.pad.size_x_m * cfg.pad.size_y_m
+    return cfg.pad.thickness_m / (cfg.sensor.tunneling.conductivity_s_per_m * area)
+
+
+def electronics_params(cfg: SceneConfig) -> ElectronicsParams:
+    from scipy import signal
+
+    el = cfg.sensor.electronics
+    fs = cfg.sampling.sample_rate_hz
+    if el.filter_order:
+        sos = signal.butter(el.filter_order, el.filter_cutoff_hz, btype="low", fs=fs, output="sos")
+        zi = signal.sosfilt_zi(sos)
+    else:
+        sos = np.array([[1.0, 0.0, 0.0, 1.0, 0.0, 0.0]])
+        zi = np.zeros((1, 2))
+    rb = el.bridge_resistance_ohm or rest_sensor_resistance_ohm(cfg)
+    return ElectronicsParams(
+        excitation_v=el.excitation_v,
+        bridge_resistance_ohm=rb,
+        amp_gain=el.amp_gain,
+        amp_offset_v=el.amp_offset_v,
+        adc_bits=el.adc_bits,
+        adc_range_v=el.adc_range_v,
+        sos=np.ascontiguousarray(sos, dtype=np.float64),
+        sos_zi=np.ascontiguousarray(zi, dtype=np.float64),
+    )
