@@ -1,0 +1,160 @@
+"""Physics of the CNT-PDMS chain (no MuJoCo): creep, relaxation, monotone resistance, closed loops,
+rate dependence, ADC, and Warp == numpy reference."""
+
+import numpy as np
+import pytest
+
+from scenes import load_scene
+from sensors.analysis import hysteresis_error_fso, loop_area
+from sensors.cnt_pdms import CntPdmsSensor
+from sensors.electronics import ElectronicsState, readout_numpy
+from sensors.params import MODE_DISPLACEMENT, MODE_FORCE, electronics_params, taxel_params
+from sensors.taxel_ref import TaxelState, taxel_chain_numpy
+from sensors.taxel_warp import TaxelChainWarp
+
+FS = 100.0
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    return load_scene("cnt_pdms")
+
+
+@pytest.fixture(scope="module")
+def tp(cfg):
+    return taxel_params(cfg)
+
+
+def hold(level, T=2000, ramp=50):
+    x = np.full(T, level, np.float32)
+    x[:ramp] = np.linspace(0, level, ramp)
+    return x[None, :, None]
+
+
+def sinus(d0, f, cycles, settle=20):
+    T = settle + int(cycles * FS / f)
+    t = np.arange(T) / FS
+    d = np.where(np.arange(T) < settle, 0.0, d0 * (1 - np.cos(2 * np.pi * f * (t - settle / FS))) / 2)
+    return d.astype(np.float32)
+
+
+def test_creep_grows_under_held_force(tp):
+    strain, stress, _, _ = taxel_chain_numpy(hold(20e3), MODE_FORCE, tp)
+    e = strain[0, :, 0]
+    assert np.allclose(stress[0, 60:, 0], 20e3, rtol=1e-4)  # force control holds the stress
+    assert np.all(np.diff(e[60:]) >= -1e-9)  # creep: strain never falls under a held force
+    assert e[-1] > e[60] * 1.02  # and grows measurably over 20 s
+
+
+def test_stress_relaxes_under_held_displacement(tp):
+    _, stress, _, _ = taxel_chain_numpy(hold(0.02), MODE_DISPLACEMENT, tp)
+    s = stress[0, :, 0]
+    assert np.all(np.diff(s[55:]) <= 1e-3)  # monotone relaxation after the ramp
+    assert s[55] > s[-1] * 1.02
+    e_inf = tp.youngs_modulus_pa * 0.02 / (1 - 0.02 / tp.lock_strain)
+    assert s[-1] == pytest.approx(e_inf, rel=0.02)  # relaxes toward the equilibrium law
+
+
+def test_resistance_falls_monotonically_under_slow_compression(tp):
+    ramp = np.linspace(0, 0.05, 3000, dtype=np.float32)[None, :, None]
+    _, _, g, _ = taxel_chain_numpy(ramp, MODE_DISPLACEMENT, tp)
+    r = 1.0 / g[0, :, 0]
+    assert np.all(np.diff(r) <= 1e-9)
+    assert r[-1] < 0.5 * r[0]
+
+
+def punch(cfg, strain):
+    """Strain history [T] applied to the taxels under a centred 10 x 10 mm punch -> drive [1, T, N]."""
+    nx, ny = cfg.pad.taxels_x, cfg.pad.taxels_y
+    x = ((np.arange(nx) + 0.5) / nx - 0.5) * cfg.pad.size_x_m
+    y = ((np.arange(ny) + 0.5) / ny - 0.5) * cfg.pad.size_y_m
+    X, Y = np.meshgrid(x, y)
+    mask = ((np.abs(X) < 0.005) & (np.abs(Y) < 0.005)).ravel().astype(np.float32)
+    return (strain[None, :, None] * mask[None, None, :]).astype(np.float32)
+
+
+def test_loops_close_after_repeated_cycles(cfg):
+    sen = CntPdmsSensor(cfg, backend="numpy")
+    f = 1.0
+    d = sinus(0.02, f, cycles=8)
+    out = sen.run(punch(cfg, d), [0])
+    n = int(FS / f)
+    F = out["force"][0]
+    R = out["resistance"][0, :, 0]
+    # the end of the last two cycles returns to the same state (periodic steady state)
+    assert abs(F[-1] - F[-1 - n]) < 1e-3 * F.max()
+    assert abs(R[-1] - R[-1 - n]) < 1e-4 * R.max()
+    # and each loop is closed: start and end of one cycle coincide
+    assert abs(F[-n] - F[-1]) < 2e-3 * F.max()
+
+
+def test_hysteresis_grows_with_frequency(cfg):
+    sen = CntPdmsSensor(cfg, backend="numpy")
+    errs, areas = [], []
+    for f in (0.1, 0.5, 1.0, 2.0):
+        d = sinus(0.03, f, cycles=2)
+        out = sen.run(punch(cfg, d), [1])
+        n = int(FS / f)
+        F, y = out["force"][0, -n:], out["resistance_measured"][0, -n:, 0]
+        errs.append(hysteresis_error_fso(F, y, d[-n:]))
+        areas.append(loop_area(F, y))
+    assert errs == sorted(errs), errs
+    assert areas == sorted(areas), areas
+    assert 10.0 <= errs[1] <= 15.0  # 0.5 Hz, paper 12.4 % FSO
+
+
+def test_adc_quantizes_and_clips(cfg):
+    ep = electronics_params(cfg)
+    rb = ep.bridge_resistance_ohm
+    # conductances spanning from far below to far above the bridge balance
+    r = np.array([rb * 0.2, rb * 0.9, rb, rb * 1.05, rb * 5.0])
+    g = (1.0 / r)[None, :, None]
+    out, _ = readout_numpy(g, np.zeros_like(g), ep, ElectronicsState.zeros(1))
+    codes = out["adc"][0, :, 0]
+    assert codes.min() >= ep.code_min and codes.max() <= ep.code_max
+    assert codes[0] == ep.code_min and codes[-1] == ep.code_max  # clipped at both rails
+    v = ep.amp_gain * out["bridge_v"][0, 1, 0]
+    assert abs(codes[1] * ep.lsb_v - v) <= ep.lsb_v / 2 + 1e-12  # quantization within half an LSB
+    assert codes[2] == 0  # balanced bridge reads zero
+
+
+def test_warp_matches_numpy_reference(cfg, tp):
+    rng = np.random.default_rng(3)
+    E, T, N = 3, 400, 7
+    d = sinus(1.0, 0.5, cycles=2)[:T]
+    drive = (d[None, :, None] * rng.uniform(0.005, 0.04, (E, 1, N))).astype(np.float32)
+    for mode, scale in ((MODE_DISPLACEMENT, 1.0), (MODE_FORCE, 2.0e6)):
+        ref = taxel_chain_numpy(drive * scale, mode, tp)
+        chain = TaxelChainWarp(tp, E, N, "cpu")
+        got = chain.run(drive * scale, mode)
+        for a, b in zip(ref[:3], got):
+            np.testing.assert_allclose(b, a, rtol=2e-5, atol=1e-6 * np.abs(a).max())
+
+
+def test_warp_streaming_equals_one_piece(cfg, tp):
+    rng = np.random.default_rng(4)
+    drive = rng.uniform(0, 0.03, (2, 300, 5)).astype(np.float32)
+    whole = TaxelChainWarp(tp, 2, 5).run(drive, MODE_DISPLACEMENT)
+    ch = TaxelChainWarp(tp, 2, 5)
+    parts = [ch.run(drive[:, :120], MODE_DISPLACEMENT), ch.run(drive[:, 120:], MODE_DISPLACEMENT)]
+    for i in range(3):
+        np.testing.assert_array_equal(np.concatenate([parts[0][i], parts[1][i]], axis=1), whole[i])
+
+
+def test_full_chain_warp_matches_numpy(cfg):
+    d = sinus(0.02, 2.0, cycles=2)
+    drive = np.concatenate([punch(cfg, d), punch(cfg, 0.5 * d)])
+    a = CntPdmsSensor(cfg, backend="numpy").run(drive, [5, 6])
+    b = CntPdmsSensor(cfg, backend="warp").run(drive, [5, 6])
+    for k in ("strain", "force", "resistance", "voltage", "resistance_measured"):
+        np.testing.assert_allclose(b[k], a[k], rtol=1e-4, atol=1e-6 * float(np.abs(a[k]).max()), err_msg=k)
+    assert np.abs(b["adc"].astype(int) - a["adc"].astype(int)).max() <= 1
+
+
+def test_noise_is_seeded(cfg):
+    sen = CntPdmsSensor(cfg, backend="numpy")
+    n1, n2, n3 = sen.noise([7], 500), sen.noise([7], 500), sen.noise([8], 500)
+    np.testing.assert_array_equal(n1, n2)
+    assert not np.allclose(n1, n3)
+    e = cfg.sensor.electronics
+    assert n1.std() == pytest.approx(np.hypot(e.white_noise_v, e.pink_noise_v), rel=0.2)
