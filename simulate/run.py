@@ -1,0 +1,180 @@
+"""The run loop: scene -> MuJoCo load field -> sensor chain -> HDF5 shards + manifest, resumable.
+
+Episode k (global index) draws everything from `episode_seed(root_seed, k)`: its protocol (stream 0 of
+the seed) and its readout noise (stream 1). A shard is a pure function of (config, shard index), so a
+rerun skips complete shards and regenerates the first missing one; files appear whole or not at all.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from scenes import SceneConfig, config_json
+from sensors.cnt_pdms import OUTPUTS, CntPdmsSensor
+from sensors.manifest import build_manifest, episode_seed, first_missing_shards, shard_path
+from sensors.recording import Channel, write_recording
+from simulate.contact import LoadBatch, run_episodes
+from simulate.mjcf import build_mjcf
+from simulate.protocols import EpisodeProtocol, make_episode_protocol
+
+LOAD_CHANNELS: dict[str, tuple[str, tuple[str, ...], str]] = {
+    "time": ("s", ("time",), "sample time"),
+    "target": ("m", ("time",), "commanded indenter displacement (m) or force (N)"),
+    "position": ("m", ("time", "xyz"), "indenter position (lowest point), world frame"),
+    "contact_force": ("N", ("time", "xyz"), "net MuJoCo contact force on the pad; z = compressive normal"),
+    "deformation": ("m", ("time", "taxel"), "surface deflection of the pad, + into the pad"),
+    "pressure": ("Pa", ("time", "taxel"), "normal pressure (Winkler distribution of the contact force)"),
+    "shear": ("Pa", ("time", "taxel", "xy"), "tangential traction on the pad"),
+}
+
+
+def make_sensor(cfg: SceneConfig, backend: str = "warp", device: str = "cpu") -> CntPdmsSensor:
+    if cfg.sensor.family != "cnt_pdms":
+        raise ValueError(f"sensor.family {cfg.sensor.family!r} not supported (allowed: cnt_pdms)")
+    return CntPdmsSensor(cfg, backend=backend, device=device)
+
+
+@dataclass
+class EpisodeResult:
+    """Everything recorded for one episode: channel name -> (array [T, ...], units, dims, description)."""
+
+    ep_id: str
+    seed: int
+    protocol: EpisodeProtocol
+    channels: dict[str, Channel]
+
+
+def simulate_episodes(
+    cfg: SceneConfig, seeds: list[int], ids: list[str], sensor: CntPdmsSensor, threads: int = 1
+) -> list[EpisodeResult]:
+    """Simulate episodes (any mix of lengths: grouped by length into batched rollouts)."""
+    protos = [make_episode_protocol(cfg, s) for s in seeds]
+    results: dict[int, EpisodeResult] = {}
+    lengths = sorted({p.n_samples for p in protos})
+    for n in lengths:
+        idx = [i for i, p in enumerate(protos) if p.n_samples == n]
+        batch = run_episodes(cfg, [protos[i] for i in idx], threads=threads)
+        out = sensor.run(sensor.drive_from_load(batch.deformation_m, batch.pressure_pa), [seeds[i] for i in idx])
+        for j, i in enumerate(idx):
+            results[i] = EpisodeResult(ids[i], seeds[i], protos[i], _channels(batch, out, j, cfg))
+    return [results[i] for i in range(len(protos))]
+
+
+def _channels(batch: LoadBatch, out: dict[str, np.ndarray], j: int, cfg: SceneConfig) -> dict[str, Channel]:
+    f32 = np.float32
+    arrays = {
+        "time": batch.time_s.astype(np.float64),
+        "target": batch.target[j].astype(f32),
+        "position": batch.indenter_pos_m[j].astype(f32),
+        "contact_force": batch.contact_force_n[j].astype(f32),
+        "deformation": batch.deformation_m[j].astype(f32),
+        "pressure": batch.pressure_pa[j].astype(f32),
+        "shear": batch.shear_pa[j].astype(f32),
+    }
+    ch = {}
+    for name, arr in arrays.items():
+        units, dims, desc = LOAD_CHANNELS[name]
+        if name == "target" and cfg.protocol.control == "force":
+            units = "N"
+        ch[name] = Channel(arr, units, dims, desc)
+    for name, spec in OUTPUTS.items():
+        ch[name] = Channel(out[name][j], spec.units, spec.dims, spec.description)
+    return ch
+
+
+def episode_ids_of_shard(cfg: SceneConfig, shard: int) -> list[int]:
+    g = cfg.generation
+    return list(range(shard * g.episodes_per_shard, min(g.episodes, (shard + 1) * g.episodes_per_shard)))
+
+
+def n_shards(cfg: SceneConfig) -> int:
+    g = cfg.generation
+    return -(-g.episodes // g.episodes_per_shard)
+
+
+def write_shard(cfg: SceneConfig, out_dir: Path, shard: int, sensor: CntPdmsSensor, mjcf: str) -> Path:
+    """Generate and atomically write one shard (a pure function of config and shard index)."""
+    g = cfg.generation
+    gids = episode_ids_of_shard(cfg, shard)
+    seeds = [episode_seed(g.root_seed, k) for k in gids]
+    ids = [f"ep-{k:06d}" for k in gids]
+    results = simulate_episodes(cfg, seeds, ids, sensor, threads=g.threads)
+    ep_attrs = {
+        r.ep_id: {
+            "seed": r.seed,
+            "global_index": k,
+            "frequency_hz": r.protocol.frequency_hz,
+            "amplitude": r.protocol.amplitude,
+            "amplitude_units": "N" if r.protocol.control == "force" else "m",
+            "offset_xy_m": np.asarray(r.protocol.offset_xy_m),
+            "n_samples": r.protocol.n_samples,
+            "control": r.protocol.control,
+            "kind": r.protocol.kind,
+        }
+        for r, k in zip(results, gids)
+    }
+    sensor_attrs = dict(sensor.attrs())
+    sensor_attrs["taxel_xy_m"] = _taxel_xy(cfg)
+    return write_recording(
+        shard_path(out_dir, shard),
+        {r.ep_id: r.channels for r in results},
+        source="sim",
+        config_json=config_json(cfg),
+        root_seed=g.root_seed,
+        shard_index=shard,
+        sensor_attrs=sensor_attrs,
+        mjcf=mjcf,
+        episode_attrs=ep_attrs,
+        compression=g.compression,
+    )
+
+
+def _taxel_xy(cfg: SceneConfig) -> np.ndarray:
+    from simulate.taxels import taxel_xy_m
+
+    return taxel_xy_m(cfg)
+
+
+def config_sha256(cfg: SceneConfig) -> str:
+    import hashlib
+
+    return hashlib.sha256(config_json(cfg).encode()).hexdigest()
+
+
+def generate(
+    cfg: SceneConfig,
+    out_dir: str | Path,
+    *,
+    backend: str = "warp",
+    device: str = "cpu",
+    on_shard: Callable[[int, int, bool], None] | None = None,
+) -> Path:
+    """Generate the dataset into out_dir (created), resuming at missing shards; returns manifest path.
+
+    on_shard(shard_index, n_episodes, skipped) is called after each shard (for progress bars).
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    ns = n_shards(cfg)
+    sha = config_sha256(cfg)
+    todo = set(first_missing_shards(out, ns, sha))
+    sensor = make_sensor(cfg, backend, device)
+    mjcf = build_mjcf(cfg)
+    for s in range(ns):
+        if s in todo:
+            write_shard(cfg, out, s, sensor, mjcf)
+        if on_shard:
+            on_shard(s, len(episode_ids_of_shard(cfg, s)), s not in todo)
+    return build_manifest(
+        out,
+        name=cfg.name,
+        n_shards=ns,
+        episodes_per_shard=cfg.generation.episodes_per_shard,
+        config_sha256=sha,
+        root_seed=cfg.generation.root_seed,
+        extra={"paper": cfg.paper, "family": cfg.sensor.family, "episodes": cfg.generation.episodes},
+    )
