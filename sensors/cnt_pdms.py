@@ -48,6 +48,10 @@ class CntPdmsSensor:
     def __init__(self, cfg: SceneConfig, backend: str = "warp", device: str = "cpu"):
         if backend not in ("warp", "numpy"):
             raise ValueError(f"backend must be 'warp' or 'numpy'; got {backend!r}")
+        if backend == "warp":
+            from sensors.warp_setup import resolve_device
+
+            device = resolve_device(device)
         self.cfg, self.backend, self.device = cfg, backend, device
         self.tp = taxel_params(cfg)
         self.ep = electronics_params(cfg)

@@ -12,6 +12,7 @@ import warp as wp
 
 from sensors.params import N_PLAY, N_PRONY, TaxelParams
 from sensors.taxel_ref import MAX_STRAIN_FRACTION, TaxelState
+from sensors.warp_setup import init_warp, resolve_device
 
 vec_prony = wp.types.vector(length=N_PRONY, dtype=wp.float32)
 vec_play = wp.types.vector(length=N_PLAY, dtype=wp.float32)
@@ -113,8 +114,8 @@ class TaxelChainWarp:
     """
 
     def __init__(self, p: TaxelParams, n_episodes: int, n_taxels: int, device: str = "cpu"):
-        wp.init()
-        self.p, self.E, self.N, self.device = p, n_episodes, n_taxels, device
+        init_warp()
+        self.p, self.E, self.N, self.device = p, n_episodes, n_taxels, resolve_device(device)
         self.reset()
 
     def reset(self, state: TaxelState | None = None) -> None:

@@ -1,0 +1,100 @@
+"""Characterization of a sensor preset: hysteresis loops per loading frequency, next to the paper.
+
+For each frequency of the preset's protocol, one centred press at the full-scale amplitude runs through
+MuJoCo and the sensor chain; the last cycle is analysed (sensors.analysis) twice: on the resistance the
+instrument reports (after bridge, ADC and the causal Butterworth filter) and on the true resistance of
+the material (no electronics), so the filter's share of the apparent hysteresis is visible.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from scenes import SceneConfig
+from sensors.analysis import LoopMetrics, loop_metrics
+from simulate.contact import run_episodes
+from simulate.protocols import EpisodeProtocol, n_samples_for
+from simulate.run import make_sensor
+
+# cnt_pdms sect. 3.1: max hysteresis error of the uncompensated sensor, % FSO (reported without a frequency;
+# the LSTM results of Table 3 are quoted at 0.5 Hz, so we compare at 0.5 Hz).
+PAPER_HYSTERESIS_FSO_PCT = {0.5: 12.4}
+
+
+@dataclass
+class CharacterizationRow:
+    frequency_hz: float
+    measured: LoopMetrics  # on resistance_measured (what the instrument reports)
+    material: LoopMetrics  # on the true resistance (no electronics)
+    paper_hysteresis_fso_pct: float | None
+    cycle: dict[str, np.ndarray]  # last cycle: time_s, displacement_m, force_n, resistance_ohm, resistance_measured_ohm
+
+
+def characterize(cfg: SceneConfig, seed: int = 0, backend: str = "warp", device: str = "cpu") -> list[CharacterizationRow]:
+    if cfg.protocol.kind != "sinusoid":
+        raise ValueError("characterize needs protocol.kind=sinusoid (allowed: sinusoid)")
+    sensor = make_sensor(cfg, backend, device)
+    fs = cfg.sampling.sample_rate_hz
+    cycles = max(cfg.protocol.cycles, 2)
+    cfg = cfg.model_copy(deep=True)
+    cfg.protocol.cycles = cycles
+    rows = []
+    for f in cfg.protocol.frequencies_hz:
+        proto = EpisodeProtocol(
+            frequency_hz=f,
+            amplitude=cfg.protocol.amplitude_max,
+            offset_xy_m=np.zeros(2),
+            n_samples=n_samples_for(cfg, f),
+            control=cfg.protocol.control,
+            kind="sinusoid",
+        )
+        batch = run_episodes(cfg, [proto], threads=1)
+        out = sensor.run(sensor.drive_from_load(batch.deformation_m, batch.pressure_pa), [seed])
+        n = int(round(fs / f))
+        sl = slice(proto.n_samples - n, proto.n_samples)
+        drive = batch.target[0, sl]
+        force = out["force"][0, sl].astype(np.float64)
+        r_meas = out["resistance_measured"][0, sl, 0].astype(np.float64)
+        r_true = out["resistance"][0, sl, 0].astype(np.float64)
+        rows.append(
+            CharacterizationRow(
+                frequency_hz=f,
+                measured=loop_metrics(force, r_meas, drive, f, fs),
+                material=loop_metrics(force, r_true, drive, f, fs),
+                paper_hysteresis_fso_pct=PAPER_HYSTERESIS_FSO_PCT.get(f),
+                cycle={
+                    "time_s": batch.time_s[sl],
+                    "displacement_m": drive,
+                    "force_n": force,
+                    "resistance_ohm": r_true,
+                    "resistance_measured_ohm": r_meas,
+                },
+            )
+        )
+    return rows
+
+
+def plot_loops(rows: list[CharacterizationRow], path: str) -> None:
+    """Force-resistance loops per frequency, loading and unloading coloured apart (matplotlib, PNG)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(rows), figsize=(3.2 * len(rows), 3.2), sharey=True, squeeze=False)
+    for ax, row in zip(axes[0], rows):
+        c = row.cycle
+        k = int(np.argmax(c["displacement_m"]))
+        r0 = c["resistance_measured_ohm"][0]
+        dr = c["resistance_measured_ohm"] - r0
+        ax.plot(dr[: k + 1], c["force_n"][: k + 1], color="tab:red", label="loading")
+        ax.plot(dr[k:], c["force_n"][k:], color="tab:blue", label="unloading")
+        ax.set_title(f"{row.frequency_hz:g} Hz: {row.measured.hysteresis_fso_pct:.1f} % FSO")
+        ax.set_xlabel("ΔR measured (Ω)")
+    axes[0][0].set_ylabel("force (N)")
+    axes[0][0].legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
