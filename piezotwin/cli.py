@@ -41,9 +41,9 @@ def _load(scene: str, overrides: list[str] | None, extra: list[str]):
 
 
 def _check_writable(out: Path) -> None:
-    probe = out if out.exists() else next((p for p in out.parents if p.exists()), Path("."))
-    if out.exists() and not out.is_dir():
-        fail(f"output folder '{out}' exists and is not a folder")
+    probe = next((p for p in (out, *out.parents) if p.exists()), Path("."))
+    if not probe.is_dir():
+        fail(f"output folder '{out}' cannot be made: '{probe}' is a file, not a folder")
     if not os.access(probe, os.W_OK | os.X_OK):
         fail(f"output folder '{out}' is not writable")
 

@@ -1,0 +1,576 @@
+"""The HDF5 recording format: one file per shard, same schema for simulated and real data.
+
+Layout (see DESIGN.md section 4)::
+
+    /                      attrs: format, format_version, source, created_utc, generator,
+                                  generator_version, generator_commit, config_json, config_sha256,
+                                  version_<library>, root_seed, shard_index, + extra_attrs
+    /sensor                attrs: family, taxel positions (m), sample rate, ADC, ... (sensor_attrs)
+    /scene/mjcf            the compiled MJCF XML (string dataset), when given
+    /episodes/<id>         attrs: seed, frequency_hz, n_samples, ... (episode_attrs)
+    /episodes/<id>/<name>  one dataset per channel; attrs units, dim_names, description
+
+Time series are chunked along time in blocks of whole frames (a length that divides T where one
+is close to the target), compressed with lzf + shuffle by default (gzip level 1 + shuffle, or none).
+
+Attribute values: numbers, strings, bools and numeric arrays are stored as HDF5 attributes; dicts,
+lists of strings and other JSON-able values are stored as JSON strings and the attribute name is
+listed in the group's ``_json_attrs`` attribute, so they read back as the same Python objects.
+``None`` values are not stored (they read back as missing, i.e. ``None`` via ``.get``).
+
+Writing is atomic: the file is written to ``<path>.tmp`` in the same directory and renamed with
+``os.replace`` only once it is complete, so a crash never leaves a file at the final name.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import functools
+import hashlib
+import importlib.metadata
+import json
+import math
+import os
+import re
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterator, Literal, Mapping
+
+import h5py
+import numpy as np
+
+FORMAT = "piezotwin-recording"
+FORMAT_VERSION = 1
+
+_JSON_ATTRS = "_json_attrs"
+_NAME_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]*$")
+_CHUNK_FRAMES = 256  # target chunk length along time
+_CHUNK_MAX_BYTES = 1 << 20  # cap on one chunk, for very wide frames
+_COMPRESSIONS = ("lzf", "gzip", "none")
+
+__all__ = [
+    "FORMAT",
+    "FORMAT_VERSION",
+    "Channel",
+    "Recording",
+    "RecordingError",
+    "generator_info",
+    "read_recording_summary",
+    "write_recording",
+]
+
+
+class RecordingError(ValueError):
+    """A file is not a readable piezotwin recording (wrong format, newer version, corrupt)."""
+
+
+@dataclass
+class Channel:
+    """One named array of an episode, with its units and the names of its dimensions.
+
+    ``dim_names[0] == "time"`` marks a time series (chunked along its first axis).
+    """
+
+    data: np.ndarray
+    units: str
+    dim_names: tuple[str, ...]
+    description: str = ""
+
+    def __post_init__(self) -> None:
+        self.data = np.asarray(self.data)
+        self.dim_names = tuple(self.dim_names)
+        self.validate()
+
+    def validate(self, where: str = "channel") -> None:
+        if not isinstance(self.units, str):
+            raise ValueError(f"{where}: units must be a string, got {self.units!r}")
+        if len(self.dim_names) != self.data.ndim:
+            raise ValueError(
+                f"{where}: dim_names {self.dim_names} has {len(self.dim_names)} names but the "
+                f"data has {self.data.ndim} dimensions (shape {self.data.shape})"
+            )
+        if not all(isinstance(d, str) and d for d in self.dim_names):
+            raise ValueError(f"{where}: dim_names must be non-empty strings, got {self.dim_names}")
+        if self.data.dtype.kind not in "biufc":
+            raise ValueError(f"{where}: data must be numeric or bool, got dtype {self.data.dtype}")
+
+    @property
+    def is_time_series(self) -> bool:
+        return self.data.ndim >= 1 and self.dim_names[0] == "time"
+
+
+# --------------------------------------------------------------------------- provenance
+
+
+@functools.lru_cache(maxsize=1)
+def generator_info() -> dict[str, str]:
+    """Package name, version and git commit of the code that writes (cached per process)."""
+    try:
+        version = importlib.metadata.version("piezotwin")
+    except importlib.metadata.PackageNotFoundError:
+        version = "0+unknown"
+    commit = "unknown"
+    try:
+        out = subprocess.run(
+            ["git", "rev-parse", "HEAD"],
+            cwd=Path(__file__).resolve().parent,
+            capture_output=True,
+            text=True,
+            timeout=5,
+        )
+        if out.returncode == 0 and re.fullmatch(r"[0-9a-f]{40}", out.stdout.strip()):
+            commit = out.stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        pass
+    return {"name": "piezotwin", "version": version, "commit": commit}
+
+
+def _library_versions() -> dict[str, str]:
+    """Versions of the libraries that shape the data; never imports mujoco or warp."""
+    versions = {"numpy": np.__version__, "h5py": h5py.__version__, "hdf5": h5py.version.hdf5_version}
+    for key, dist in (("mujoco", "mujoco"), ("mujoco_warp", "mujoco-warp"), ("warp", "warp-lang")):
+        mod = sys.modules.get(key)
+        v = getattr(mod, "__version__", None) if mod is not None else None
+        if v is None:
+            try:
+                v = importlib.metadata.version(dist)
+            except importlib.metadata.PackageNotFoundError:
+                continue
+        versions[key] = str(v)
+    return versions
+
+
+def _utc_now() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds").replace("+00:00", "Z")
+
+
+# --------------------------------------------------------------------------- attributes
+
+
+def _set_attrs(obj: h5py.HLObject, attrs: Mapping[str, Any], where: str) -> None:
+    json_keys = [str(k) for k in obj.attrs.get(_JSON_ATTRS, [])]
+    for key, value in attrs.items():
+        if not isinstance(key, str) or not key or key == _JSON_ATTRS:
+            raise ValueError(f"{where}: bad attribute name {key!r}")
+        if value is None:
+            continue
+        stored, is_json = _encode_attr(value, f"{where}.{key}")
+        obj.attrs[key] = stored
+        if is_json:
+            json_keys.append(key)
+    if json_keys:
+        obj.attrs[_JSON_ATTRS] = json.dumps(sorted(set(json_keys)))
+
+
+def _encode_attr(value: Any, where: str) -> tuple[Any, bool]:
+    if isinstance(value, (str, bool, np.bool_)):
+        return value, False
+    if isinstance(value, int) and not isinstance(value, bool):
+        if -(2**63) <= value < 2**63:
+            return np.int64(value), False
+        if 0 <= value < 2**64:
+            return np.uint64(value), False
+        raise ValueError(f"{where}: integer {value} does not fit in 64 bits")
+    if isinstance(value, (float, np.number)):
+        return value, False
+    if isinstance(value, np.ndarray) and value.dtype.kind in "biufc":
+        return value, False
+    if isinstance(value, (list, tuple)):
+        arr = np.asarray(value) if len(value) else None
+        if arr is not None and arr.dtype.kind in "biufc" and arr.dtype != object:
+            return arr, False
+    try:
+        return json.dumps(value, sort_keys=True, default=_json_default), True
+    except TypeError as e:
+        raise ValueError(f"{where}: cannot store {type(value).__name__} as an attribute: {e}") from e
+
+
+def _json_default(o: Any) -> Any:
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"not JSON serializable: {type(o).__name__}")
+
+
+def _decode_value(v: Any) -> Any:
+    if isinstance(v, bytes):
+        return v.decode("utf-8")
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, np.ndarray) and v.dtype.kind in "OSU":
+        return [_decode_value(x) for x in v.tolist()]
+    return v
+
+
+def _get_attrs(obj: h5py.HLObject) -> dict[str, Any]:
+    raw = dict(obj.attrs)
+    json_keys = set(json.loads(_decode_value(raw.pop(_JSON_ATTRS, "[]"))))
+    out = {}
+    for key in sorted(raw):
+        v = _decode_value(raw[key])
+        out[key] = json.loads(v) if key in json_keys else v
+    return out
+
+
+# --------------------------------------------------------------------------- writing
+
+
+def _check_name(name: Any, what: str) -> str:
+    if not isinstance(name, str) or not _NAME_RE.match(name) or name in (".", ".."):
+        raise ValueError(
+            f"invalid {what} {name!r}: use letters, digits, '_', '-', '.' (not starting with '.' "
+            "or '-')"
+        )
+    return name
+
+
+def _chunk_len(n_time: int, frame_bytes: int) -> int:
+    """Frames per chunk: <= 256 and <= 1 MiB, preferring a length that divides ``n_time``."""
+    target = max(1, min(n_time, _CHUNK_FRAMES, _CHUNK_MAX_BYTES // max(1, frame_bytes)))
+    for c in range(target, max(1, target // 2) - 1, -1):
+        if n_time % c == 0:
+            return c
+    return target
+
+
+def _write_channel(
+    group: h5py.Group, name: str, ch: Channel, compression: str
+) -> h5py.Dataset:
+    data = ch.data
+    kwargs: dict[str, Any] = {}
+    if data.ndim >= 1 and data.size > 0:
+        if ch.is_time_series:
+            frame_bytes = int(np.prod(data.shape[1:], dtype=np.int64)) * data.dtype.itemsize
+            kwargs["chunks"] = (_chunk_len(data.shape[0], frame_bytes),) + data.shape[1:]
+        else:
+            kwargs["chunks"] = True
+        if compression == "lzf":
+            kwargs.update(compression="lzf", shuffle=True)
+        elif compression == "gzip":
+            kwargs.update(compression="gzip", compression_opts=1, shuffle=True)
+    ds = group.create_dataset(name, data=data, **kwargs)
+    ds.attrs["units"] = ch.units
+    ds.attrs["dim_names"] = json.dumps(list(ch.dim_names))
+    if ch.description:
+        ds.attrs["description"] = ch.description
+    return ds
+
+
+def _fsync(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def write_recording(
+    path: str | os.PathLike,
+    episodes: Mapping[str, Mapping[str, Channel]],
+    *,
+    source: Literal["sim", "real"],
+    config_json: str,
+    root_seed: int | None,
+    shard_index: int | None,
+    sensor_attrs: Mapping[str, Any],
+    mjcf: str | None = None,
+    episode_attrs: Mapping[str, Mapping[str, Any]] | None = None,
+    extra_attrs: Mapping[str, Any] | None = None,
+    compression: Literal["lzf", "gzip", "none"] = "lzf",
+) -> Path:
+    """Write one recording (shard) atomically and return its final path.
+
+    The file is built at ``<path>.tmp`` and renamed to ``path`` when complete; on any exception
+    the temporary file is removed and nothing appears at ``path``.
+    """
+    path = Path(path)
+    if source not in ("sim", "real"):
+        raise ValueError(f"source must be 'sim' or 'real', got {source!r}")
+    if compression not in _COMPRESSIONS:
+        raise ValueError(f"compression must be one of {_COMPRESSIONS}, got {compression!r}")
+    if not isinstance(config_json, str):
+        raise ValueError("config_json must be a JSON string")
+    try:
+        json.loads(config_json)
+    except json.JSONDecodeError as e:
+        raise ValueError(f"config_json is not valid JSON: {e}") from e
+    if not episodes:
+        raise ValueError("episodes is empty: a recording needs at least one episode")
+    episode_attrs = dict(episode_attrs or {})
+    for ep_id, channels in episodes.items():
+        _check_name(ep_id, "episode id")
+        if not channels:
+            raise ValueError(f"episode {ep_id!r} has no channels")
+        for name, ch in channels.items():
+            _check_name(name, "channel name")
+            if not isinstance(ch, Channel):
+                raise ValueError(f"episode {ep_id!r} channel {name!r}: expected a Channel")
+            ch.validate(f"episode {ep_id!r} channel {name!r}")
+    unknown = set(episode_attrs) - set(episodes)
+    if unknown:
+        raise ValueError(f"episode_attrs for unknown episodes: {sorted(unknown)}")
+    reserved = {"format", "format_version", "source", "config_json", "config_sha256"}
+    if extra_attrs and reserved & set(extra_attrs):
+        raise ValueError(f"extra_attrs may not override {sorted(reserved & set(extra_attrs))}")
+
+    gen = generator_info()
+    root: dict[str, Any] = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "source": source,
+        "created_utc": _utc_now(),
+        "generator": f"{gen['name']} {gen['version']} (git {gen['commit']})",
+        "generator_version": gen["version"],
+        "generator_commit": gen["commit"],
+        "config_json": config_json,
+        "config_sha256": hashlib.sha256(config_json.encode("utf-8")).hexdigest(),
+        "root_seed": root_seed,
+        "shard_index": shard_index,
+    }
+    root.update({f"version_{k}": v for k, v in _library_versions().items()})
+    root.update(extra_attrs or {})
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        with h5py.File(tmp, "w", track_order=True) as f:
+            _set_attrs(f, root, "root")
+            _set_attrs(f.create_group("sensor"), dict(sensor_attrs), "sensor")
+            if mjcf is not None:
+                f.create_group("scene").create_dataset("mjcf", data=mjcf, dtype=h5py.string_dtype())
+            eps = f.create_group("episodes")
+            for ep_id in _natural_sorted(episodes):
+                g = eps.create_group(ep_id)
+                _set_attrs(g, episode_attrs.get(ep_id, {}), f"episode {ep_id}")
+                for name, ch in episodes[ep_id].items():
+                    _write_channel(g, name, ch, compression)
+        _fsync(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            tmp.unlink()
+        except FileNotFoundError:
+            pass
+        raise
+    try:  # make the rename durable; best effort (not every filesystem allows it)
+        _fsync(path.parent)
+    except OSError:
+        pass
+    return path
+
+
+# --------------------------------------------------------------------------- reading
+
+
+def _natural_key(s: str) -> list:
+    return [(0, int(t), "") if t.isdigit() else (1, 0, t) for t in re.split(r"(\d+)", s) if t]
+
+
+def _natural_sorted(names) -> list[str]:
+    return sorted(names, key=_natural_key)
+
+
+class Recording:
+    """Read access to one recording file; use as a context manager or call ``close()``."""
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path)
+        try:
+            self._f = h5py.File(self.path, "r")
+        except FileNotFoundError:
+            raise
+        except OSError as e:
+            msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+            raise RecordingError(f"{self.path}: not a readable HDF5 file ({msg})") from None
+        try:
+            self._validate()
+        except BaseException:
+            self._f.close()
+            raise
+
+    def _validate(self) -> None:
+        fmt = _decode_value(self._f.attrs.get("format"))
+        if fmt is None:
+            groups = ", ".join(sorted(self._f.keys())[:8]) or "none"
+            raise RecordingError(
+                f"{self.path}: not a {FORMAT} file (an HDF5 file with no 'format' attribute; "
+                f"top-level entries: {groups})"
+            )
+        if fmt != FORMAT:
+            raise RecordingError(f"{self.path}: format is {fmt!r}, not {FORMAT!r}")
+        version = _decode_value(self._f.attrs.get("format_version"))
+        if not isinstance(version, int) or version < 1:
+            raise RecordingError(f"{self.path}: bad format_version {version!r}")
+        if version > FORMAT_VERSION:
+            raise RecordingError(
+                f"{self.path}: format_version {version} is newer than this piezotwin supports "
+                f"({FORMAT_VERSION}); upgrade piezotwin"
+            )
+        if "episodes" not in self._f:
+            raise RecordingError(f"{self.path}: recording has no /episodes group")
+
+    # context manager
+    def __enter__(self) -> "Recording":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self._f.id.valid:
+            self._f.close()
+
+    def __repr__(self) -> str:
+        return f"Recording({str(self.path)!r})"
+
+    # metadata
+    @functools.cached_property
+    def attrs(self) -> dict[str, Any]:
+        return _get_attrs(self._f)
+
+    @property
+    def config(self) -> dict[str, Any]:
+        return json.loads(self.attrs["config_json"])
+
+    @property
+    def config_sha256(self) -> str:
+        return self.attrs["config_sha256"]
+
+    @functools.cached_property
+    def sensor_attrs(self) -> dict[str, Any]:
+        return _get_attrs(self._f["sensor"]) if "sensor" in self._f else {}
+
+    @property
+    def mjcf(self) -> str | None:
+        if "scene" in self._f and "mjcf" in self._f["scene"]:
+            return _decode_value(self._f["scene/mjcf"][()])
+        return None
+
+    @functools.cached_property
+    def episode_ids(self) -> list[str]:
+        return _natural_sorted(self._f["episodes"].keys())
+
+    def _group(self, ep_id: str) -> h5py.Group:
+        try:
+            return self._f["episodes"][ep_id]
+        except KeyError:
+            raise KeyError(f"{self.path}: no episode {ep_id!r}") from None
+
+    def _ds(self, ep_id: str, name: str) -> h5py.Dataset:
+        g = self._group(ep_id)
+        if name not in g:
+            raise KeyError(
+                f"{self.path}: episode {ep_id!r} has no channel {name!r} (has {sorted(g.keys())})"
+            )
+        return g[name]
+
+    def channels(self, ep_id: str) -> list[str]:
+        return sorted(self._group(ep_id).keys())
+
+    def episode_attrs(self, ep_id: str) -> dict[str, Any]:
+        return _get_attrs(self._group(ep_id))
+
+    def units(self, ep_id: str, name: str) -> str:
+        return _decode_value(self._ds(ep_id, name).attrs["units"])
+
+    def dim_names(self, ep_id: str, name: str) -> tuple[str, ...]:
+        return tuple(json.loads(_decode_value(self._ds(ep_id, name).attrs["dim_names"])))
+
+    def description(self, ep_id: str, name: str) -> str:
+        return _decode_value(self._ds(ep_id, name).attrs.get("description", ""))
+
+    def shape(self, ep_id: str, name: str) -> tuple[int, ...]:
+        return tuple(self._ds(ep_id, name).shape)
+
+    def read(self, ep_id: str, name: str, sl: Any = slice(None)) -> np.ndarray:
+        ds = self._ds(ep_id, name)
+        if ds.ndim == 0:
+            return np.asarray(ds[()])
+        return np.asarray(ds[sl])
+
+    def channel(self, ep_id: str, name: str) -> Channel:
+        return Channel(
+            self.read(ep_id, name),
+            self.units(ep_id, name),
+            self.dim_names(ep_id, name),
+            self.description(ep_id, name),
+        )
+
+    def _blocks(self, ds: h5py.Dataset, max_bytes: int = 32 << 20) -> Iterator[np.ndarray]:
+        if ds.ndim == 0 or ds.shape[0] == 0:
+            yield np.asarray(ds[()])
+            return
+        row = max(1, ds.size // ds.shape[0] * ds.dtype.itemsize)
+        step = max(1, max_bytes // row)
+        if ds.chunks:
+            step = max(ds.chunks[0], step // ds.chunks[0] * ds.chunks[0])
+        for i in range(0, ds.shape[0], step):
+            yield ds[i : i + step]
+
+    def summary(self) -> dict[str, Any]:
+        """Episodes, total duration (s) and per channel units, dims, shapes, min and max.
+
+        The duration of an episode is n * mean(dt) of its ``time`` channel (its span plus one
+        sample period), so n samples at f Hz last n/f seconds.
+        """
+        duration = 0.0
+        n_samples = 0
+        chans: dict[str, dict[str, Any]] = {}
+        for ep in self.episode_ids:
+            g = self._group(ep)
+            if "time" in g and g["time"].ndim >= 1:
+                t = g["time"]
+                n = t.shape[0]
+                n_samples += n
+                if n >= 2:
+                    duration += float(t[n - 1] - t[0]) * n / (n - 1)
+            for name in sorted(g.keys()):
+                ds = g[name]
+                c = chans.setdefault(
+                    name,
+                    {
+                        "units": self.units(ep, name),
+                        "dim_names": self.dim_names(ep, name),
+                        "dtype": str(ds.dtype),
+                        "frame_shape": tuple(ds.shape[1:]) if ds.ndim else (),
+                        "n_samples": 0,
+                        "min": math.inf,
+                        "max": -math.inf,
+                    },
+                )
+                c["n_samples"] += ds.shape[0] if ds.ndim else 1
+                for block in self._blocks(ds):
+                    b = np.asarray(block)
+                    if b.dtype.kind in "fc":
+                        b = b.real[np.isfinite(b.real)]
+                    if b.size:
+                        c["min"] = min(c["min"], b.min().item())
+                        c["max"] = max(c["max"], b.max().item())
+        for c in chans.values():
+            if c["min"] == math.inf:
+                c["min"] = c["max"] = None
+        a = self.attrs
+        return {
+            "path": str(self.path),
+            "format_version": a["format_version"],
+            "source": a["source"],
+            "created_utc": a.get("created_utc"),
+            "generator": a.get("generator"),
+            "config_sha256": a.get("config_sha256"),
+            "root_seed": a.get("root_seed"),
+            "shard_index": a.get("shard_index"),
+            "n_episodes": len(self.episode_ids),
+            "n_samples": n_samples,
+            "duration_s": duration,
+            "channels": chans,
+        }
+
+
+def read_recording_summary(path: str | os.PathLike) -> dict[str, Any]:
+    with Recording(path) as rec:
+        return rec.summary()
