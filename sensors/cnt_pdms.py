@@ -79,7 +79,7 @@ class CntPdmsSensor:
             raise ValueError(f"need one seed per episode ({E}); got {len(seeds)}")
         noise = self.noise(seeds, T)
         if self.backend == "numpy":
-            strain, stress, cond, _ = taxel_chain_numpy(drive, self.mode, self.tp, TaxelState.zeros(E * N))
+            strain, stress, cond, _ = taxel_chain_numpy(drive, self.mode, self.tp, TaxelState.zeros(E * N, self.tp))
             g, force = el.sum_channels_numpy(cond, stress, self.taxel_channel, self.n_channels, self.tp.taxel_area_m2)
             ro, _ = el.readout_numpy(g, noise, self.ep)
         else:

@@ -1,8 +1,8 @@
 """Flat numeric parameters of the CNT-PDMS transduction chain, derived once from a SceneConfig.
 
 The kernels (Warp and the numpy reference) read only these arrays, never the pydantic config.
-Prony and play banks are padded to fixed lengths (N_PRONY, N_PLAY) with inert terms so that a
-kernel can keep the whole state in registers.
+Prony and play banks hold only the active terms; the Warp kernel is specialised (compiled once) for
+each pair of term counts so that the whole state stays in registers and no work goes to padding.
 """
 
 from __future__ import annotations
@@ -12,9 +12,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from scenes.config import SceneConfig
-
-N_PRONY = 8  # max Prony terms (MechanicsConfig allows up to 8)
-N_PLAY = 16  # max play operators (HysteresisConfig allows up to 16)
 
 MODE_DISPLACEMENT = 0  # drive = compressive strain (-)
 MODE_FORCE = 1  # drive = compressive stress (Pa)
@@ -27,17 +24,25 @@ class TaxelParams:
     dt_s: float
     youngs_modulus_pa: float  # relaxed (long-time) modulus E_inf
     lock_strain: float  # nonlinear law sigma_eq = E_inf e / (1 - e/e_lock)
-    prony_decay: np.ndarray  # [N_PRONY] a_i = exp(-dt/tau_i)
-    prony_gain: np.ndarray  # [N_PRONY] b_i = tau_i/dt (1 - a_i): exact for piecewise-linear strain
-    prony_modulus_pa: np.ndarray  # [N_PRONY] E_i = g_i E_inf (0 for padding)
+    prony_decay: np.ndarray  # [P] a_i = exp(-dt/tau_i)
+    prony_gain: np.ndarray  # [P] b_i = tau_i/dt (1 - a_i): exact for piecewise-linear strain
+    prony_modulus_pa: np.ndarray  # [P] E_i = g_i E_inf
     gap_decay: float  # a = exp(-dt/tau_gap)
     gap_gain: float  # b = tau_gap/dt (1 - a)
-    play_threshold: np.ndarray  # [N_PLAY] r_k (strain)
-    play_weight: np.ndarray  # [N_PLAY] w_k (0 for padding)
+    play_threshold: np.ndarray  # [K] r_k (strain)
+    play_weight: np.ndarray  # [K] w_k
     recovery_decay: float  # exp(-dt/T_recovery) pulling play states toward the input
     gamma_s0: float  # tunneling exponent factor
     taxel_area_m2: float
     rest_resistance_ohm: float  # one taxel's through-thickness resistance at rest: h / (sigma0 A)
+
+    @property
+    def n_prony(self) -> int:
+        return len(self.prony_decay)
+
+    @property
+    def n_play(self) -> int:
+        return len(self.play_threshold)
 
 
 @dataclass(frozen=True)
@@ -69,16 +74,13 @@ class ElectronicsParams:
 def taxel_params(cfg: SceneConfig) -> TaxelParams:
     dt = 1.0 / cfg.sampling.sample_rate_hz
     mech, hyst, tun = cfg.sensor.mechanics, cfg.sensor.hysteresis, cfg.sensor.tunneling
-    tau = np.ones(N_PRONY)
-    g = np.zeros(N_PRONY)
-    tau[: len(mech.prony_times_s)] = mech.prony_times_s
-    g[: len(mech.prony_fractions)] = mech.prony_fractions
+    # an empty bank becomes one inert term (zero modulus / zero weight) so kernels need no special case
+    tau = np.asarray(mech.prony_times_s or [1.0], dtype=np.float64)
+    g = np.asarray(mech.prony_fractions or [0.0], dtype=np.float64)
     a = np.exp(-dt / tau)
     b = tau / dt * (1.0 - a)
-    r = np.zeros(N_PLAY)
-    w = np.zeros(N_PLAY)
-    r[: len(hyst.play_thresholds)] = hyst.play_thresholds
-    w[: len(hyst.play_weights)] = hyst.play_weights
+    r = np.asarray(hyst.play_thresholds or [0.0], dtype=np.float64)
+    w = np.asarray(hyst.play_weights or [0.0], dtype=np.float64)
     a_gap = float(np.exp(-dt / tun.gap_time_s))
     area = cfg.pad.size_x_m * cfg.pad.size_y_m / cfg.pad.n_taxels
     return TaxelParams(

@@ -19,14 +19,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sensors.params import MODE_FORCE, N_PLAY, N_PRONY, TaxelParams
+from sensors.params import MODE_FORCE, TaxelParams
 
 MAX_STRAIN_FRACTION = 0.95  # of lock_strain: the law diverges at e_lock
 
 
 @dataclass
 class TaxelState:
-    """State carried across calls, all float32. Shapes: [B] or [B, N_PRONY] / [B, N_PLAY], B = episodes x taxels."""
+    """State carried across calls, all float32. Shapes: [B] or [B, P] / [B, K]; B = episodes x taxels,
+    P Prony terms, K play operators."""
 
     strain: np.ndarray
     phi: np.ndarray
@@ -35,9 +36,9 @@ class TaxelState:
     play: np.ndarray
 
     @classmethod
-    def zeros(cls, n: int) -> "TaxelState":
+    def zeros(cls, n: int, p: TaxelParams) -> "TaxelState":
         z = np.zeros(n, np.float32)
-        return cls(z.copy(), z.copy(), np.zeros((n, N_PRONY), np.float32), z.copy(), np.zeros((n, N_PLAY), np.float32))
+        return cls(z.copy(), z.copy(), np.zeros((n, p.n_prony), np.float32), z.copy(), np.zeros((n, p.n_play), np.float32))
 
 
 def _phi(e: np.ndarray, e_lock: float) -> np.ndarray:
@@ -59,12 +60,12 @@ def taxel_chain_numpy(
     """
     f32 = np.float32
     E, T, N = drive.shape
-    st = state if state is not None else TaxelState.zeros(E * N)
+    st = state if state is not None else TaxelState.zeros(E * N, p)
     e = st.strain.reshape(E, N).astype(f32).copy()
     phi = st.phi.reshape(E, N).astype(f32).copy()
-    h = st.prony_pa.reshape(E, N, N_PRONY).astype(f32).copy()
+    h = st.prony_pa.reshape(E, N, p.n_prony).astype(f32).copy()
     s = st.gap_strain.reshape(E, N).astype(f32).copy()
-    z = st.play.reshape(E, N, N_PLAY).astype(f32).copy()
+    z = st.play.reshape(E, N, p.n_play).astype(f32).copy()
 
     a, b, Ei = (x.astype(f32) for x in (p.prony_decay, p.prony_gain, p.prony_modulus_pa))
     r, w = p.play_threshold.astype(f32), p.play_weight.astype(f32)
@@ -100,6 +101,6 @@ def taxel_chain_numpy(
         e, phi = e_new, phi_new
         strain[:, k], stress[:, k], cond[:, k] = e, sig, g
     out_state = TaxelState(
-        e.reshape(-1), phi.reshape(-1), h.reshape(-1, N_PRONY), s.reshape(-1), z.reshape(-1, N_PLAY)
+        e.reshape(-1), phi.reshape(-1), h.reshape(-1, p.n_prony), s.reshape(-1), z.reshape(-1, p.n_play)
     )
     return strain, stress, cond, out_state

@@ -1,113 +1,120 @@
 """Warp kernel of the per-taxel CNT-PDMS chain (same equations as sensors/taxel_ref.py, which tests compare).
 
 One thread per (episode, taxel) loops over time with the whole state in registers (TECH-NOTES: one
-launch with the time loop inside beats one launch per step by ~7x on the GPU). Memory layout [E, T, N]:
+launch with the time loop inside beats one launch per step by ~7x on the GPU). The kernel is built per
+(Prony terms, play operators) pair, so term loops unroll at compile time. Memory layout [E, T, N]:
 neighbouring threads read neighbouring taxels, so loads coalesce on CUDA.
 """
 
-from __future__ import annotations
+# no `from __future__ import annotations`: Warp must see the closure vector types as real objects
+
+import functools
 
 import numpy as np
 import warp as wp
 
-from sensors.params import N_PLAY, N_PRONY, TaxelParams
+from sensors.params import TaxelParams
 from sensors.taxel_ref import MAX_STRAIN_FRACTION, TaxelState
 from sensors.warp_setup import init_warp, resolve_device
 
-vec_prony = wp.types.vector(length=N_PRONY, dtype=wp.float32)
-vec_play = wp.types.vector(length=N_PLAY, dtype=wp.float32)
 
+@functools.cache
+def taxel_kernel(n_prony: int, n_play: int):
+    """(kernel, prony vector type, play vector type) for this many terms; compiled once per pair."""
+    vec_p = wp.types.vector(length=n_prony, dtype=wp.float32)
+    vec_k = wp.types.vector(length=n_play, dtype=wp.float32)
+    strain_frac = float(MAX_STRAIN_FRACTION)
 
-@wp.kernel
-def taxel_chain_kernel(
-    drive: wp.array(dtype=wp.float32),  # [E*T*N]
-    n_steps: int,
-    n_taxels: int,
-    mode: int,
-    prony_decay: vec_prony,
-    prony_gain: vec_prony,
-    prony_modulus: vec_prony,
-    play_r: vec_play,
-    play_w: vec_play,
-    e_inf: float,
-    e_lock: float,
-    gap_a: float,
-    gap_b: float,
-    recovery: float,
-    gamma: float,
-    g0: float,
-    st_strain: wp.array(dtype=wp.float32),  # [E*N] in/out
-    st_phi: wp.array(dtype=wp.float32),
-    st_prony: wp.array(dtype=vec_prony),
-    st_gap: wp.array(dtype=wp.float32),
-    st_play: wp.array(dtype=vec_play),
-    out_strain: wp.array(dtype=wp.float32),  # [E*T*N]
-    out_stress: wp.array(dtype=wp.float32),
-    out_cond: wp.array(dtype=wp.float32),
-):
-    tid = wp.tid()
-    ep = tid // n_taxels
-    n = tid - ep * n_taxels
-    e = st_strain[tid]
-    phi = st_phi[tid]
-    h = st_prony[tid]
-    s = st_gap[tid]
-    z = st_play[tid]
+    def chain(
+        drive: wp.array(dtype=wp.float32),  # [E*T*N]
+        n_steps: int,
+        n_taxels: int,
+        mode: int,
+        prony_decay: vec_p,
+        prony_gain: vec_p,
+        prony_modulus: vec_p,
+        play_r: vec_k,
+        play_w: vec_k,
+        e_inf: float,
+        e_lock: float,
+        gap_a: float,
+        gap_b: float,
+        recovery: float,
+        gamma: float,
+        g0: float,
+        st_strain: wp.array(dtype=wp.float32),  # [E*N] in/out
+        st_phi: wp.array(dtype=wp.float32),
+        st_prony: wp.array(dtype=vec_p),
+        st_gap: wp.array(dtype=wp.float32),
+        st_play: wp.array(dtype=vec_k),
+        out_strain: wp.array(dtype=wp.float32),  # [E*T*N]
+        out_stress: wp.array(dtype=wp.float32),
+        out_cond: wp.array(dtype=wp.float32),
+    ):
+        tid = wp.tid()
+        ep = tid // n_taxels
+        n = tid - ep * n_taxels
+        e = st_strain[tid]
+        phi = st_phi[tid]
+        h = st_prony[tid]
+        s = st_gap[tid]
+        z = st_play[tid]
 
-    e_max = float(MAX_STRAIN_FRACTION) * e_lock
-    phi_max = e_max / (1.0 - e_max / e_lock)
-    eb_sum = float(0.0)
-    w_sum = float(0.0)
-    for i in range(N_PRONY):
-        eb_sum += prony_modulus[i] * prony_gain[i]
-    for j in range(N_PLAY):
-        w_sum += play_w[j]
-    stiff = e_inf + eb_sum
-    w_direct = 1.0 - w_sum
+        e_max = strain_frac * e_lock
+        phi_max = e_max / (1.0 - e_max / e_lock)
+        eb = wp.cw_mul(prony_modulus, prony_gain)
+        eb_sum = float(0.0)
+        w_sum = float(0.0)
+        for i in range(n_prony):
+            eb_sum += eb[i]
+        for j in range(n_play):
+            w_sum += play_w[j]
+        stiff = e_inf + eb_sum
+        w_direct = 1.0 - w_sum
 
-    base = ep * n_steps * n_taxels + n
-    for k in range(n_steps):
-        idx = base + k * n_taxels
-        d = drive[idx]
-        e_new = float(0.0)
-        phi_new = float(0.0)
-        if mode == 1:
-            ah = float(0.0)
-            for i in range(N_PRONY):
-                ah += prony_decay[i] * h[i]
-            phi_new = wp.clamp((d - ah + eb_sum * phi) / stiff, 0.0, phi_max)
-            e_new = phi_new / (1.0 + phi_new / e_lock)
-        else:
-            e_new = wp.clamp(d, 0.0, e_max)
-            phi_new = e_new / (1.0 - e_new / e_lock)
-        sig = e_inf * phi_new
-        dphi = phi_new - phi
-        for i in range(N_PRONY):
-            h[i] = prony_decay[i] * h[i] + prony_modulus[i] * prony_gain[i] * dphi
-            sig += h[i]
-        s = gap_a * s + (1.0 - gap_a) * e + (1.0 - gap_b) * (e_new - e)
-        e_net = w_direct * s
-        for j in range(N_PLAY):
-            zj = wp.max(s - play_r[j], wp.min(s + play_r[j], z[j]))
-            zj = s + (zj - s) * recovery
-            z[j] = zj
-            e_net += play_w[j] * zj
-        g = g0 / ((1.0 - e_net) * wp.exp(-gamma * e_net))
-        e = e_new
-        phi = phi_new
-        out_strain[idx] = e
-        out_stress[idx] = sig
-        out_cond[idx] = g
+        base = ep * n_steps * n_taxels + n
+        for k in range(n_steps):
+            idx = base + k * n_taxels
+            d = drive[idx]
+            e_new = float(0.0)
+            phi_new = float(0.0)
+            if mode == 1:
+                phi_new = wp.clamp((d - wp.dot(prony_decay, h) + eb_sum * phi) / stiff, 0.0, phi_max)
+                e_new = phi_new / (1.0 + phi_new / e_lock)
+            else:
+                e_new = wp.clamp(d, 0.0, e_max)
+                phi_new = e_new / (1.0 - e_new / e_lock)
+            h = wp.cw_mul(prony_decay, h) + eb * (phi_new - phi)
+            sig = e_inf * phi_new
+            for i in range(n_prony):
+                sig += h[i]
+            s = gap_a * s + (1.0 - gap_a) * e + (1.0 - gap_b) * (e_new - e)
+            e_net = w_direct * s
+            for j in range(n_play):
+                zj = wp.max(s - play_r[j], wp.min(s + play_r[j], z[j]))
+                zj = s + (zj - s) * recovery
+                z[j] = zj
+                e_net += play_w[j] * zj
+            g = g0 / ((1.0 - e_net) * wp.exp(-gamma * e_net))
+            e = e_new
+            phi = phi_new
+            out_strain[idx] = e
+            out_stress[idx] = sig
+            out_cond[idx] = g
 
-    st_strain[tid] = e
-    st_phi[tid] = phi
-    st_prony[tid] = h
-    st_gap[tid] = s
-    st_play[tid] = z
+        st_strain[tid] = e
+        st_phi[tid] = phi
+        st_prony[tid] = h
+        st_gap[tid] = s
+        st_play[tid] = z
+
+    chain.__name__ = chain.__qualname__ = f"taxel_chain_p{n_prony}_k{n_play}"
+    kernel = wp.kernel(chain, module="unique", enable_backward=False)
+    return kernel, vec_p, vec_k
 
 
 class TaxelChainWarp:
-    """Holds device buffers for one batch shape and launches the fused kernel.
+    """Holds device state for one batch shape and launches the fused kernel.
 
     drive: [E, T, N] float32 (numpy or a wp.array on `device`). State persists across `run` calls,
     so a long episode can be fed in chunks (streaming) with the same result as in one piece.
@@ -116,37 +123,39 @@ class TaxelChainWarp:
     def __init__(self, p: TaxelParams, n_episodes: int, n_taxels: int, device: str = "cpu"):
         init_warp()
         self.p, self.E, self.N, self.device = p, n_episodes, n_taxels, resolve_device(device)
+        self.kernel, self.vec_p, self.vec_k = taxel_kernel(p.n_prony, p.n_play)
         self.reset()
 
     def reset(self, state: TaxelState | None = None) -> None:
-        st = state or TaxelState.zeros(self.E * self.N)
+        st = state or TaxelState.zeros(self.E * self.N, self.p)
         d = self.device
         self.st_strain = wp.array(st.strain, dtype=wp.float32, device=d)
         self.st_phi = wp.array(st.phi, dtype=wp.float32, device=d)
-        self.st_prony = wp.array(st.prony_pa, dtype=vec_prony, device=d)
+        self.st_prony = wp.array(st.prony_pa, dtype=self.vec_p, device=d)
         self.st_gap = wp.array(st.gap_strain, dtype=wp.float32, device=d)
-        self.st_play = wp.array(st.play, dtype=vec_play, device=d)
+        self.st_play = wp.array(st.play, dtype=self.vec_k, device=d)
 
     def state(self) -> TaxelState:
         return TaxelState(
             self.st_strain.numpy(), self.st_phi.numpy(), self.st_prony.numpy(), self.st_gap.numpy(), self.st_play.numpy()
         )
 
-    def run_device(self, drive: wp.array, n_steps: int, mode: int):
+    def run_device(self, drive: wp.array, n_steps: int, mode: int, outs: list | None = None):
         """Launch on a flat device array [E*T*N]; returns (strain, stress, conductance) device arrays."""
         p, d = self.p, self.device
         size = self.E * n_steps * self.N
-        out = [wp.empty(size, dtype=wp.float32, device=d) for _ in range(3)]
+        out = outs or [wp.empty(size, dtype=wp.float32, device=d) for _ in range(3)]
+        f32 = np.float32
         wp.launch(
-            taxel_chain_kernel,
+            self.kernel,
             dim=self.E * self.N,
             inputs=[
                 drive, n_steps, self.N, int(mode),
-                vec_prony(*p.prony_decay.astype(np.float32)),
-                vec_prony(*p.prony_gain.astype(np.float32)),
-                vec_prony(*p.prony_modulus_pa.astype(np.float32)),
-                vec_play(*p.play_threshold.astype(np.float32)),
-                vec_play(*p.play_weight.astype(np.float32)),
+                self.vec_p(*p.prony_decay.astype(f32)),
+                self.vec_p(*p.prony_gain.astype(f32)),
+                self.vec_p(*p.prony_modulus_pa.astype(f32)),
+                self.vec_k(*p.play_threshold.astype(f32)),
+                self.vec_k(*p.play_weight.astype(f32)),
                 float(p.youngs_modulus_pa), float(p.lock_strain), float(p.gap_decay), float(p.gap_gain),
                 float(p.recovery_decay), float(p.gamma_s0), float(1.0 / p.rest_resistance_ohm),
                 self.st_strain, self.st_phi, self.st_prony, self.st_gap, self.st_play,
