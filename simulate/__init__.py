@@ -1,0 +1,1 @@
+"""simulate: MuJoCo scenes, loading protocols, contact -> per-taxel load field."""

@@ -1,0 +1,118 @@
+"""Transduction chain speed: Warp (CPU, and CUDA when present) vs the numpy reference, in one run.
+
+Measures taxel-steps/s of the per-taxel kernel alone and of the whole chain (taxel kernel + channel sums +
+bridge/ADC/filter readout) on E episodes x (side x side) taxels x T steps, with the drive already on the
+device (host transfers are reported apart). Writes bench/results/transduction-<host>.json and prints ratios.
+
+    python bench/bench_transduction.py                       # CPU: numpy vs Warp
+    python bench/bench_transduction.py --gpu-episodes 256    # adds CUDA at the issue's size (256 x 64 x 64 x 1000)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def _drive(E: int, T: int, N: int) -> np.ndarray:
+    t = np.arange(T, dtype=np.float32) / 100.0
+    amp = np.random.default_rng(0).uniform(0.005, 0.04, (E, 1, N)).astype(np.float32)
+    return (amp * (0.5 - 0.5 * np.cos(2 * np.pi * 1.0 * t))[None, :, None]).astype(np.float32)
+
+
+def bench_numpy(cfg, E, T, N):
+    from sensors.params import taxel_params
+    from sensors.taxel_ref import taxel_chain_numpy
+
+    d = _drive(E, T, N)
+    t0 = time.perf_counter()
+    taxel_chain_numpy(d, 0, taxel_params(cfg))
+    return E * T * N / (time.perf_counter() - t0)
+
+
+def bench_warp(cfg, E, T, N, device, repeats=3):
+    import warp as wp
+
+    from sensors import electronics as el
+    from sensors.params import electronics_params, taxel_params
+    from sensors.taxel_warp import TaxelChainWarp
+
+    tp, ep = taxel_params(cfg), electronics_params(cfg)
+    chain = TaxelChainWarp(tp, E, N, device)
+    host = _drive(E, T, N).reshape(-1)
+    t0 = time.perf_counter()
+    drive = wp.array(host, dtype=wp.float32, device=chain.device)
+    wp.synchronize_device(chain.device)
+    h2d = time.perf_counter() - t0
+    outs = [wp.empty(E * T * N, dtype=wp.float32, device=chain.device) for _ in range(3)]
+    chain.run_device(drive, T, 0, outs)  # warm-up / compile
+    wp.synchronize_device(chain.device)
+    best = float("inf")
+    for _ in range(repeats):
+        chain.reset()
+        t0 = time.perf_counter()
+        chain.run_device(drive, T, 0, outs)
+        wp.synchronize_device(chain.device)
+        best = min(best, time.perf_counter() - t0)
+    noise = np.zeros((E, T, 1))
+    tc = np.zeros(N, np.int32)
+    el.readout_warp(outs[2], outs[1], tc, 1, tp.taxel_area_m2, (E, T, N), noise, ep, None, chain.device)
+    best_full = float("inf")
+    for _ in range(repeats):
+        chain.reset()
+        wp.synchronize_device(chain.device)
+        t0 = time.perf_counter()
+        chain.run_device(drive, T, 0, outs)
+        el.readout_warp(outs[2], outs[1], tc, 1, tp.taxel_area_m2, (E, T, N), noise, ep, None, chain.device)
+        wp.synchronize_device(chain.device)
+        best_full = min(best_full, time.perf_counter() - t0)
+    return {"kernel": E * T * N / best, "chain": E * T * N / best_full, "h2d_s": h2d, "device": chain.device}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--episodes", type=int, default=16, help="CPU batch (the numpy reference runs on the same)")
+    ap.add_argument("--side", type=int, default=64)
+    ap.add_argument("--steps", type=int, default=1000)
+    ap.add_argument("--gpu-episodes", type=int, default=256)
+    ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
+    a = ap.parse_args()
+
+    from scenes import load_scene
+    from sensors.warp_setup import init_warp
+
+    init_warp()
+    import warp as wp
+
+    cfg = load_scene("cnt_pdms")
+    N = a.side * a.side
+    res: dict = {"host": platform.node(), "cpu": platform.processor() or platform.machine(), "taxels": N, "steps": a.steps}
+    res["numpy_ref"] = {"episodes": a.episodes, "taxel_steps_per_s": bench_numpy(cfg, a.episodes, a.steps, N)}
+    w = bench_warp(cfg, a.episodes, a.steps, N, "cpu")
+    res["warp_cpu"] = {"episodes": a.episodes, "taxel_steps_per_s_kernel": w["kernel"], "taxel_steps_per_s_chain": w["chain"]}
+    print(f"numpy reference : {res['numpy_ref']['taxel_steps_per_s']:.3g} taxel-steps/s  ({a.episodes} x {N} x {a.steps})")
+    print(f"warp cpu        : kernel {w['kernel']:.3g}, whole chain {w['chain']:.3g} taxel-steps/s")
+    print(f"  ratio warp-cpu / numpy: {w['chain'] / res['numpy_ref']['taxel_steps_per_s']:.2f}x")
+    if wp.get_cuda_device_count() > 0:
+        g = bench_warp(cfg, a.gpu_episodes, a.steps, N, "cuda:0")
+        res["warp_cuda"] = {
+            "episodes": a.gpu_episodes, "device_name": wp.get_device("cuda:0").name,
+            "taxel_steps_per_s_kernel": g["kernel"], "taxel_steps_per_s_chain": g["chain"], "h2d_s": g["h2d_s"],
+        }
+        print(f"warp cuda ({res['warp_cuda']['device_name']}): kernel {g['kernel']:.3g}, whole chain {g['chain']:.3g} "
+              f"taxel-steps/s ({a.gpu_episodes} x {N} x {a.steps}); h2d of the drive {g['h2d_s']:.2f} s")
+        print(f"  ratio cuda / warp-cpu: {g['chain'] / w['chain']:.0f}x; cuda / numpy: {g['chain'] / res['numpy_ref']['taxel_steps_per_s']:.0f}x")
+    a.out.mkdir(parents=True, exist_ok=True)
+    tag = "gpu" if "warp_cuda" in res else "cpu"
+    path = a.out / f"transduction-{tag}.json"
+    path.write_text(json.dumps(res, indent=2))
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()

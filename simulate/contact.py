@@ -1,0 +1,225 @@
+"""Batched MuJoCo episodes -> per-taxel load field (deformation, pressure, shear).
+
+One `mujoco.rollout` call runs all episodes (open-loop controls, no Python stepping); the sensors of
+the MJCF (joint positions + the netforce contact sensor) are read at every `substeps`-th step.
+The taxel fields are then computed in vectorised numpy:
+
+- deformation: geometric overlap of the indenter (at its simulated pose) with the undeformed pad top,
+  averaged over each taxel cell (box: exact cell coverage; sphere: 4 x 4 supersampling), spread by a
+  row-normalised Gaussian elastic-layer kernel of width pad.spread_length_m
+  (Johnson, Contact Mechanics, 1985, sect. 5.8, thin elastic layer), and never less than the overlap
+  itself (the surface cannot stay inside the rigid indenter): max(overlap, kernel * overlap).
+- pressure: Winkler distribution of MuJoCo's net normal contact force, proportional to the
+  deformation, so that sum(pressure * taxel_area) == normal force exactly.
+- shear: MuJoCo's net tangential contact force distributed with the same weights.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import mujoco.rollout
+import numpy as np
+
+from scenes.config import SceneConfig
+from simulate.mjcf import build_mjcf, contact_design
+from simulate.protocols import EpisodeProtocol, target_waveform
+from simulate.taxels import (
+    interval_coverage,
+    spread_matrix,
+    sphere_overlap,
+    taxel_area_m2,
+    taxel_xy_m,
+)
+
+MAX_STEPS_PER_CHUNK = 4_000_000  # episodes x steps per rollout call (bounds the rollout's output memory)
+
+# sensordata layout of build_mjcf: jointpos x, y, z; contact netforce: found, force(3), torque(3), dist, pos(3), ...
+_POS = slice(0, 3)
+_FOUND = 3
+_FORCE = slice(4, 7)
+
+
+@dataclass
+class LoadBatch:
+    """Load field of E episodes x T samples on N taxels (float64, SI).
+
+    time_s: (T,) sample times, sample k at k / sample_rate_hz.
+    target: (E, T) commanded penetration (m, + into the pad) or force (N, + compressive).
+    indenter_pos_m: (E, T, 3) world position of the indenter's lowest point on its axis (box: bottom-face
+        centre, sphere: bottom pole); z - pad thickness = -penetration.
+    contact_force_n: (E, T, 3) net contact force of the indenter on the pad, world x/y (tangential, force
+        on the pad) and z = normal compressive force (positive when pressing; = -F_z on the pad).
+    contact_points: (E, T) number of MuJoCo contacts between indenter and pad.
+    deformation_m: (E, T, N) surface deflection of the pad (m, + down).
+    pressure_pa: (E, T, N) normal pressure; sum over N of pressure * taxel_area == contact_force_n[..., 2].
+    shear_pa: (E, T, N, 2) tangential traction on the pad (x, y); sums to contact_force_n[..., :2] / area.
+    taxel_xy_m: (N, 2) taxel centres, flat index n = iy * taxels_x + ix.
+    taxel_area_m2: area of one taxel cell.
+    control: "displacement" | "force".
+    """
+
+    time_s: np.ndarray
+    target: np.ndarray
+    indenter_pos_m: np.ndarray
+    contact_force_n: np.ndarray
+    contact_points: np.ndarray
+    deformation_m: np.ndarray
+    pressure_pa: np.ndarray
+    shear_pa: np.ndarray
+    taxel_xy_m: np.ndarray
+    taxel_area_m2: float
+    control: str
+
+
+def build_model(cfg: SceneConfig) -> mujoco.MjModel:
+    return mujoco.MjModel.from_xml_string(build_mjcf(cfg))
+
+
+def episode_controls(cfg: SceneConfig, protocols: list[EpisodeProtocol], nstep: int) -> tuple[np.ndarray, np.ndarray]:
+    """(E, nstep, 3) actuator controls for steps i = 0..nstep-1 (evaluated at t = (i + 1) dt) and the
+    (E, nstep) commanded target at those times.
+
+    Displacement control: the z servo gets ctrl = q* + (kv / kp) dq*/dt with q* = -d (1 + k_pad / kp):
+    velocity feed-forward (no servo lag) and static feed-forward of the servo deflection under the
+    design pad stiffness. Force control: ctrl_z = -F (a force pushing the indenter down).
+    """
+    des = contact_design(cfg)
+    dt = cfg.sampling.physics_timestep_s
+    t = (np.arange(nstep) + 1.0) * dt
+    E = len(protocols)
+    ctrl = np.zeros((E, nstep, 3))
+    target = np.zeros((E, nstep))
+    for e, p in enumerate(protocols):
+        target[e] = target_waveform(p, cfg, t)
+        ctrl[e, :, 0] = p.offset_xy_m[0]
+        ctrl[e, :, 1] = p.offset_xy_m[1]
+    if cfg.protocol.control == "displacement":
+        kp, kv = des.servo_kp_n_per_m, des.servo_kv_n_s_per_m
+        q = -target * (1.0 + des.pad_stiffness_n_per_m / kp)
+        dq = np.gradient(q, dt, axis=1) if nstep > 1 else np.zeros_like(q)
+        ctrl[:, :, 2] = q + (kv / kp) * dq
+    else:
+        ctrl[:, :, 2] = -target
+    return ctrl, target
+
+
+def _initial_states(m: mujoco.MjModel, cfg: SceneConfig, protocols: list[EpisodeProtocol], ctrl0: np.ndarray):
+    """(E, nstate) full-physics initial states and (E, nsensordata) sensors at t = 0."""
+    d = mujoco.MjData(m)
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    nstate = mujoco.mj_stateSize(m, spec)
+    states = np.zeros((len(protocols), nstate))
+    sens = np.zeros((len(protocols), m.nsensordata))
+    for e, p in enumerate(protocols):
+        mujoco.mj_resetData(m, d)
+        d.qpos[:] = (p.offset_xy_m[0], p.offset_xy_m[1], cfg.indenter.start_gap_m)
+        d.ctrl[:] = ctrl0[e]
+        mujoco.mj_forward(m, d)
+        mujoco.mj_getState(m, d, states[e], spec)
+        sens[e] = d.sensordata
+    return states, sens
+
+
+def simulate_sensors(
+    cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1
+) -> tuple[np.ndarray, np.ndarray]:
+    """Run the episodes; returns sensordata (E, T, nsensordata) at the sample times and target (E, T)."""
+    ns = {p.n_samples for p in protocols}
+    if len(ns) != 1:
+        raise ValueError(f"run_episodes: all protocols must have the same n_samples (got {sorted(ns)})")
+    n = ns.pop()
+    if n < 2:
+        raise ValueError(f"run_episodes: n_samples must be >= 2 (got {n})")
+    sub = cfg.sampling.substeps
+    nstep = (n - 1) * sub
+    m = build_model(cfg)
+    ctrl, tgt_steps = episode_controls(cfg, protocols, nstep)
+    states0, sens0 = _initial_states(m, cfg, protocols, ctrl[:, 0])
+    E = len(protocols)
+    out = np.zeros((E, n, m.nsensordata))
+    out[:, 0] = sens0
+    rows = np.arange(1, n) * sub - 1
+    datas = [mujoco.MjData(m) for _ in range(max(1, threads))]
+    data_arg = datas if threads > 1 else datas[0]
+    chunk = max(max(1, threads), MAX_STEPS_PER_CHUNK // nstep)
+    for a in range(0, E, chunk):
+        b = min(E, a + chunk)
+        _, sd = mujoco.rollout.rollout(m, data_arg, states0[a:b], ctrl[a:b], nstep=nstep)
+        out[a:b, 1:] = sd[:, rows]
+    target = np.zeros((E, n))
+    target[:, 1:] = tgt_steps[:, rows]
+    target[:, 0] = [target_waveform(p, cfg, np.zeros(1))[0] for p in protocols]
+    return out, target
+
+
+def load_field(cfg: SceneConfig, pos_rel_m: np.ndarray, force_n: np.ndarray):
+    """Taxel fields from the indenter pose and net contact force.
+
+    pos_rel_m: (E, T, 3) indenter lowest point relative to (0, 0, pad top).
+    force_n: (E, T, 3) tangential x, y and normal compressive z contact force.
+    Returns deformation_m (E, T, N), pressure_pa (E, T, N), shear_pa (E, T, N, 2).
+    """
+    pad, ind = cfg.pad, cfg.indenter
+    E, T, _ = pos_rel_m.shape
+    nx, ny = pad.taxels_x, pad.taxels_y
+    sx = spread_matrix(pad.size_x_m, nx, pad.spread_length_m)
+    sy = spread_matrix(pad.size_y_m, ny, pad.spread_length_m)
+    pen = np.clip(-pos_rel_m[..., 2], 0.0, None)  # (E, T)
+    if ind.shape == "box":
+        cx = interval_coverage(pos_rel_m[..., 0], ind.size_x_m / 2, pad.size_x_m, nx)  # (E, T, nx)
+        cy = interval_coverage(pos_rel_m[..., 1], ind.size_y_m / 2, pad.size_y_m, ny)  # (E, T, ny)
+        overlap = pen[..., None, None] * cy[..., :, None] * cx[..., None, :]
+        spread = pen[..., None, None] * (cy @ sy.T)[..., :, None] * (cx @ sx.T)[..., None, :]
+    else:
+        overlap = sphere_overlap(cfg, pos_rel_m.reshape(-1, 3), ind.radius_m)  # (E T, ny, nx)
+        spread = np.einsum("ij,fjk,lk->fil", sy, overlap, sx, optimize=True).reshape(E, T, ny, nx)
+        overlap = overlap.reshape(E, T, ny, nx)
+    # the surface cannot stay inside the rigid indenter: under it the deflection is at least the overlap
+    deform = np.maximum(overlap, spread)
+    deform = deform.reshape(E, T, nx * ny)
+
+    area = taxel_area_m2(cfg)
+    weights = deform
+    wsum = weights.sum(axis=-1)
+    fn = np.clip(force_n[..., 2], 0.0, None)
+    loaded = fn > 0.0
+    fallback = loaded & (wsum <= 0.0)
+    if fallback.any():  # force without resolvable overlap (sub-sample depth): a kernel at the indenter centre
+        xy = taxel_xy_m(cfg)
+        c = pos_rel_m[fallback][:, :2]
+        g = np.exp(-((xy[None, :, :] - c[:, None, :]) ** 2).sum(-1) / (2 * pad.spread_length_m**2))
+        weights = weights.copy()
+        weights[fallback] = g
+        wsum = weights.sum(axis=-1)
+    scale = np.where(loaded, 1.0 / (area * np.where(wsum > 0, wsum, 1.0)), 0.0)  # (E, T)
+    share = weights * scale[..., None]  # (E, T, N), sums to 1 / area where loaded
+    pressure = share * fn[..., None]
+    shear = share[..., None] * force_n[..., None, :2]
+    return deform, pressure, shear
+
+
+def run_episodes(cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1) -> LoadBatch:
+    """Simulate E episodes (same n_samples) in one batched rollout and return their load fields."""
+    sens, target = simulate_sensors(cfg, protocols, threads)
+    top = cfg.pad.thickness_m
+    q = sens[..., _POS]
+    pos_world = q + np.array([0.0, 0.0, top])
+    f_pad = sens[..., _FORCE]  # force on the pad, global frame
+    force = np.concatenate([f_pad[..., :2], -f_pad[..., 2:3]], axis=-1)
+    deform, pressure, shear = load_field(cfg, q, force)
+    n = sens.shape[1]
+    return LoadBatch(
+        time_s=np.arange(n) / cfg.sampling.sample_rate_hz,
+        target=target,
+        indenter_pos_m=pos_world,
+        contact_force_n=force,
+        contact_points=sens[..., _FOUND].astype(np.int64),
+        deformation_m=deform,
+        pressure_pa=pressure,
+        shear_pa=shear,
+        taxel_xy_m=taxel_xy_m(cfg),
+        taxel_area_m2=taxel_area_m2(cfg),
+        control=cfg.protocol.control,
+    )

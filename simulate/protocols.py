@@ -1,0 +1,72 @@
+"""Loading protocols: one random draw per episode, and the commanded waveform it implies.
+
+kind "sinusoid": d(t) = d0 [1 - cos(2 pi f (t - settle))] / 2 for `cycles` periods after `settle_s`
+(cnt_pdms paper, sect. 3.2). kind "hold": a smooth (raised-cosine) ramp over `ramp_s` to the
+amplitude, then hold (creep under force control, relaxation under displacement control).
+Displacement is positive into the pad (m); force is positive compressive (N).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from scenes.config import SceneConfig
+
+
+@dataclass(frozen=True)
+class EpisodeProtocol:
+    """One episode's loading.
+
+    frequency_hz: sinusoid frequency (drawn also for "hold", where it is unused).
+    amplitude: peak displacement d0 (m, control="displacement") or peak force (N, control="force").
+    offset_xy_m: (2,) x/y position of the indenter centre on the pad (m).
+    n_samples: samples in the episode at cfg.sampling.sample_rate_hz (sample k at t = k / rate).
+    control: "displacement" | "force".  kind: "sinusoid" | "hold".
+    """
+
+    frequency_hz: float
+    amplitude: float
+    offset_xy_m: np.ndarray = field(repr=True)
+    n_samples: int = 0
+    control: str = "displacement"
+    kind: str = "sinusoid"
+
+
+def n_samples_for(cfg: SceneConfig, frequency_hz: float) -> int:
+    """Samples of an episode at this frequency: round(duration * sample_rate)."""
+    return int(round(cfg.episode_duration_s(frequency_hz) * cfg.sampling.sample_rate_hz))
+
+
+def make_episode_protocol(cfg: SceneConfig, seed: int) -> EpisodeProtocol:
+    """Draw one episode: frequency from cfg.protocol.frequencies_hz, amplitude U[min, max],
+    offset U[-jitter, +jitter]^2, with numpy.random.default_rng(seed)."""
+    rng = np.random.default_rng(seed)
+    p = cfg.protocol
+    f = float(p.frequencies_hz[int(rng.integers(len(p.frequencies_hz)))])
+    amp = float(rng.uniform(p.amplitude_min, p.amplitude_max))
+    j = cfg.indenter.position_jitter_m
+    off = rng.uniform(-j, j, size=2) if j > 0 else np.zeros(2)
+    return EpisodeProtocol(
+        frequency_hz=f,
+        amplitude=amp,
+        offset_xy_m=np.asarray(off, dtype=float),
+        n_samples=n_samples_for(cfg, f),
+        control=p.control,
+        kind=p.kind,
+    )
+
+
+def target_waveform(proto: EpisodeProtocol, cfg: SceneConfig, t_s: np.ndarray) -> np.ndarray:
+    """Commanded displacement (m, + into the pad) or force (N, + compressive) at times t_s (any shape)."""
+    t = np.asarray(t_s, dtype=float)
+    tau = t - cfg.protocol.settle_s
+    if proto.kind == "sinusoid":
+        f = proto.frequency_hz
+        on = (tau >= 0.0) & (tau <= cfg.protocol.cycles / f)
+        return np.where(on, proto.amplitude * 0.5 * (1.0 - np.cos(2.0 * np.pi * f * tau)), 0.0)
+    if proto.kind == "hold":
+        u = np.clip(tau / cfg.protocol.ramp_s, 0.0, 1.0)
+        return proto.amplitude * 0.5 * (1.0 - np.cos(np.pi * u))
+    raise ValueError(f"protocol kind '{proto.kind}' (allowed: sinusoid, hold)")
