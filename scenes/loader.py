@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import difflib
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -94,6 +95,9 @@ def format_validation_error(exc: ValidationError) -> str:
     if err["type"] == "extra_forbidden":
         return _unknown(dotted, loc[-1], _fields_at(loc[:-1]))
     msg = err["msg"].removeprefix("Value error, ")
+    inner = re.match(r"^'([A-Za-z0-9_]+)' (.*)$", msg)  # unit errors name the field inside the section
+    if inner:
+        return f"field '{dotted}.{inner.group(1)}' {inner.group(2)}" if loc else f"field '{inner.group(1)}' {inner.group(2)}"
     if err["type"] == "literal_error":
         return f"field '{dotted}': {msg} (got {err.get('input')!r})"
     if dotted == "<root>" or msg.startswith(loc[-1] if loc else "\0") or "'" in msg[:40]:
