@@ -117,6 +117,9 @@ def readout_numpy(g_s: np.ndarray, noise_v: np.ndarray, ep: ElectronicsParams, s
 # ------------------------------------------------------------------------------------------------ warp
 
 
+REDUCE_BLOCK = 256  # threads per (episode, step) row in the tiled channel sum on CUDA (Warp uses 1 on the CPU)
+
+
 @wp.kernel
 def sum_channels_kernel(
     cond: wp.array(dtype=wp.float32),  # [E*T*N]
@@ -128,16 +131,25 @@ def sum_channels_kernel(
     g_out: wp.array(dtype=wp.float64),  # [E*T*C]
     force_out: wp.array(dtype=wp.float64),  # [E*T]
 ):
-    et = wp.tid()  # one thread per (episode, step): a fixed summation order, same on CPU and CUDA
+    # one block per (episode, step) row; lanes stride over the taxels (coalesced loads), then a fixed-order
+    # tile reduction: deterministic on each device, and CPU vs CUDA differ only by float64 rounding
+    et, lane = wp.tid()
     base = et * n_taxels
+    nb = wp.block_dim()
     f = wp.float64(0.0)
+    for j in range(lane, n_taxels, nb):
+        f += wp.float64(stress[base + j])
+    ft = wp.tile_sum(wp.tile(f))
+    if lane == 0:
+        force_out[et] = wp.tile_extract(ft, 0) * wp.float64(area)
     for c in range(n_channels):
-        g_out[et * n_channels + c] = wp.float64(0.0)
-    for n in range(n_taxels):
-        c = taxel_channel[n]
-        g_out[et * n_channels + c] = g_out[et * n_channels + c] + wp.float64(cond[base + n])
-        f += wp.float64(stress[base + n])
-    force_out[et] = f * wp.float64(area)
+        g = wp.float64(0.0)
+        for j in range(lane, n_taxels, nb):
+            if taxel_channel[j] == c:
+                g += wp.float64(cond[base + j])
+        gt = wp.tile_sum(wp.tile(g))
+        if lane == 0:
+            g_out[et * n_channels + c] = wp.tile_extract(gt, 0)
 
 
 @wp.kernel
@@ -209,7 +221,10 @@ def readout_warp(
     g = wp.empty(E * T * C, dtype=wp.float64, device=d)
     force = wp.empty(E * T, dtype=wp.float64, device=d)
     tc = wp.array(np.asarray(taxel_channel, np.int32), dtype=wp.int32, device=d)
-    wp.launch(sum_channels_kernel, dim=E * T, inputs=[cond, stress, tc, N, C, float(area_m2), g, force], device=d)
+    wp.launch_tiled(
+        sum_channels_kernel, dim=[E * T], inputs=[cond, stress, tc, N, C, float(area_m2), g, force],
+        block_dim=REDUCE_BLOCK, device=d,
+    )
     st = state or ElectronicsState.zeros(E * C)
     sos, zi, ns = _sos_vectors(ep)
     filt = wp.array(st.filt, dtype=vec_zi, device=d)
