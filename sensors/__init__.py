@@ -1,0 +1,1 @@
+"""sensors: transduction physics (Warp kernels + numpy references), electronics, recordings, datasets."""

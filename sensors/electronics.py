@@ -210,21 +210,29 @@ def readout_kernel(
     st_primed[tid] = primed
 
 
-def readout_warp(
+def sum_channels_warp(
     cond: wp.array, stress: wp.array, taxel_channel: np.ndarray, n_channels: int, area_m2: float,
-    shape: tuple[int, int, int], noise_v: np.ndarray, ep: ElectronicsParams, state: ElectronicsState | None, device: str,
+    shape: tuple[int, int, int], device: str,
 ):
-    """Device arrays of taxel conductance/stress (flat [E*T*N]) -> (dict of numpy [E,T,C] outputs, force [E,T], state)."""
+    """Flat [E*T*N] taxel conductance and stress on the device -> channel conductance [E*T*C] and force [E*T]."""
     E, T, N = shape
-    C = n_channels
-    d = device
-    g = wp.empty(E * T * C, dtype=wp.float64, device=d)
-    force = wp.empty(E * T, dtype=wp.float64, device=d)
-    tc = wp.array(np.asarray(taxel_channel, np.int32), dtype=wp.int32, device=d)
+    g = wp.empty(E * T * n_channels, dtype=wp.float64, device=device)
+    force = wp.empty(E * T, dtype=wp.float64, device=device)
+    tc = wp.array(np.asarray(taxel_channel, np.int32), dtype=wp.int32, device=device)
     wp.launch_tiled(
-        sum_channels_kernel, dim=[E * T], inputs=[cond, stress, tc, N, C, float(area_m2), g, force],
-        block_dim=REDUCE_BLOCK, device=d,
+        sum_channels_kernel, dim=[E * T], inputs=[cond, stress, tc, N, n_channels, float(area_m2), g, force],
+        block_dim=REDUCE_BLOCK if device.startswith("cuda") else 1, device=device,
     )
+    return g, force
+
+
+def readout_warp(
+    g: wp.array, shape: tuple[int, int, int], noise_v: np.ndarray, ep: ElectronicsParams,
+    state: ElectronicsState | None, device: str,
+):
+    """Channel conductance on the device (flat [E*T*C]) -> (dict of numpy [E,T,C] outputs, state)."""
+    E, T, C = shape
+    d = device
     st = state or ElectronicsState.zeros(E * C)
     sos, zi, ns = _sos_vectors(ep)
     filt = wp.array(st.filt, dtype=vec_zi, device=d)
@@ -244,4 +252,4 @@ def readout_warp(
     )
     names = ["resistance", "bridge_v", "adc", "filtered_v", "resistance_measured"]
     result = {n: o.numpy().reshape(E, T, C) for n, o in zip(names, outs)}
-    return result, force.numpy().reshape(E, T), ElectronicsState(filt.numpy(), primed.numpy())
+    return result, ElectronicsState(filt.numpy(), primed.numpy())

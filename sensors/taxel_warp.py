@@ -1,12 +1,18 @@
-"""Warp kernel of the per-taxel CNT-PDMS chain (same equations as sensors/taxel_ref.py, which tests compare).
+"""Warp kernels of the per-taxel CNT-PDMS chain (same equations as sensors/taxel_ref.py, which tests compare).
 
 One thread per (episode, taxel) loops over time with the whole state in registers (TECH-NOTES: one
-launch with the time loop inside beats one launch per step by ~7x on the GPU). The kernel is built per
-(Prony terms, play operators) pair, so term loops unroll at compile time. Memory layout [E, T, N]:
+launch with the time loop inside beats one launch per step by ~7x on the GPU). Kernels are built per
+(Prony terms, play operators) pair, so the term loops unroll at compile time. Memory layout [E, T, N]:
 neighbouring threads read neighbouring taxels, so loads coalesce on CUDA.
+
+Two kernels share one step function:
+- `chain`: writes strain, stress and conductance per taxel (the channel sums run afterwards).
+- `chain_fused` (tiled, used on CUDA): also reduces conductance and stress over each thread block at every
+  step, writing one partial per block, so the channel sums never re-read the per-taxel arrays. Block
+  partials are summed in a fixed order: the result is deterministic.
 """
 
-# no `from __future__ import annotations`: Warp must see the closure vector types as real objects
+# no `from __future__ import annotations`: Warp must see the closure types as real objects
 
 import functools
 
@@ -17,31 +23,71 @@ from sensors.params import TaxelParams
 from sensors.taxel_ref import MAX_STRAIN_FRACTION, TaxelState
 from sensors.warp_setup import init_warp, resolve_device
 
+FUSED_BLOCK = 256  # threads per block in chain_fused on CUDA (Warp runs tiled kernels with 1 thread per block on CPU)
+
 
 @functools.cache
-def taxel_kernel(n_prony: int, n_play: int):
-    """(kernel, prony vector type, play vector type) for this many terms; compiled once per pair."""
+def taxel_kernels(n_prony: int, n_play: int):
+    """Kernels and types for this many Prony terms and play operators; compiled once per pair."""
     vec_p = wp.types.vector(length=n_prony, dtype=wp.float32)
     vec_k = wp.types.vector(length=n_play, dtype=wp.float32)
     strain_frac = float(MAX_STRAIN_FRACTION)
+
+    @wp.struct
+    class Params:
+        prony_decay: vec_p
+        prony_eb: vec_p  # E_i b_i
+        play_r: vec_k
+        play_w: vec_k
+        e_inf: float
+        e_lock: float
+        gap_a: float
+        gap_b: float
+        recovery: float
+        gamma: float
+        g0: float
+
+    def step(p: Params, mode: int, d: float, e: float, phi: float, h: vec_p, s: float, z: vec_k):
+        e_max = strain_frac * p.e_lock
+        eb_sum = float(0.0)
+        w_sum = float(0.0)
+        for i in range(n_prony):
+            eb_sum += p.prony_eb[i]
+        for j in range(n_play):
+            w_sum += p.play_w[j]
+        e_new = float(0.0)
+        phi_new = float(0.0)
+        if mode == 1:
+            phi_max = e_max / (1.0 - e_max / p.e_lock)
+            phi_new = wp.clamp((d - wp.dot(p.prony_decay, h) + eb_sum * phi) / (p.e_inf + eb_sum), 0.0, phi_max)
+            e_new = phi_new / (1.0 + phi_new / p.e_lock)
+        else:
+            e_new = wp.clamp(d, 0.0, e_max)
+            phi_new = e_new / (1.0 - e_new / p.e_lock)
+        h_new = wp.cw_mul(p.prony_decay, h) + p.prony_eb * (phi_new - phi)
+        sig = p.e_inf * phi_new
+        for i in range(n_prony):
+            sig += h_new[i]
+        s_new = p.gap_a * s + (1.0 - p.gap_a) * e + (1.0 - p.gap_b) * (e_new - e)
+        e_net = (1.0 - w_sum) * s_new
+        z_new = z
+        for j in range(n_play):
+            zj = wp.max(s_new - p.play_r[j], wp.min(s_new + p.play_r[j], z[j]))
+            zj = s_new + (zj - s_new) * p.recovery
+            z_new[j] = zj
+            e_net += p.play_w[j] * zj
+        g = p.g0 / ((1.0 - e_net) * wp.exp(-p.gamma * e_net))
+        return e_new, phi_new, h_new, s_new, z_new, sig, g
+
+    step.__name__ = step.__qualname__ = f"taxel_step_p{n_prony}_k{n_play}"
+    step_f = wp.func(step)
 
     def chain(
         drive: wp.array(dtype=wp.float32),  # [E*T*N]
         n_steps: int,
         n_taxels: int,
         mode: int,
-        prony_decay: vec_p,
-        prony_gain: vec_p,
-        prony_modulus: vec_p,
-        play_r: vec_k,
-        play_w: vec_k,
-        e_inf: float,
-        e_lock: float,
-        gap_a: float,
-        gap_b: float,
-        recovery: float,
-        gamma: float,
-        g0: float,
+        p: Params,
         st_strain: wp.array(dtype=wp.float32),  # [E*N] in/out
         st_phi: wp.array(dtype=wp.float32),
         st_prony: wp.array(dtype=vec_p),
@@ -59,62 +105,108 @@ def taxel_kernel(n_prony: int, n_play: int):
         h = st_prony[tid]
         s = st_gap[tid]
         z = st_play[tid]
-
-        e_max = strain_frac * e_lock
-        phi_max = e_max / (1.0 - e_max / e_lock)
-        eb = wp.cw_mul(prony_modulus, prony_gain)
-        eb_sum = float(0.0)
-        w_sum = float(0.0)
-        for i in range(n_prony):
-            eb_sum += eb[i]
-        for j in range(n_play):
-            w_sum += play_w[j]
-        stiff = e_inf + eb_sum
-        w_direct = 1.0 - w_sum
-
         base = ep * n_steps * n_taxels + n
         for k in range(n_steps):
             idx = base + k * n_taxels
-            d = drive[idx]
-            e_new = float(0.0)
-            phi_new = float(0.0)
-            if mode == 1:
-                phi_new = wp.clamp((d - wp.dot(prony_decay, h) + eb_sum * phi) / stiff, 0.0, phi_max)
-                e_new = phi_new / (1.0 + phi_new / e_lock)
-            else:
-                e_new = wp.clamp(d, 0.0, e_max)
-                phi_new = e_new / (1.0 - e_new / e_lock)
-            h = wp.cw_mul(prony_decay, h) + eb * (phi_new - phi)
-            sig = e_inf * phi_new
-            for i in range(n_prony):
-                sig += h[i]
-            s = gap_a * s + (1.0 - gap_a) * e + (1.0 - gap_b) * (e_new - e)
-            e_net = w_direct * s
-            for j in range(n_play):
-                zj = wp.max(s - play_r[j], wp.min(s + play_r[j], z[j]))
-                zj = s + (zj - s) * recovery
-                z[j] = zj
-                e_net += play_w[j] * zj
-            g = g0 / ((1.0 - e_net) * wp.exp(-gamma * e_net))
-            e = e_new
-            phi = phi_new
+            e, phi, h, s, z, sig, g = step_f(p, mode, drive[idx], e, phi, h, s, z)
             out_strain[idx] = e
             out_stress[idx] = sig
             out_cond[idx] = g
-
         st_strain[tid] = e
         st_phi[tid] = phi
         st_prony[tid] = h
         st_gap[tid] = s
         st_play[tid] = z
 
+    def chain_fused(
+        drive: wp.array(dtype=wp.float32),  # [E*T*N]
+        n_steps: int,
+        n_taxels: int,
+        n_blocks: int,  # blocks per episode
+        mode: int,
+        p: Params,
+        st_strain: wp.array(dtype=wp.float32),
+        st_phi: wp.array(dtype=wp.float32),
+        st_prony: wp.array(dtype=vec_p),
+        st_gap: wp.array(dtype=wp.float32),
+        st_play: wp.array(dtype=vec_k),
+        out_strain: wp.array(dtype=wp.float32),  # [E*T*N]
+        out_stress: wp.array(dtype=wp.float32),
+        part_g: wp.array(dtype=wp.float64),  # [E*T*n_blocks]
+        part_f: wp.array(dtype=wp.float64),  # [E*T*n_blocks] sum of stress (Pa)
+    ):
+        b, lane = wp.tid()
+        ep = b // n_blocks
+        blk = b - ep * n_blocks
+        n = blk * wp.block_dim() + lane
+        active = n < n_taxels
+        tid = ep * n_taxels + n
+        e = float(0.0)
+        phi = float(0.0)
+        h = vec_p()
+        s = float(0.0)
+        z = vec_k()
+        if active:
+            e = st_strain[tid]
+            phi = st_phi[tid]
+            h = st_prony[tid]
+            s = st_gap[tid]
+            z = st_play[tid]
+        base = ep * n_steps * n_taxels + n
+        for k in range(n_steps):
+            idx = base + k * n_taxels
+            d = float(0.0)
+            if active:
+                d = drive[idx]
+            e, phi, h, s, z, sig, g = step_f(p, mode, d, e, phi, h, s, z)
+            g64 = wp.float64(0.0)
+            f64 = wp.float64(0.0)
+            if active:
+                out_strain[idx] = e
+                out_stress[idx] = sig
+                g64 = wp.float64(g)
+                f64 = wp.float64(sig)
+            gt = wp.tile_sum(wp.tile(g64))
+            ft = wp.tile_sum(wp.tile(f64))
+            if lane == 0:
+                o = (ep * n_steps + k) * n_blocks + blk
+                part_g[o] = wp.tile_extract(gt, 0)
+                part_f[o] = wp.tile_extract(ft, 0)
+        if active:
+            st_strain[tid] = e
+            st_phi[tid] = phi
+            st_prony[tid] = h
+            st_gap[tid] = s
+            st_play[tid] = z
+
     chain.__name__ = chain.__qualname__ = f"taxel_chain_p{n_prony}_k{n_play}"
-    kernel = wp.kernel(chain, module="unique", enable_backward=False)
-    return kernel, vec_p, vec_k
+    chain_fused.__name__ = chain_fused.__qualname__ = f"taxel_chain_fused_p{n_prony}_k{n_play}"
+    k_chain = wp.kernel(chain, module="unique", enable_backward=False)
+    k_fused = wp.kernel(chain_fused, module="unique", enable_backward=False)
+    return {"chain": k_chain, "fused": k_fused, "Params": Params, "vec_p": vec_p, "vec_k": vec_k}
+
+
+@wp.kernel
+def sum_partials_kernel(
+    part_g: wp.array(dtype=wp.float64),  # [E*T*B]
+    part_f: wp.array(dtype=wp.float64),
+    n_blocks: int,
+    area: float,
+    g_out: wp.array(dtype=wp.float64),  # [E*T] (one channel)
+    force_out: wp.array(dtype=wp.float64),  # [E*T]
+):
+    et = wp.tid()
+    g = wp.float64(0.0)
+    f = wp.float64(0.0)
+    for b in range(n_blocks):
+        g += part_g[et * n_blocks + b]
+        f += part_f[et * n_blocks + b]
+    g_out[et] = g
+    force_out[et] = f * wp.float64(area)
 
 
 class TaxelChainWarp:
-    """Holds device state for one batch shape and launches the fused kernel.
+    """Holds device state for one batch shape and launches the kernels.
 
     drive: [E, T, N] float32 (numpy or a wp.array on `device`). State persists across `run` calls,
     so a long episode can be fed in chunks (streaming) with the same result as in one piece.
@@ -123,47 +215,73 @@ class TaxelChainWarp:
     def __init__(self, p: TaxelParams, n_episodes: int, n_taxels: int, device: str = "cpu"):
         init_warp()
         self.p, self.E, self.N, self.device = p, n_episodes, n_taxels, resolve_device(device)
-        self.kernel, self.vec_p, self.vec_k = taxel_kernel(p.n_prony, p.n_play)
+        self.k = taxel_kernels(p.n_prony, p.n_play)
+        self.params = self._params()
         self.reset()
+
+    def _params(self):
+        p, k = self.p, self.k
+        f32 = np.float32
+        s = k["Params"]()
+        s.prony_decay = k["vec_p"](*p.prony_decay.astype(f32))
+        s.prony_eb = k["vec_p"](*(p.prony_modulus_pa * p.prony_gain).astype(f32))
+        s.play_r = k["vec_k"](*p.play_threshold.astype(f32))
+        s.play_w = k["vec_k"](*p.play_weight.astype(f32))
+        s.e_inf = float(p.youngs_modulus_pa)
+        s.e_lock = float(p.lock_strain)
+        s.gap_a = float(p.gap_decay)
+        s.gap_b = float(p.gap_gain)
+        s.recovery = float(p.recovery_decay)
+        s.gamma = float(p.gamma_s0)
+        s.g0 = float(1.0 / p.rest_resistance_ohm)
+        return s
 
     def reset(self, state: TaxelState | None = None) -> None:
         st = state or TaxelState.zeros(self.E * self.N, self.p)
         d = self.device
         self.st_strain = wp.array(st.strain, dtype=wp.float32, device=d)
         self.st_phi = wp.array(st.phi, dtype=wp.float32, device=d)
-        self.st_prony = wp.array(st.prony_pa, dtype=self.vec_p, device=d)
+        self.st_prony = wp.array(st.prony_pa, dtype=self.k["vec_p"], device=d)
         self.st_gap = wp.array(st.gap_strain, dtype=wp.float32, device=d)
-        self.st_play = wp.array(st.play, dtype=self.vec_k, device=d)
+        self.st_play = wp.array(st.play, dtype=self.k["vec_k"], device=d)
 
     def state(self) -> TaxelState:
         return TaxelState(
             self.st_strain.numpy(), self.st_phi.numpy(), self.st_prony.numpy(), self.st_gap.numpy(), self.st_play.numpy()
         )
 
+    def _state_args(self):
+        return [self.st_strain, self.st_phi, self.st_prony, self.st_gap, self.st_play]
+
     def run_device(self, drive: wp.array, n_steps: int, mode: int, outs: list | None = None):
         """Launch on a flat device array [E*T*N]; returns (strain, stress, conductance) device arrays."""
-        p, d = self.p, self.device
         size = self.E * n_steps * self.N
-        out = outs or [wp.empty(size, dtype=wp.float32, device=d) for _ in range(3)]
-        f32 = np.float32
+        out = outs or [wp.empty(size, dtype=wp.float32, device=self.device) for _ in range(3)]
         wp.launch(
-            self.kernel,
-            dim=self.E * self.N,
-            inputs=[
-                drive, n_steps, self.N, int(mode),
-                self.vec_p(*p.prony_decay.astype(f32)),
-                self.vec_p(*p.prony_gain.astype(f32)),
-                self.vec_p(*p.prony_modulus_pa.astype(f32)),
-                self.vec_k(*p.play_threshold.astype(f32)),
-                self.vec_k(*p.play_weight.astype(f32)),
-                float(p.youngs_modulus_pa), float(p.lock_strain), float(p.gap_decay), float(p.gap_gain),
-                float(p.recovery_decay), float(p.gamma_s0), float(1.0 / p.rest_resistance_ohm),
-                self.st_strain, self.st_phi, self.st_prony, self.st_gap, self.st_play,
-                out[0], out[1], out[2],
-            ],
-            device=d,
+            self.k["chain"], dim=self.E * self.N,
+            inputs=[drive, n_steps, self.N, int(mode), self.params, *self._state_args(), out[0], out[1], out[2]],
+            device=self.device,
         )
         return out
+
+    def run_fused_device(self, drive: wp.array, n_steps: int, mode: int, outs: list | None = None):
+        """Fused launch: returns (strain, stress) per taxel and the per-step sums over all taxels of each
+        episode as device arrays (conductance_sum [E*T] in S, force [E*T] in N), summed in a fixed order."""
+        d = self.device
+        block = FUSED_BLOCK if d.startswith("cuda") else 1
+        nb = -(-self.N // block)
+        size = self.E * n_steps * self.N
+        out = outs or [wp.empty(size, dtype=wp.float32, device=d) for _ in range(2)]
+        part = [wp.empty(self.E * n_steps * nb, dtype=wp.float64, device=d) for _ in range(2)]
+        wp.launch_tiled(
+            self.k["fused"], dim=[self.E * nb],
+            inputs=[drive, n_steps, self.N, nb, int(mode), self.params, *self._state_args(), out[0], out[1], *part],
+            block_dim=block, device=d,
+        )
+        g = wp.empty(self.E * n_steps, dtype=wp.float64, device=d)
+        f = wp.empty(self.E * n_steps, dtype=wp.float64, device=d)
+        wp.launch(sum_partials_kernel, dim=self.E * n_steps, inputs=[*part, nb, float(self.p.taxel_area_m2), g, f], device=d)
+        return out[0], out[1], g, f
 
     def run(self, drive: np.ndarray, mode: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """drive [E, T, N] -> strain, stress_pa, conductance_s, each [E, T, N] numpy float32."""
