@@ -35,7 +35,7 @@ def bench_numpy(cfg, E, T, N):
     return E * T * N / (time.perf_counter() - t0)
 
 
-def bench_warp(cfg, E, T, N, device, repeats=3, fused=False):
+def bench_warp(cfg, E, T, N, device, repeats=3):
     import warp as wp
 
     from sensors import electronics as el
@@ -63,11 +63,8 @@ def bench_warp(cfg, E, T, N, device, repeats=3, fused=False):
     tc = np.zeros(N, np.int32)
 
     def whole_chain():
-        if fused:
-            _, _, g, _ = chain.run_fused_device(drive, T, 0, outs[:2])
-        else:
-            chain.run_device(drive, T, 0, outs)
-            g, _ = el.sum_channels_warp(outs[2], outs[1], tc, 1, tp.taxel_area_m2, (E, T, N), chain.device)
+        chain.run_device(drive, T, 0, outs)
+        g, _ = el.sum_channels_warp(outs[2], outs[1], tc, 1, tp.taxel_area_m2, (E, T, N), chain.device)
         el.readout_warp(g, (E, T, 1), noise, ep, None, chain.device)
 
     whole_chain()  # compile
@@ -107,16 +104,13 @@ def main() -> None:
     print(f"warp cpu        : kernel {w['kernel']:.3g}, whole chain {w['chain']:.3g} taxel-steps/s")
     print(f"  ratio warp-cpu / numpy: {w['chain'] / res['numpy_ref']['taxel_steps_per_s']:.2f}x")
     if wp.get_cuda_device_count() > 0:
-        g = bench_warp(cfg, a.gpu_episodes, a.steps, N, "cuda:0", fused=True)
-        g0 = bench_warp(cfg, a.gpu_episodes, a.steps, N, "cuda:0", fused=False)
+        g = bench_warp(cfg, a.gpu_episodes, a.steps, N, "cuda:0")
         res["warp_cuda"] = {
             "episodes": a.gpu_episodes, "device_name": wp.get_device("cuda:0").name,
             "taxel_steps_per_s_kernel": g["kernel"], "taxel_steps_per_s_chain": g["chain"], "h2d_s": g["h2d_s"],
-            "taxel_steps_per_s_chain_unfused": g0["chain"],
         }
         print(f"warp cuda ({res['warp_cuda']['device_name']}): kernel {g['kernel']:.3g}, whole chain {g['chain']:.3g} "
               f"taxel-steps/s ({a.gpu_episodes} x {N} x {a.steps}); h2d of the drive {g['h2d_s']:.2f} s")
-        print(f"  fused chain vs unfused (separate reduction pass): {g['chain'] / g0['chain']:.2f}x")
         print(f"  ratio cuda / warp-cpu: {g['chain'] / w['chain']:.0f}x; cuda / numpy: {g['chain'] / res['numpy_ref']['taxel_steps_per_s']:.0f}x")
     a.out.mkdir(parents=True, exist_ok=True)
     tag = "gpu" if "warp_cuda" in res else "cpu"

@@ -45,7 +45,7 @@ class CntPdmsSensor:
 
     family = "cnt_pdms"
 
-    def __init__(self, cfg: SceneConfig, backend: str = "warp", device: str = "cpu", fused: bool | None = None):
+    def __init__(self, cfg: SceneConfig, backend: str = "warp", device: str = "cpu"):
         if backend not in ("warp", "numpy"):
             raise ValueError(f"backend must be 'warp' or 'numpy'; got {backend!r}")
         if backend == "warp":
@@ -59,8 +59,6 @@ class CntPdmsSensor:
         self.n_channels = 1
         self.taxel_channel = np.zeros(self.n_taxels, np.int32)
         self.mode = MODE_FORCE if cfg.protocol.control == "force" else MODE_DISPLACEMENT
-        # fused taxel kernel + block reduction (one channel only): the default on CUDA
-        self.fused = (str(device).startswith("cuda") if fused is None else fused) and self.n_channels == 1
 
     def drive_from_load(self, deformation_m: np.ndarray, pressure_pa: np.ndarray) -> np.ndarray:
         """The chain's input [E,T,N]: strain = deformation / thickness (displacement control) or pressure (force control)."""
@@ -91,13 +89,10 @@ class CntPdmsSensor:
 
             chain = TaxelChainWarp(self.tp, E, N, self.device)
             d = wp.array(np.ascontiguousarray(drive, np.float32).reshape(-1), dtype=wp.float32, device=self.device)
-            if self.fused:
-                s_d, st_d, g_d, f_d = chain.run_fused_device(d, T, self.mode)
-            else:
-                s_d, st_d, c_d = chain.run_device(d, T, self.mode)
-                g_d, f_d = el.sum_channels_warp(
-                    c_d, st_d, self.taxel_channel, self.n_channels, self.tp.taxel_area_m2, (E, T, N), self.device
-                )
+            s_d, st_d, c_d = chain.run_device(d, T, self.mode)
+            g_d, f_d = el.sum_channels_warp(
+                c_d, st_d, self.taxel_channel, self.n_channels, self.tp.taxel_area_m2, (E, T, N), self.device
+            )
             ro, _ = el.readout_warp(g_d, (E, T, self.n_channels), noise, self.ep, None, self.device)
             force = f_d.numpy().reshape(E, T)
             strain, stress = s_d.numpy().reshape(E, T, N), st_d.numpy().reshape(E, T, N)

@@ -43,12 +43,11 @@ def test_full_chain_cuda_equals_cpu():
     mask = (np.random.default_rng(1).uniform(size=cfg.pad.n_taxels) < 0.1).astype(np.float32)
     drive = np.stack([d[:, None] * mask, 0.5 * d[:, None] * mask])
     a = CntPdmsSensor(cfg, device="cpu").run(drive, [1, 2])
-    for fused in (False, True):
-        b = CntPdmsSensor(cfg, device="cuda:0", fused=fused).run(drive, [1, 2])
-        for k in ("strain", "force", "resistance", "voltage", "resistance_measured"):
-            np.testing.assert_allclose(b[k], a[k], rtol=1e-5, atol=1e-6 * float(np.abs(a[k]).max()), err_msg=k)
-        assert np.abs(b["adc"].astype(int) - a["adc"].astype(int)).max() <= 1
-    # deterministic on the GPU: the fused block reduction sums in a fixed order
+    b = CntPdmsSensor(cfg, device="cuda:0").run(drive, [1, 2])
+    for k in ("strain", "force", "resistance", "voltage", "resistance_measured"):
+        np.testing.assert_allclose(b[k], a[k], rtol=1e-5, atol=1e-6 * float(np.abs(a[k]).max()), err_msg=k)
+    assert np.abs(b["adc"].astype(int) - a["adc"].astype(int)).max() <= 1
+    # deterministic on the GPU: no atomics, the block reduction sums in a fixed order
     c1 = CntPdmsSensor(cfg, device="cuda:0").run(drive, [1, 2])
     c2 = CntPdmsSensor(cfg, device="cuda:0").run(drive, [1, 2])
     for k in c1:

@@ -159,11 +159,3 @@ def test_noise_is_seeded(cfg):
     e = cfg.sensor.electronics
     assert n1.std() == pytest.approx(np.hypot(e.white_noise_v, e.pink_noise_v), rel=0.2)
 
-
-def test_fused_kernel_equals_unfused(cfg):
-    d = sinus(0.02, 1.0, cycles=1)
-    drive = np.concatenate([punch(cfg, d), punch(cfg, 0.7 * d)])
-    a = CntPdmsSensor(cfg, backend="warp", fused=False).run(drive, [3, 4])
-    b = CntPdmsSensor(cfg, backend="warp", fused=True).run(drive, [3, 4])
-    for k in ("strain", "force_taxel", "force", "resistance", "voltage"):
-        np.testing.assert_allclose(b[k], a[k], rtol=1e-6, atol=1e-9 * float(np.abs(a[k]).max()), err_msg=k)
