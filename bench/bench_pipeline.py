@@ -56,11 +56,11 @@ def main() -> None:
         drive = s.drive_from_load(batch.deformation_m, batch.pressure_pa)
         s.run(drive[:1, :10], [0])  # compile / warm up
         t0 = time.perf_counter()
-        out = s.run(drive, list(range(a.episodes)))
+        out = s.run_load(batch, list(range(a.episodes)))
         sens[backend] = time.perf_counter() - t0
     res["sensor"] = {k: {"seconds": v, "samples_per_s": samples / v} for k, v in sens.items()}
 
-    eps = {f"ep-{j}": _channels(batch, out, j, cfg) for j in range(a.episodes)}
+    eps = {f"ep-{j}": _channels(batch, out, j, cfg, s) for j in range(a.episodes)}
     raw = sum(c.data.nbytes for e in eps.values() for c in e.values())
     with tempfile.TemporaryDirectory() as tmp:
         times = {}

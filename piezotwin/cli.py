@@ -153,38 +153,35 @@ def _print_summary(path: Path) -> None:
 def characterize(
     scene: Annotated[str, typer.Argument(help="Preset name or scene YAML.")] = "cnt_pdms",
     set_: SetOpt = None,
-    plot: Annotated[Optional[Path], typer.Option(help="Write the loops as a PNG here.")] = None,
+    plot: Annotated[Optional[Path], typer.Option(help="Write the characterization plot as a PNG here.")] = None,
+    json_out: Annotated[Optional[Path], typer.Option("--json", help="Write the numbers as JSON here.")] = None,
     backend: Annotated[str, typer.Option(help="warp | numpy")] = "warp",
 ) -> None:
     """Hysteresis error (% FSO), loop area and phase lag per loading frequency, beside the paper's figure."""
     cfg = _load(scene, set_, [])
     _quiet_warp()
     from simulate.characterize import characterize as run_char
-    from simulate.characterize import plot_loops
 
     try:
-        rows = run_char(cfg, backend=backend)
+        report = run_char(cfg, backend=backend)
     except ValueError as exc:
         fail(str(exc))
-    t = Table(title=f"{cfg.name}: uncompensated hysteresis (last of {max(cfg.protocol.cycles, 2)} cycles, full-scale press)")
-    for col in ("f (Hz)", "F max (N)", "hysteresis % FSO", "paper % FSO", "loop area", "phase lag (deg)",
-                "material only % FSO", "material lag (deg)"):
+    t = Table(title=report.title)
+    for col in report.columns:
         t.add_column(col, justify="right")
-    for r in rows:
-        t.add_row(
-            f"{r.frequency_hz:g}", f"{r.measured.force_max_n:.2f}", f"{r.measured.hysteresis_fso_pct:.1f}",
-            "-" if r.paper_hysteresis_fso_pct is None else f"{r.paper_hysteresis_fso_pct:.1f}",
-            f"{r.measured.loop_area_norm:.3f}", f"{r.measured.phase_lag_deg:.1f}",
-            f"{r.material.hysteresis_fso_pct:.1f}", f"{r.material.phase_lag_deg:.1f}",
-        )
+    for row in report.rows:
+        t.add_row(*row)
     console.print(t)
-    console.print(
-        "measured = resistance after bridge, 14-bit ADC and the causal 4th-order 10 Hz Butterworth (about 40 ms "
-        "delay); material only = the true resistance of the pad. Loop area is normalised to the loop's spans."
-    )
-    if plot:
+    for note in report.notes:
+        console.print(note)
+    if json_out:
+        import json
+
+        json_out.write_text(json.dumps(report.metrics, indent=2))
+        console.print(f"wrote {json_out}")
+    if plot and report.plot:
         _check_writable(plot.parent if str(plot.parent) else Path("."))
-        plot_loops(rows, str(plot))
+        report.plot(str(plot))
         console.print(f"wrote {plot}")
 
 

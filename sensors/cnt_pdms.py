@@ -9,23 +9,13 @@ backend "warp" runs the Warp kernels on `device` ("cpu" or "cuda:0"); backend "n
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from scenes.config import SceneConfig
 from sensors import electronics as el
+from sensors.base import ChannelSpec, LoadBatch
 from sensors.params import MODE_DISPLACEMENT, MODE_FORCE, electronics_params, taxel_params
 from sensors.taxel_ref import TaxelState, taxel_chain_numpy
-
-
-@dataclass(frozen=True)
-class ChannelSpec:
-    """How an output is stored: units and dimension names (first dim after episode is time)."""
-
-    units: str
-    dims: tuple[str, ...]
-    description: str
 
 
 OUTPUTS: dict[str, ChannelSpec] = {
@@ -44,6 +34,7 @@ class CntPdmsSensor:
     """Batched CNT-PDMS sensor. Shapes: E episodes, T samples, N taxels, C = 1 channel (whole pad)."""
 
     family = "cnt_pdms"
+    outputs = OUTPUTS
 
     def __init__(self, cfg: SceneConfig, backend: str = "warp", device: str = "cpu"):
         if backend not in ("warp", "numpy"):
@@ -65,6 +56,9 @@ class CntPdmsSensor:
         if self.mode == MODE_FORCE:
             return np.ascontiguousarray(pressure_pa, np.float32)
         return np.ascontiguousarray(deformation_m / self.cfg.pad.thickness_m, np.float32)
+
+    def run_load(self, load: LoadBatch, seeds: list[int]) -> dict[str, np.ndarray]:
+        return self.run(self.drive_from_load(load.deformation_m, load.pressure_pa), seeds)
 
     def noise(self, seeds: list[int], n_steps: int) -> np.ndarray:
         e = self.cfg.sensor.electronics

@@ -16,15 +16,14 @@ The taxel fields are then computed in vectorised numpy:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import mujoco
 import mujoco.rollout
 import numpy as np
 
 from scenes.config import SceneConfig
+from sensors.base import LoadBatch
 from simulate.mjcf import build_mjcf, contact_design
-from simulate.protocols import EpisodeProtocol, target_waveform
+from simulate.protocols import EpisodeProtocol, target_waveform, xy_waveform
 from simulate.taxels import (
     interval_coverage,
     spread_matrix,
@@ -39,38 +38,6 @@ MAX_STEPS_PER_CHUNK = 4_000_000  # episodes x steps per rollout call (bounds the
 _POS = slice(0, 3)
 _FOUND = 3
 _FORCE = slice(4, 7)
-
-
-@dataclass
-class LoadBatch:
-    """Load field of E episodes x T samples on N taxels (float64, SI).
-
-    time_s: (T,) sample times, sample k at k / sample_rate_hz.
-    target: (E, T) commanded penetration (m, + into the pad) or force (N, + compressive).
-    indenter_pos_m: (E, T, 3) world position of the indenter's lowest point on its axis (box: bottom-face
-        centre, sphere: bottom pole); z - pad thickness = -penetration.
-    contact_force_n: (E, T, 3) net contact force of the indenter on the pad, world x/y (tangential, force
-        on the pad) and z = normal compressive force (positive when pressing; = -F_z on the pad).
-    contact_points: (E, T) number of MuJoCo contacts between indenter and pad.
-    deformation_m: (E, T, N) surface deflection of the pad (m, + down).
-    pressure_pa: (E, T, N) normal pressure; sum over N of pressure * taxel_area == contact_force_n[..., 2].
-    shear_pa: (E, T, N, 2) tangential traction on the pad (x, y); sums to contact_force_n[..., :2] / area.
-    taxel_xy_m: (N, 2) taxel centres, flat index n = iy * taxels_x + ix.
-    taxel_area_m2: area of one taxel cell.
-    control: "displacement" | "force".
-    """
-
-    time_s: np.ndarray
-    target: np.ndarray
-    indenter_pos_m: np.ndarray
-    contact_force_n: np.ndarray
-    contact_points: np.ndarray
-    deformation_m: np.ndarray
-    pressure_pa: np.ndarray
-    shear_pa: np.ndarray
-    taxel_xy_m: np.ndarray
-    taxel_area_m2: float
-    control: str
 
 
 def build_model(cfg: SceneConfig) -> mujoco.MjModel:
@@ -93,8 +60,7 @@ def episode_controls(cfg: SceneConfig, protocols: list[EpisodeProtocol], nstep: 
     target = np.zeros((E, nstep))
     for e, p in enumerate(protocols):
         target[e] = target_waveform(p, cfg, t)
-        ctrl[e, :, 0] = p.offset_xy_m[0]
-        ctrl[e, :, 1] = p.offset_xy_m[1]
+        ctrl[e, :, :2] = xy_waveform(p, cfg, t)
     if cfg.protocol.control == "displacement":
         kp, kv = des.servo_kp_n_per_m, des.servo_kv_n_s_per_m
         q = -target * (1.0 + des.pad_stiffness_n_per_m / kp)

@@ -32,6 +32,7 @@ class EpisodeProtocol:
     n_samples: int = 0
     control: str = "displacement"
     kind: str = "sinusoid"
+    params: dict = field(default_factory=dict)  # kind-specific draws (levels, hold times, stroke paths, ...)
 
 
 def n_samples_for(cfg: SceneConfig, frequency_hz: float) -> int:
@@ -58,15 +59,37 @@ def make_episode_protocol(cfg: SceneConfig, seed: int) -> EpisodeProtocol:
     )
 
 
+def _sinusoid(proto: EpisodeProtocol, cfg: SceneConfig, tau: np.ndarray) -> np.ndarray:
+    f = proto.frequency_hz
+    on = (tau >= 0.0) & (tau <= cfg.protocol.cycles / f)
+    return np.where(on, proto.amplitude * 0.5 * (1.0 - np.cos(2.0 * np.pi * f * tau)), 0.0)
+
+
+def _hold(proto: EpisodeProtocol, cfg: SceneConfig, tau: np.ndarray) -> np.ndarray:
+    u = np.clip(tau / cfg.protocol.ramp_s, 0.0, 1.0)
+    return proto.amplitude * 0.5 * (1.0 - np.cos(np.pi * u))
+
+
+# protocol kind -> waveform(proto, cfg, tau = t - settle_s) of the normal axis; families add their kinds here
+WAVEFORMS = {"sinusoid": _sinusoid, "hold": _hold}
+
+
 def target_waveform(proto: EpisodeProtocol, cfg: SceneConfig, t_s: np.ndarray) -> np.ndarray:
     """Commanded displacement (m, + into the pad) or force (N, + compressive) at times t_s (any shape)."""
     t = np.asarray(t_s, dtype=float)
-    tau = t - cfg.protocol.settle_s
-    if proto.kind == "sinusoid":
-        f = proto.frequency_hz
-        on = (tau >= 0.0) & (tau <= cfg.protocol.cycles / f)
-        return np.where(on, proto.amplitude * 0.5 * (1.0 - np.cos(2.0 * np.pi * f * tau)), 0.0)
-    if proto.kind == "hold":
-        u = np.clip(tau / cfg.protocol.ramp_s, 0.0, 1.0)
-        return proto.amplitude * 0.5 * (1.0 - np.cos(np.pi * u))
-    raise ValueError(f"protocol kind '{proto.kind}' (allowed: sinusoid, hold)")
+    if proto.kind not in WAVEFORMS:
+        raise ValueError(f"protocol kind '{proto.kind}' (allowed: {', '.join(WAVEFORMS)})")
+    return WAVEFORMS[proto.kind](proto, cfg, t - cfg.protocol.settle_s)
+
+
+def xy_waveform(proto: EpisodeProtocol, cfg: SceneConfig, t_s: np.ndarray) -> np.ndarray:
+    """Commanded indenter x/y (m) at times t_s: shape t_s.shape + (2,). A protocol with a tangential
+    stroke puts `stroke_xy_m` (the displacement at the end, (2,)) and `stroke_start_s`/`stroke_end_s` in
+    params; otherwise the indenter stays at its offset."""
+    t = np.asarray(t_s, dtype=float)
+    xy = np.broadcast_to(np.asarray(proto.offset_xy_m, float), t.shape + (2,)).copy()
+    if "stroke_xy_m" in proto.params:
+        t0, t1 = proto.params["stroke_start_s"], proto.params["stroke_end_s"]
+        u = np.clip((t - t0) / max(t1 - t0, 1e-9), 0.0, 1.0)
+        xy += (0.5 * (1.0 - np.cos(np.pi * u)))[..., None] * np.asarray(proto.params["stroke_xy_m"], float)
+    return xy

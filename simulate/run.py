@@ -14,10 +14,12 @@ from typing import Callable
 import numpy as np
 
 from scenes import SceneConfig, config_json
-from sensors.cnt_pdms import OUTPUTS, CntPdmsSensor
+from sensors.base import SensorModel
+from sensors.registry import make_sensor
 from sensors.manifest import build_manifest, episode_seed, first_missing_shards, shard_path
 from sensors.recording import Channel, write_recording
-from simulate.contact import LoadBatch, run_episodes
+from sensors.base import LoadBatch
+from simulate.contact import run_episodes
 from simulate.mjcf import build_mjcf
 from simulate.protocols import EpisodeProtocol, make_episode_protocol
 
@@ -32,12 +34,6 @@ LOAD_CHANNELS: dict[str, tuple[str, tuple[str, ...], str]] = {
 }
 
 
-def make_sensor(cfg: SceneConfig, backend: str = "warp", device: str = "cpu") -> CntPdmsSensor:
-    if cfg.sensor.family != "cnt_pdms":
-        raise ValueError(f"sensor.family {cfg.sensor.family!r} not supported (allowed: cnt_pdms)")
-    return CntPdmsSensor(cfg, backend=backend, device=device)
-
-
 @dataclass
 class EpisodeResult:
     """Everything recorded for one episode: channel name -> (array [T, ...], units, dims, description)."""
@@ -49,7 +45,7 @@ class EpisodeResult:
 
 
 def simulate_episodes(
-    cfg: SceneConfig, seeds: list[int], ids: list[str], sensor: CntPdmsSensor, threads: int = 1
+    cfg: SceneConfig, seeds: list[int], ids: list[str], sensor: SensorModel, threads: int = 1
 ) -> list[EpisodeResult]:
     """Simulate episodes (any mix of lengths: grouped by length into batched rollouts)."""
     protos = [make_episode_protocol(cfg, s) for s in seeds]
@@ -58,13 +54,15 @@ def simulate_episodes(
     for n in lengths:
         idx = [i for i, p in enumerate(protos) if p.n_samples == n]
         batch = run_episodes(cfg, [protos[i] for i in idx], threads=threads)
-        out = sensor.run(sensor.drive_from_load(batch.deformation_m, batch.pressure_pa), [seeds[i] for i in idx])
+        out = sensor.run_load(batch, [seeds[i] for i in idx])
         for j, i in enumerate(idx):
-            results[i] = EpisodeResult(ids[i], seeds[i], protos[i], _channels(batch, out, j, cfg))
+            results[i] = EpisodeResult(ids[i], seeds[i], protos[i], _channels(batch, out, j, cfg, sensor))
     return [results[i] for i in range(len(protos))]
 
 
-def _channels(batch: LoadBatch, out: dict[str, np.ndarray], j: int, cfg: SceneConfig) -> dict[str, Channel]:
+def _channels(
+    batch: LoadBatch, out: dict[str, np.ndarray], j: int, cfg: SceneConfig, sensor: SensorModel
+) -> dict[str, Channel]:
     f32 = np.float32
     arrays = {
         "time": batch.time_s.astype(np.float64),
@@ -81,7 +79,7 @@ def _channels(batch: LoadBatch, out: dict[str, np.ndarray], j: int, cfg: SceneCo
         if name == "target" and cfg.protocol.control == "force":
             units = "N"
         ch[name] = Channel(arr, units, dims, desc)
-    for name, spec in OUTPUTS.items():
+    for name, spec in sensor.outputs.items():
         ch[name] = Channel(out[name][j], spec.units, spec.dims, spec.description)
     return ch
 
@@ -96,7 +94,7 @@ def n_shards(cfg: SceneConfig) -> int:
     return -(-g.episodes // g.episodes_per_shard)
 
 
-def write_shard(cfg: SceneConfig, out_dir: Path, shard: int, sensor: CntPdmsSensor, mjcf: str) -> Path:
+def write_shard(cfg: SceneConfig, out_dir: Path, shard: int, sensor: SensorModel, mjcf: str) -> Path:
     """Generate and atomically write one shard (a pure function of config and shard index)."""
     g = cfg.generation
     gids = episode_ids_of_shard(cfg, shard)

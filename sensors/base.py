@@ -1,0 +1,66 @@
+"""What every sensor model shares: the load it receives from simulate, its output specs, and the protocol
+a family model implements (Isaac Lab TacSL-style config / sensor / data triad: the config is
+scenes.SceneConfig, the sensor is a class here, the data are the arrays below)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class ChannelSpec:
+    """How an output is stored: units and dimension names (first dim after episode is time)."""
+
+    units: str
+    dims: tuple[str, ...]
+    description: str
+
+
+@dataclass
+class LoadBatch:
+    """Load field of E episodes x T samples on N taxels (float64, SI).
+
+    time_s: (T,) sample times, sample k at k / sample_rate_hz.
+    target: (E, T) commanded penetration (m, + into the pad) or force (N, + compressive).
+    indenter_pos_m: (E, T, 3) world position of the indenter's lowest point on its axis (box: bottom-face
+        centre, sphere: bottom pole); z - pad thickness = -penetration.
+    contact_force_n: (E, T, 3) net contact force of the indenter on the pad, world x/y (tangential, force
+        on the pad) and z = normal compressive force (positive when pressing; = -F_z on the pad).
+    contact_points: (E, T) number of MuJoCo contacts between indenter and pad.
+    deformation_m: (E, T, N) surface deflection of the pad (m, + down).
+    pressure_pa: (E, T, N) normal pressure; sum over N of pressure * taxel_area == contact_force_n[..., 2].
+    shear_pa: (E, T, N, 2) tangential traction on the pad (x, y); sums to contact_force_n[..., :2] / area.
+    taxel_xy_m: (N, 2) taxel centres, flat index n = iy * taxels_x + ix.
+    taxel_area_m2: area of one taxel cell.
+    control: "displacement" | "force".
+    """
+
+    time_s: np.ndarray
+    target: np.ndarray
+    indenter_pos_m: np.ndarray
+    contact_force_n: np.ndarray
+    contact_points: np.ndarray
+    deformation_m: np.ndarray
+    pressure_pa: np.ndarray
+    shear_pa: np.ndarray
+    taxel_xy_m: np.ndarray
+    taxel_area_m2: float
+    control: str
+
+
+class SensorModel(Protocol):
+    """A sensor family's batched model. Shapes: E episodes, T samples."""
+
+    family: str
+    outputs: dict[str, ChannelSpec]
+
+    def run_load(self, load: LoadBatch, seeds: list[int]) -> dict[str, np.ndarray]:
+        """Load field of E episodes -> {output name: array [E, T, ...]} (names and units in `outputs`)."""
+        ...
+
+    def attrs(self) -> dict:
+        """/sensor attrs for recordings (family, geometry in m, sample rate, ADC...)."""
+        ...

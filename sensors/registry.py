@@ -1,0 +1,20 @@
+"""Sensor family -> model class. Each family adds one line; the classes are imported lazily."""
+
+from __future__ import annotations
+
+import importlib
+
+from scenes import SceneConfig
+from sensors.base import SensorModel
+
+FAMILIES: dict[str, str] = {
+    "cnt_pdms": "sensors.cnt_pdms:CntPdmsSensor",
+}
+
+
+def make_sensor(cfg: SceneConfig, backend: str = "warp", device: str = "cpu") -> SensorModel:
+    family = cfg.sensor.family
+    if family not in FAMILIES:
+        raise ValueError(f"sensor.family {family!r} has no model (allowed: {', '.join(sorted(FAMILIES))})")
+    module, cls = FAMILIES[family].split(":")
+    return getattr(importlib.import_module(module), cls)(cfg, backend=backend, device=device)
