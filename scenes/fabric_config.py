@@ -30,12 +30,12 @@ class FabricStackConfig(Strict):
     """
 
     layer_thickness_m: PositiveFloat = 0.38e-3  # fabric sect. 3.1 (EeonTex, 0.38 mm)
-    layer_r_inf_ohm: NonNegFloat = 95.0  # fit to fabric eq. 6 (sensors/fabric_calib.py)
-    layer_r_amp_ohm: NonNegFloat = 1200.0  # fit to fabric eq. 6
-    layer_force_n: PositiveFloat = 0.6  # fit to fabric eq. 6
-    layer_beta: Annotated[float, Field(gt=0, le=4)] = 1.0  # fit to fabric eq. 6
-    contact_r0_ohm: NonNegFloat = 700.0  # fit to fabric eq. 6
-    contact_force_n: PositiveFloat = 0.5  # fit to fabric eq. 6: preload of the sewn stack
+    layer_r_inf_ohm: NonNegFloat = 242.368  # fit to fabric eq. 6 (sensors/fabric_calib.py)
+    layer_r_amp_ohm: NonNegFloat = 855.664  # fit to fabric eq. 6
+    layer_force_n: PositiveFloat = 0.758332  # fit to fabric eq. 6
+    layer_beta: Annotated[float, Field(gt=0, le=4)] = 1.39721  # fit to fabric eq. 6
+    contact_r0_ohm: NonNegFloat = 1021.62  # fit to fabric eq. 6
+    contact_force_n: PositiveFloat = 0.225262  # fit to fabric eq. 6: preload of the sewn stack
     contact_exponent: Annotated[float, Field(ge=0.33, le=0.5)] = 0.5  # Holm: 1/3 elastic .. 1/2 plastic
     lead_resistance_ohm: NonNegFloat = 30.0  # fabric sect. 3.2: silver thread < 300 ohm/m, 2 x 5 cm leads  # estimate
 
@@ -63,7 +63,7 @@ class FabricHysteresisConfig(Strict):
     Source: Brokate & Sprekels, Hysteresis and Phase Transitions (1996); Al Janaideh et al. (generalized PI)."""
 
     play_thresholds_n: list[NonNegFloat] = Field(default_factory=lambda: [0.05, 0.15, 0.3, 0.5])  # estimate, tuned to 24.2 % FSO
-    play_weights: list[NonNegFloat] = Field(default_factory=lambda: [0.15, 0.15, 0.15, 0.15])  # estimate, tuned to 24.2 % FSO
+    play_weights: list[NonNegFloat] = Field(default_factory=lambda: [0.1, 0.1, 0.1, 0.1])  # estimate, tuned to 24.2 % FSO
     recovery_time_s: PositiveFloat = 120.0  # estimate: slow release of the compaction at rest
 
     @model_validator(mode="after")
