@@ -224,6 +224,14 @@ class SceneConfig(Strict):
     sensor: SensorConfig = Field(default_factory=CntPdmsSensorConfig)
     generation: GenerationConfig = Field(default_factory=GenerationConfig)
 
+    @model_validator(mode="before")
+    @classmethod
+    def _default_family(cls, data: object) -> object:
+        """A sensor section without `family` is cnt_pdms (the union needs its tag; older scenes omit it)."""
+        if isinstance(data, dict) and isinstance(data.get("sensor"), dict) and "family" not in data["sensor"]:
+            data = {**data, "sensor": {"family": "cnt_pdms", **data["sensor"]}}
+        return data
+
     @model_validator(mode="after")
     def _cross(self) -> "SceneConfig":
         nyq = self.sampling.sample_rate_hz / 2.0
