@@ -7,7 +7,9 @@ Defaults without a source in the papers are marked `# estimate`.
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+import math
+
+from typing import Annotated, Literal, Union
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
@@ -67,9 +69,12 @@ class ProtocolConfig(Strict):
 
     kind = "sinusoid": d(t) = d0 [1 - cos(2 pi f t)] / 2 (cnt_pdms sect. 3.2), displacement or force amplitude.
     kind = "hold": ramp to a level in `ramp_s`, hold for the rest of the episode (creep / relaxation).
+    kind = "staircase" (force control, fabric sect. 3.3): loading-unloading cycles in `stair_step_n` steps held
+    `stair_dwell_s` each, between turning points: `stair_return_points_n` (0 -> r1 -> 0 -> r2 -> ...) or, when
+    empty, a full cycle to amplitude_max then random minor loops (peaks in [amplitude_min, amplitude_max]).
     """
 
-    kind: Literal["sinusoid", "hold"] = "sinusoid"
+    kind: Literal["sinusoid", "hold", "staircase"] = "sinusoid"
     control: Literal["displacement", "force"] = "displacement"
     frequencies_hz: list[PositiveFloat] = Field(default_factory=lambda: [0.1, 0.5, 1.0, 2.0])  # cnt_pdms
     cycles: Annotated[int, Field(ge=1, le=1000)] = 3  # estimate
@@ -78,6 +83,12 @@ class ProtocolConfig(Strict):
     ramp_s: PositiveFloat = 0.5  # for kind="hold"
     duration_s: PositiveFloat = 20.0  # for kind="hold"; sinusoids last cycles / f
     settle_s: NonNegFloat = 0.2  # rest before loading starts
+    stair_step_n: PositiveFloat = 0.1  # fabric sect. 3.3: 0.1 N between force levels
+    stair_dwell_s: PositiveFloat = 2.0  # fabric sect. 3.3: 2 s from a new force level to the reading
+    stair_ramp_s: NonNegFloat = 0.1  # estimate: time to apply a new level by hand
+    stair_cycles_min: Annotated[int, Field(ge=1, le=50)] = 4  # fabric sect. 3.3: four to six cycles
+    stair_cycles_max: Annotated[int, Field(ge=1, le=50)] = 6  # fabric sect. 3.3
+    stair_return_points_n: list[PositiveFloat] = Field(default_factory=list)  # fixed peaks; empty: random
 
     @model_validator(mode="after")
     def _check(self) -> "ProtocolConfig":
@@ -87,6 +98,12 @@ class ProtocolConfig(Strict):
             )
         if not self.frequencies_hz:
             raise ValueError("protocol.frequencies_hz must list at least one frequency")
+        if self.stair_cycles_min > self.stair_cycles_max:
+            raise ValueError(
+                f"protocol.stair_cycles_min ({self.stair_cycles_min}) must be <= protocol.stair_cycles_max ({self.stair_cycles_max})"
+            )
+        if self.kind == "staircase" and self.stair_ramp_s > self.stair_dwell_s:
+            raise ValueError("protocol.stair_ramp_s must be <= protocol.stair_dwell_s")
         return self
 
 
@@ -181,6 +198,11 @@ class CntPdmsSensorConfig(Strict):
     electronics: ElectronicsConfig = Field(default_factory=ElectronicsConfig)
 
 
+from scenes.fabric_config import FabricSensorConfig  # noqa: E402  (needs Strict above)
+
+SensorConfig = Annotated[Union[CntPdmsSensorConfig, FabricSensorConfig], Field(discriminator="family")]
+
+
 class GenerationConfig(Strict):
     episodes: Annotated[int, Field(ge=1, le=10_000_000)] = 32
     episodes_per_shard: Annotated[int, Field(ge=1)] = 16
@@ -199,8 +221,16 @@ class SceneConfig(Strict):
     indenter: IndenterConfig = Field(default_factory=IndenterConfig)
     protocol: ProtocolConfig = Field(default_factory=ProtocolConfig)
     sampling: SamplingConfig = Field(default_factory=SamplingConfig)
-    sensor: CntPdmsSensorConfig = Field(default_factory=CntPdmsSensorConfig)
+    sensor: SensorConfig = Field(default_factory=CntPdmsSensorConfig)
     generation: GenerationConfig = Field(default_factory=GenerationConfig)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _default_family(cls, data: object) -> object:
+        """A sensor section without `family` is cnt_pdms (the union needs its tag; older scenes omit it)."""
+        if isinstance(data, dict) and isinstance(data.get("sensor"), dict) and "family" not in data["sensor"]:
+            data = {**data, "sensor": {"family": "cnt_pdms", **data["sensor"]}}
+        return data
 
     @model_validator(mode="after")
     def _cross(self) -> "SceneConfig":
@@ -211,8 +241,9 @@ class SceneConfig(Strict):
                     f"protocol.frequencies_hz: {f} Hz cannot be resolved at sampling.sample_rate_hz="
                     f"{self.sampling.sample_rate_hz} Hz (allowed: 0 < f < {nyq / 5.0:g} Hz, 10 samples per cycle)"
                 )
-        fc = self.sensor.electronics.filter_cutoff_hz
-        if self.sensor.electronics.filter_order and fc >= nyq:
+        elec = getattr(self.sensor, "electronics", None)  # families without a filtered ADC skip this
+        fc = elec.filter_cutoff_hz if elec is not None else 0.0
+        if elec is not None and elec.filter_order and fc >= nyq:
             raise ValueError(
                 f"sensor.electronics.filter_cutoff_hz: {fc} Hz must be below the Nyquist frequency {nyq:g} Hz"
             )
@@ -231,4 +262,8 @@ class SceneConfig(Strict):
         p = self.protocol
         if p.kind == "sinusoid":
             return p.settle_s + p.cycles / frequency_hz
+        if p.kind == "staircase":  # longest plan: every cycle a full 0 -> peak -> 0, plus a rest of duration_s
+            peaks = p.stair_return_points_n or [p.amplitude_max] * p.stair_cycles_max
+            levels = sum(2 * (math.ceil(r / p.stair_step_n - 1e-9) + 1) for r in peaks)
+            return p.settle_s + levels * p.stair_dwell_s + p.duration_s
         return p.settle_s + p.duration_s

@@ -8,6 +8,7 @@ from __future__ import annotations
 import difflib
 import json
 import re
+import typing
 from pathlib import Path
 from typing import Any
 
@@ -47,15 +48,39 @@ def _read_source(source: str | Path) -> dict[str, Any]:
     return data
 
 
+def _models_of(ann: object) -> list[type[BaseModel]]:
+    """The pydantic models an annotation names: the model itself, or the members of a (discriminated) union."""
+    if isinstance(ann, type) and issubclass(ann, BaseModel):
+        return [ann]
+    out: list[type[BaseModel]] = []
+    for a in typing.get_args(ann):
+        out += _models_of(a)
+    return out
+
+
 def _fields_at(path: list[str]) -> list[str]:
-    """Allowed field names at a dotted path inside SceneConfig (for error messages)."""
-    model: type[BaseModel] | None = SceneConfig
+    """Allowed field names at a dotted path inside SceneConfig (for error messages); under a union
+    (sensor families) the fields of every member."""
+    models: list[type[BaseModel]] = [SceneConfig]
     for part in path:
-        if model is None or part not in model.model_fields:
+        nxt: list[type[BaseModel]] = []
+        for m in models:
+            if part in m.model_fields:
+                nxt += _models_of(m.model_fields[part].annotation)
+        models = nxt
+        if not models:
             return []
-        ann = model.model_fields[part].annotation
-        model = ann if isinstance(ann, type) and issubclass(ann, BaseModel) else None
-    return sorted(model.model_fields) if model is not None else []
+    return sorted({f for m in models for f in m.model_fields})
+
+
+def _union_tags() -> set[str]:
+    """Discriminator values of the sensor union: pydantic puts them in error locations ('sensor', 'fabric', ...)."""
+    tags = set()
+    for m in _models_of(SceneConfig.model_fields["sensor"].annotation):
+        fam = m.model_fields.get("family")
+        if fam is not None:
+            tags.update(str(a) for a in typing.get_args(fam.annotation))
+    return tags
 
 
 def apply_overrides(data: dict[str, Any], overrides: list[str] | None) -> dict[str, Any]:
@@ -91,6 +116,8 @@ def format_validation_error(exc: ValidationError) -> str:
     """One line naming the first offending field and the allowed values."""
     err = exc.errors()[0]
     loc = [str(p) for p in err["loc"] if not isinstance(p, int)]
+    if len(loc) >= 2 and loc[0] == "sensor" and loc[1] in _union_tags():
+        loc = [loc[0]] + loc[2:]
     dotted = ".".join(loc) or "<root>"
     if err["type"] == "extra_forbidden":
         return _unknown(dotted, loc[-1], _fields_at(loc[:-1]))

@@ -49,6 +49,7 @@ def make_episode_protocol(cfg: SceneConfig, seed: int) -> EpisodeProtocol:
     amp = float(rng.uniform(p.amplitude_min, p.amplitude_max))
     j = cfg.indenter.position_jitter_m
     off = rng.uniform(-j, j, size=2) if j > 0 else np.zeros(2)
+    params = PARAM_DRAWS[p.kind](cfg, rng) if p.kind in PARAM_DRAWS else {}
     return EpisodeProtocol(
         frequency_hz=f,
         amplitude=amp,
@@ -56,6 +57,7 @@ def make_episode_protocol(cfg: SceneConfig, seed: int) -> EpisodeProtocol:
         n_samples=n_samples_for(cfg, f),
         control=p.control,
         kind=p.kind,
+        params=params,
     )
 
 
@@ -70,8 +72,72 @@ def _hold(proto: EpisodeProtocol, cfg: SceneConfig, tau: np.ndarray) -> np.ndarr
     return proto.amplitude * 0.5 * (1.0 - np.cos(np.pi * u))
 
 
+def staircase_turning_points(cfg: SceneConfig, rng: np.random.Generator | None = None) -> list[float]:
+    """Turning points of a staircase episode (fabric sect. 3.3), starting and ending at 0 N.
+
+    With protocol.stair_return_points_n: 0 -> r1 -> 0 -> r2 -> 0 ... (the paper's 1-layer series is
+    2, 1.27, 1, 1.96, 0.5, 1.7 N). Otherwise: a full cycle 0 -> amplitude_max -> 0, then cycles to random peaks
+    U[amplitude_min, amplitude_max], each coming down to 0 or (half the time) to a random valley U[0, peak/2]
+    from which the next cycle rises again: return points on the ascending branch and starting points on the
+    descending branch both vary. The number of cycles is U{stair_cycles_min..stair_cycles_max}.
+    """
+    p = cfg.protocol
+    step = p.stair_step_n
+    if p.stair_return_points_n:
+        pts = [0.0]
+        for r in p.stair_return_points_n:
+            pts += [float(r), 0.0]
+        return pts
+    rng = rng or np.random.default_rng(0)
+    n = int(rng.integers(p.stair_cycles_min, p.stair_cycles_max + 1))
+    pts = [0.0, float(p.amplitude_max), 0.0]
+    for i in range(1, n):
+        peak = float(np.round(rng.uniform(p.amplitude_min, p.amplitude_max) / step * 10) * step / 10)
+        valley = 0.0 if (i == n - 1 or rng.random() < 0.5) else float(np.round(rng.uniform(0, peak / 2) / step) * step)
+        pts += [max(peak, pts[-1] + step), valley]
+    return pts
+
+
+def staircase_levels(turning_points: list[float], step: float) -> np.ndarray:
+    """Force levels visited one dwell each: from each turning point to the next in `step` increments, the
+    turning point itself last, on the step grid (0 -> 1.27 -> 0 visits 0.1, ..., 1.2, 1.27, 1.2, ..., 0.1, 0). The first level is turning_points[0]."""
+    levels = [float(turning_points[0])]
+    eps = 1e-6 * step
+    for a, b in zip(turning_points[:-1], turning_points[1:]):
+        lo, hi = min(a, b), max(a, b)
+        grid = step * np.arange(np.floor(lo / step) - 1, np.ceil(hi / step) + 2)
+        inner = grid[(grid > lo + eps) & (grid < hi - eps)]
+        levels += list(inner if b > a else inner[::-1]) + [float(b)]
+    return np.round(np.asarray(levels), 9)
+
+
+def _staircase_draw(cfg: SceneConfig, rng: np.random.Generator) -> dict:
+    pts = staircase_turning_points(cfg, rng)
+    return {"turning_points_n": pts, "levels_n": staircase_levels(pts, cfg.protocol.stair_step_n)}
+
+
+def _staircase(proto: EpisodeProtocol, cfg: SceneConfig, tau: np.ndarray) -> np.ndarray:
+    """Each level held stair_dwell_s; a new level is applied over stair_ramp_s (raised cosine) at the start
+    of its dwell. After the last level (0 N) the force stays at 0."""
+    p = cfg.protocol
+    levels = proto.params.get("levels_n")
+    if levels is None:
+        levels = _staircase_draw(cfg, np.random.default_rng(0))["levels_n"]
+    levels = np.asarray(levels, float)
+    prev = np.concatenate([[0.0], levels])  # level before dwell j
+    j = np.clip(np.floor(tau / p.stair_dwell_s).astype(np.int64), 0, len(levels))
+    cur = np.concatenate([levels, [0.0]])[j]
+    before = prev[j]
+    tin = tau - j * p.stair_dwell_s
+    u = np.clip(tin / p.stair_ramp_s, 0.0, 1.0) if p.stair_ramp_s > 0 else np.ones_like(tin)
+    out = before + (cur - before) * 0.5 * (1.0 - np.cos(np.pi * u))
+    return np.where(tau < 0.0, 0.0, out)
+
+
 # protocol kind -> waveform(proto, cfg, tau = t - settle_s) of the normal axis; families add their kinds here
-WAVEFORMS = {"sinusoid": _sinusoid, "hold": _hold}
+WAVEFORMS = {"sinusoid": _sinusoid, "hold": _hold, "staircase": _staircase}
+# protocol kind -> draw(cfg, rng) -> EpisodeProtocol.params (after the shared draws, so other kinds are unchanged)
+PARAM_DRAWS = {"staircase": _staircase_draw}
 
 
 def target_waveform(proto: EpisodeProtocol, cfg: SceneConfig, t_s: np.ndarray) -> np.ndarray:

@@ -1,0 +1,103 @@
+"""Config of the `fabric` family: EeonTex knitted conductive fabric stacks (paper key `fabric`).
+
+A stack of `layers` fabric layers (1 x 1 cm) between two silver-thread electrodes, read by a 2-wire
+multimeter. Every value is SI with the unit in the field name; defaults without a source are marked
+`# estimate`. The stack-curve defaults are the 1-layer calibration (fit to the paper's eq. 6 through the
+whole chain, see sensors/fabric_calib.py); the presets fabric_3/6/12 carry their own fitted values.
+The paper does not print the unit of its resistance axis; we read it as kOhm (EeonTex is sold at
+~20 kOhm/sq), so eq. 6's R(0) = 3.17 becomes 3170 ohm.  # estimate
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import Field, model_validator
+
+from scenes.config import NonNegFloat, PositiveFloat, Strict
+
+
+class FabricStackConfig(Strict):
+    """Kirchhoff series stack: n layers of in-layer resistance + (n + 1) Holm contacts (n - 1 between layers,
+    2 fabric-to-thread electrodes), all carrying the same force.
+
+    in-layer (knit compaction):  R_layer(x) = layer_r_inf_ohm + layer_r_amp_ohm * exp(-(x / layer_force_n)^layer_beta)
+                                 (the monotone form of the paper's reading note)
+    contact (Holm, Electric Contacts, 1967, sect. 1-4): R_c = rho / (2 a), a-spot radius a ~ (x + F0)^m,
+                                 R_c(x) = contact_r0_ohm * (1 + x / contact_force_n)^(-contact_exponent),
+                                 m = 1/3 (elastic a-spots) .. 1/2 (plastic a-spots).
+    x is the effective compaction load (N) after creep and hysteresis.
+    """
+
+    layer_thickness_m: PositiveFloat = 0.38e-3  # fabric sect. 3.1 (EeonTex, 0.38 mm)
+    layer_r_inf_ohm: NonNegFloat = 242.368  # fit to fabric eq. 6 (sensors/fabric_calib.py)
+    layer_r_amp_ohm: NonNegFloat = 855.664  # fit to fabric eq. 6
+    layer_force_n: PositiveFloat = 0.758332  # fit to fabric eq. 6
+    layer_beta: Annotated[float, Field(gt=0, le=4)] = 1.39721  # fit to fabric eq. 6
+    contact_r0_ohm: NonNegFloat = 1021.62  # fit to fabric eq. 6
+    contact_force_n: PositiveFloat = 0.225262  # fit to fabric eq. 6: preload of the sewn stack
+    contact_exponent: Annotated[float, Field(ge=0.33, le=0.5)] = 0.5  # Holm: 1/3 elastic .. 1/2 plastic
+    lead_resistance_ohm: NonNegFloat = 30.0  # fabric sect. 3.2: silver thread < 300 ohm/m, 2 x 5 cm leads  # estimate
+
+
+class FabricCreepConfig(Strict):
+    """Prony creep of the fabric's compaction under force: u = F + sum q_i, q_i -> g_i F with time constant tau_i.
+    Source: Ferry, Viscoelastic Properties of Polymers (1980) (generalized Kelvin-Voigt creep compliance)."""
+
+    prony_fractions: list[NonNegFloat] = Field(default_factory=lambda: [0.04, 0.06])  # estimate
+    prony_times_s: list[PositiveFloat] = Field(default_factory=lambda: [1.0, 30.0])  # estimate
+
+    @model_validator(mode="after")
+    def _check(self) -> "FabricCreepConfig":
+        if len(self.prony_fractions) != len(self.prony_times_s):
+            raise ValueError("sensor.creep.prony_fractions and prony_times_s must have the same length")
+        if len(self.prony_fractions) > 8:
+            raise ValueError("sensor.creep allows at most 8 Prony terms")
+        return self
+
+
+class FabricHysteresisConfig(Strict):
+    """Prandtl-Ishlinskii play bank on the creep-compaction load (N), with return-point memory; the stack law
+    R(x) that follows is nonlinear, so minor loops are not congruent, and the residual compaction at zero
+    force depends on the last peak (minor loops return at different points). Slow recovery at rest.
+    Source: Brokate & Sprekels, Hysteresis and Phase Transitions (1996); Al Janaideh et al. (generalized PI)."""
+
+    play_thresholds_n: list[NonNegFloat] = Field(default_factory=lambda: [0.05, 0.15, 0.3, 0.5])  # estimate, tuned to 24.2 % FSO
+    play_weights: list[NonNegFloat] = Field(default_factory=lambda: [0.1, 0.1, 0.1, 0.1])  # estimate, tuned to 24.2 % FSO
+    recovery_time_s: PositiveFloat = 120.0  # estimate: slow release of the compaction at rest
+
+    @model_validator(mode="after")
+    def _check(self) -> "FabricHysteresisConfig":
+        if len(self.play_thresholds_n) != len(self.play_weights):
+            raise ValueError("sensor.hysteresis.play_thresholds_n and play_weights must have the same length")
+        if len(self.play_weights) > 16:
+            raise ValueError("sensor.hysteresis allows at most 16 play operators")
+        if sum(self.play_weights) >= 1.0:
+            raise ValueError("sensor.hysteresis.play_weights must sum to < 1 (the rest is the direct path)")
+        return self
+
+
+class MultimeterConfig(Strict):
+    """2-wire handheld multimeter (fabric sect. 3.3): autoranging, finite counts, a few readings per second,
+    sample-and-hold between readings. Reading = round(R (1 + gain_error) / resolution + noise) counts."""
+
+    ranges_ohm: list[PositiveFloat] = Field(default_factory=lambda: [600.0, 6e3, 60e3, 600e3, 6e6])  # estimate: 6000-count meter
+    counts: Annotated[int, Field(ge=100, le=1_000_000)] = 6000  # estimate
+    readings_per_s: PositiveFloat = 2.5  # estimate: "a few readings per second"
+    noise_counts: NonNegFloat = 0.5  # estimate: rms, in least-significant counts
+    gain_error: Annotated[float, Field(ge=-0.1, le=0.1)] = 0.0  # estimate: calibration error (fraction)
+
+    @model_validator(mode="after")
+    def _check(self) -> "MultimeterConfig":
+        if not self.ranges_ohm or sorted(self.ranges_ohm) != list(self.ranges_ohm):
+            raise ValueError("sensor.multimeter.ranges_ohm must list at least one range, ascending")
+        return self
+
+
+class FabricSensorConfig(Strict):
+    family: Literal["fabric"] = "fabric"
+    layers: Annotated[int, Field(ge=1, le=64)] = 1  # fabric sect. 3.3: 1, 3, 6, 12
+    stack: FabricStackConfig = Field(default_factory=FabricStackConfig)
+    creep: FabricCreepConfig = Field(default_factory=FabricCreepConfig)
+    hysteresis: FabricHysteresisConfig = Field(default_factory=FabricHysteresisConfig)
+    multimeter: MultimeterConfig = Field(default_factory=MultimeterConfig)

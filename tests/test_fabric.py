@@ -1,0 +1,180 @@
+"""fabric family (paper key `fabric`): stack physics, paper curves (eqs. 6-9), hysteresis, minor loops, creep,
+multimeter, Warp == numpy, config errors, and one characterization + one generation through MuJoCo."""
+
+import numpy as np
+import pytest
+
+from scenes import ConfigError, load_scene
+from sensors.fabric import FabricSensor, multimeter_numpy
+from sensors.fabric_calib import PAPER_CURVES, loading_branch_x
+from sensors.fabric_ref import FabricState, fabric_chain_numpy, fabric_params, stack_resistance
+from simulate.protocols import make_episode_protocol, staircase_levels, target_waveform
+
+PRESETS = {n: f"fabric_{n}" for n in (1, 3, 6, 12)}
+DWELL = 20  # samples: 2 s at 10 Hz
+
+
+@pytest.fixture(scope="module")
+def cfgs():
+    return {n: load_scene(p) for n, p in PRESETS.items()}
+
+
+def staircase(turning, step=0.1, dwell=DWELL):
+    lv = staircase_levels(turning, step)
+    return lv, np.repeat(lv, dwell).astype(np.float32)[None, :, None]
+
+
+def readings(cfg, turning):
+    lv, f = staircase(turning)
+    _, g, _ = fabric_chain_numpy(f, fabric_params(cfg))
+    return lv, 1.0 / g[0, DWELL - 1 :: DWELL, 0].astype(float) + cfg.sensor.stack.lead_resistance_ohm
+
+
+def test_resistance_rises_with_layers_at_zero_force_and_falls_with_force(cfgs):
+    r0 = [stack_resistance(0.0, fabric_params(cfgs[n])) for n in (1, 3, 6, 12)]
+    assert r0 == sorted(r0) and r0[-1] > 10 * r0[0]  # paper: 3.17, 19.8, 30.4, 54.9 (kOhm)
+    for n, cfg in cfgs.items():
+        lv, r = readings(cfg, [0.0, cfg.protocol.amplitude_max])
+        assert np.all(np.diff(r) < 0), n  # every 0.1 N step lowers the resistance
+        assert r[-1] < 0.5 * r[0]
+
+
+@pytest.mark.parametrize("n", [1, 3, 6, 12])
+def test_loading_branch_within_10pct_fso_of_paper_curve(cfgs, n):
+    cfg, curve = cfgs[n], PAPER_CURVES[n]
+    f, x = loading_branch_x(cfg, curve.monotone_range_n)
+    r = stack_resistance(x, fabric_params(cfg)) + cfg.sensor.stack.lead_resistance_ohm
+    ref = curve.r_ohm(f)
+    assert np.max(np.abs(r - ref)) / np.ptp(ref) < 0.10
+    assert abs(r[0] - ref[0]) / ref[0] < 0.05  # zero-force resistance as in the paper
+
+
+def test_minor_loops_return_at_different_points(cfgs):
+    cfg = cfgs[1]
+    lv, r = readings(cfg, [0.0, 2.0, 0.0, 0.5, 0.0, 1.27, 0.0])
+    ends = [r[i] for i in np.flatnonzero(lv == 0.0)[1:]]
+    assert max(ends) - min(ends) > 0.005 * np.ptp(r)  # back at 0 N, each cycle ends elsewhere
+    assert max(ends) < r[0] - 0.1 * np.ptp(r)  # and none recovers the virgin value within the dwell
+    # unloading branches from different return points cross 0.4 N at different resistances
+    down_04 = []
+    for peak_i in np.flatnonzero((lv[1:-1] > lv[:-2]) & (lv[1:-1] > lv[2:])) + 1:
+        j = peak_i + np.flatnonzero(np.isclose(lv[peak_i:], 0.4))[0]
+        down_04.append(r[j])
+    assert len(down_04) == 3 and np.ptp(down_04) > 0.02 * np.ptp(r)
+    # return-point memory: re-loading past the earlier peak rejoins the outer branch
+    _, r2 = readings(cfg, [0.0, 1.0, 0.3, 1.0, 0.3, 1.0])
+    peaks = r2[np.isclose(staircase_levels([0.0, 1.0, 0.3, 1.0, 0.3, 1.0], 0.1), 1.0)]
+    assert np.ptp(peaks) < 0.01 * np.ptp(r2)
+
+
+def test_hysteresis_error_of_one_layer_in_paper_band(cfgs):
+    lv, r = readings(cfgs[1], [0.0, 2.0, 0.0])
+    k = int(np.argmax(lv))
+    gap = np.abs(r[: k + 1] - r[k:][::-1]).max()
+    assert 20.0 <= 100 * gap / np.ptp(r) <= 28.0  # paper 24.2 % FSO
+
+
+def test_creep_under_held_force(cfgs):
+    cfg = cfgs[3]
+    f = np.full((1, 600, 1), 2.0, np.float32)  # 60 s at 2 N
+    f[0, :2] = 0.0
+    x, g, _ = fabric_chain_numpy(f, fabric_params(cfg))
+    r = 1.0 / g[0, 3:, 0]
+    assert np.all(np.diff(r) <= 0)  # resistance keeps falling under a held force
+    assert r[0] - r[-1] > 0.03 * r[0]
+    assert np.all(np.diff(x[0, 3:, 0]) >= 0)
+
+
+def test_warp_matches_numpy_and_state_streams(cfgs):
+    from sensors.fabric_warp import FabricChainWarp
+
+    cfg = load_scene("fabric_3", ["pad.taxels_x=2", "pad.taxels_y=2"])
+    p = fabric_params(cfg)
+    rng = np.random.default_rng(3)
+    _, base = staircase([0.0, 6.0, 1.0, 4.0, 0.0], step=0.5, dwell=5)
+    load = (base * rng.uniform(0.5, 1.5, size=(3, 1, 4))).astype(np.float32)  # 3 episodes x 4 taxels
+    x_np, g_np, st_np = fabric_chain_numpy(load, p)
+    ch = FabricChainWarp(p, 3, 4, "cpu")
+    T = load.shape[1]
+    x1, g1 = ch.run(load[:, : T // 2])
+    x2, g2 = ch.run(load[:, T // 2 :])  # streaming: state carried across calls
+    np.testing.assert_allclose(np.concatenate([x1, x2], 1), x_np, rtol=2e-5, atol=1e-6)
+    np.testing.assert_allclose(np.concatenate([g1, g2], 1), g_np, rtol=2e-5)
+    np.testing.assert_allclose(ch.state().play_n, st_np.play_n, rtol=2e-5, atol=1e-6)
+    # whole sensor: same readings from both backends
+    seeds = [1, 2, 3]
+    a = FabricSensor(cfg, "numpy").run(load / 4, seeds)
+    b = FabricSensor(cfg, "warp").run(load / 4, seeds)
+    np.testing.assert_allclose(a["resistance"], b["resistance"], rtol=2e-5)
+    assert np.abs(a["dmm_counts"] - b["dmm_counts"]).max() <= 1
+
+
+def test_multimeter_counts_range_and_hold():
+    from scenes.fabric_config import MultimeterConfig
+
+    mm = MultimeterConfig(noise_counts=0.0)
+    r = np.array([[500.0, 3170.0, 3170.4, 3172.0, 45_000.0, 9e9]]).repeat(4, axis=1)
+    out = multimeter_numpy(r, [0], mm, sample_rate_hz=10.0)  # a reading every 4 samples
+    assert np.all(out["reading"][0, :4] == 500.0) and out["range"][0, 0] == 600.0
+    assert out["reading"][0, 4] == 3170.0 and out["range"][0, 4] == 6e3  # 1 ohm resolution on 6 kOhm
+    assert out["reading"][0, 16] == 45_000.0 and out["range"][0, 16] == 60e3
+    assert out["counts"][0, -1] == mm.counts - 1  # overload clips on the top range
+
+
+@pytest.mark.parametrize(
+    "override, expected",
+    [
+        ("sensor.stack.contact_exponent=0.7", "field 'sensor.stack.contact_exponent'"),
+        ("sensor.stack.layr_beta=1", "unknown field 'sensor.stack.layr_beta' (did you mean 'layer_beta'?)"),
+        ("sensor.layers=0", "field 'sensor.layers'"),
+        ("sensor.hysteresis.play_weights=[0.5,0.5,0.1,0]", "sensor.hysteresis.play_weights must sum to < 1"),
+        ("sensor.multimeter.ranges_ohm=[6000,600]", "sensor.multimeter.ranges_ohm"),
+        ("sensor.stack.lead_resistance_ohm=3 mm", "field 'sensor.stack.lead_resistance_ohm' takes a value in ohm units"),
+        ("protocol.stair_cycles_min=7", "protocol.stair_cycles_min"),
+    ],
+)
+def test_bad_parameter_gives_one_line_error(override, expected):
+    with pytest.raises(ConfigError) as exc:
+        load_scene("fabric_1", [override])
+    assert expected in str(exc.value) and "\n" not in str(exc.value)
+
+
+def test_staircase_protocol_follows_the_paper(cfgs):
+    cfg = cfgs[1]
+    lv = staircase_levels([0.0, 1.27, 0.0], 0.1)
+    assert lv[13] == pytest.approx(1.27) and lv[12] == pytest.approx(1.2) and lv[14] == pytest.approx(1.2)
+    proto = make_episode_protocol(cfg, seed=5)
+    pts = proto.params["turning_points_n"]
+    assert 4 <= (len(pts) - 1) // 2 <= 6 and pts[1] == 2.0 and pts[-1] == 0.0
+    t = np.arange(proto.n_samples) / cfg.sampling.sample_rate_hz
+    f = target_waveform(proto, cfg, t)
+    assert f.max() == pytest.approx(2.0) and f[-1] == 0.0 and f.min() >= 0.0
+    assert len(proto.params["levels_n"]) * 2.0 + 0.2 <= t[-1]  # the plan fits in the episode
+
+
+def test_characterize_fabric_1_through_mujoco(cfgs):
+    from simulate.characterize import characterize
+
+    m = characterize(cfgs[1]).metrics
+    assert 20.0 <= m["hysteresis_fso_pct"] <= 28.0  # paper 24.2 % FSO
+    assert m["loading_vs_paper_fso_pct"] < 10.0
+    assert m["r0_ohm"] == pytest.approx(3170.3, rel=0.05)
+    assert np.ptp(m["return_r_ohm"]) > 0
+
+
+def test_generate_fabric_dataset(tmp_path):
+    import simulate.run as run
+    from sensors.recording import Recording
+    from sensors.manifest import shard_path
+
+    cfg = load_scene("fabric_1", ["generation.episodes=2", "generation.episodes_per_shard=2",
+                                  "protocol.stair_cycles_min=1", "protocol.stair_cycles_max=1", "protocol.amplitude_max=1.0"])
+    run.generate(cfg, tmp_path)
+    with Recording(shard_path(tmp_path, 0)) as rec:
+        ep = rec.episode_ids[0]
+        force, target = rec.read(ep, "force"), rec.read(ep, "target")
+        r = rec.read(ep, "resistance_measured")[:, 0]
+        assert rec.units(ep, "resistance_measured") == "ohm" and rec.units(ep, "force") == "N"
+    k = np.arange(21, len(force), 20)  # end of each 2 s dwell
+    np.testing.assert_allclose(force[k], target[k], atol=0.01)  # the applied force follows the staircase
+    assert r[np.argmax(force)] < 0.5 * r[0]
