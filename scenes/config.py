@@ -7,7 +7,7 @@ Defaults without a source in the papers are marked `# estimate`.
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Literal, Union
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
@@ -60,6 +60,7 @@ class IndenterConfig(Strict):
     friction: NonNegFloat = 0.8  # estimate: PDMS on steel
     position_jitter_m: NonNegFloat = 0.003  # estimate: random x/y offset of the press per episode
     start_gap_m: NonNegFloat = 0.0  # gap between indenter and pad at t=0
+    count: Annotated[int, Field(ge=1, le=8)] = 1  # indenters in the scene (protocol kind "press_stroke" uses > 1)
 
 
 class ProtocolConfig(Strict):
@@ -67,9 +68,13 @@ class ProtocolConfig(Strict):
 
     kind = "sinusoid": d(t) = d0 [1 - cos(2 pi f t)] / 2 (cnt_pdms sect. 3.2), displacement or force amplitude.
     kind = "hold": ramp to a level in `ramp_s`, hold for the rest of the episode (creep / relaxation).
+    kind = "press_stroke": each of indenter.count indenters (each active with `active_probability`) presses
+    at a random position to a force U[amplitude_min, amplitude_max] (force control), then strokes tangentially
+    in a random direction to a target shear force of U[0, shear_ratio_max] x friction x normal force
+    (Coulomb stick-slip; above 1 it slips), holds, then releases (ntype).
     """
 
-    kind: Literal["sinusoid", "hold"] = "sinusoid"
+    kind: Literal["sinusoid", "hold", "press_stroke"] = "sinusoid"
     control: Literal["displacement", "force"] = "displacement"
     frequencies_hz: list[PositiveFloat] = Field(default_factory=lambda: [0.1, 0.5, 1.0, 2.0])  # cnt_pdms
     cycles: Annotated[int, Field(ge=1, le=1000)] = 3  # estimate
@@ -78,6 +83,9 @@ class ProtocolConfig(Strict):
     ramp_s: PositiveFloat = 0.5  # for kind="hold"
     duration_s: PositiveFloat = 20.0  # for kind="hold"; sinusoids last cycles / f
     settle_s: NonNegFloat = 0.2  # rest before loading starts
+    stroke_s: PositiveFloat = 0.5  # for kind="press_stroke": duration of the tangential stroke; estimate
+    shear_ratio_max: NonNegFloat = 1.2  # for kind="press_stroke": target shear / (friction x normal force); estimate
+    active_probability: Fraction = 0.7  # for kind="press_stroke": chance that each extra indenter presses; estimate
 
     @model_validator(mode="after")
     def _check(self) -> "ProtocolConfig":
@@ -181,6 +189,11 @@ class CntPdmsSensorConfig(Strict):
     electronics: ElectronicsConfig = Field(default_factory=ElectronicsConfig)
 
 
+from scenes.ntype_config import NtypeSensorConfig  # noqa: E402  (after Strict: it builds on it)
+
+SensorConfig = Annotated[Union[CntPdmsSensorConfig, NtypeSensorConfig], Field(discriminator="family")]
+
+
 class GenerationConfig(Strict):
     episodes: Annotated[int, Field(ge=1, le=10_000_000)] = 32
     episodes_per_shard: Annotated[int, Field(ge=1)] = 16
@@ -199,8 +212,16 @@ class SceneConfig(Strict):
     indenter: IndenterConfig = Field(default_factory=IndenterConfig)
     protocol: ProtocolConfig = Field(default_factory=ProtocolConfig)
     sampling: SamplingConfig = Field(default_factory=SamplingConfig)
-    sensor: CntPdmsSensorConfig = Field(default_factory=CntPdmsSensorConfig)
+    sensor: SensorConfig = Field(default_factory=CntPdmsSensorConfig)
     generation: GenerationConfig = Field(default_factory=GenerationConfig)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _default_family(cls, data: object) -> object:
+        """A sensor section without `family` is the default family (cnt_pdms), as before the union."""
+        if isinstance(data, dict) and isinstance(data.get("sensor"), dict) and "family" not in data["sensor"]:
+            data = {**data, "sensor": {"family": "cnt_pdms", **data["sensor"]}}
+        return data
 
     @model_validator(mode="after")
     def _cross(self) -> "SceneConfig":
@@ -211,8 +232,9 @@ class SceneConfig(Strict):
                     f"protocol.frequencies_hz: {f} Hz cannot be resolved at sampling.sample_rate_hz="
                     f"{self.sampling.sample_rate_hz} Hz (allowed: 0 < f < {nyq / 5.0:g} Hz, 10 samples per cycle)"
                 )
-        fc = self.sensor.electronics.filter_cutoff_hz
-        if self.sensor.electronics.filter_order and fc >= nyq:
+        elec = getattr(self.sensor, "electronics", None)  # families without a filtered readout have none
+        fc = elec.filter_cutoff_hz if elec is not None else 0.0
+        if elec is not None and elec.filter_order and fc >= nyq:
             raise ValueError(
                 f"sensor.electronics.filter_cutoff_hz: {fc} Hz must be below the Nyquist frequency {nyq:g} Hz"
             )

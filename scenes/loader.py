@@ -8,6 +8,7 @@ from __future__ import annotations
 import difflib
 import json
 import re
+import typing
 from pathlib import Path
 from typing import Any
 
@@ -47,15 +48,40 @@ def _read_source(source: str | Path) -> dict[str, Any]:
     return data
 
 
+def _union_members(ann: Any) -> list[type[BaseModel]]:
+    """The models of a (discriminated) union annotation, or [ann] for a model, or []."""
+    if isinstance(ann, type) and issubclass(ann, BaseModel):
+        return [ann]
+    out = []
+    for a in typing.get_args(ann):
+        out += _union_members(a)
+    return out
+
+
 def _fields_at(path: list[str]) -> list[str]:
-    """Allowed field names at a dotted path inside SceneConfig (for error messages)."""
-    model: type[BaseModel] | None = SceneConfig
+    """Allowed field names at a dotted path inside SceneConfig (for error messages); a union of sensor
+    families lists the fields of all its members."""
+    models: list[type[BaseModel]] = [SceneConfig]
     for part in path:
-        if model is None or part not in model.model_fields:
+        models = [m for m in models if part in m.model_fields]
+        if not models:
             return []
-        ann = model.model_fields[part].annotation
-        model = ann if isinstance(ann, type) and issubclass(ann, BaseModel) else None
-    return sorted(model.model_fields) if model is not None else []
+        models = [x for m in models for x in _union_members(m.model_fields[part].annotation)]
+    return sorted({f for m in models for f in m.model_fields})
+
+
+def _strip_union_tags(loc: list[str]) -> list[str]:
+    """pydantic puts the discriminator tag into error locations ('sensor', 'ntype', 'layer'): drop it."""
+    out: list[str] = []
+    models: list[type[BaseModel]] = [SceneConfig]
+    for part in loc:
+        if len(models) > 1 and any(getattr(m.model_fields.get("family"), "default", None) == part for m in models):
+            models = [m for m in models if m.model_fields["family"].default == part]
+            continue
+        out.append(part)
+        models = [m for m in models if part in m.model_fields]
+        models = [x for m in models for x in _union_members(m.model_fields[part].annotation)]
+    return out
 
 
 def apply_overrides(data: dict[str, Any], overrides: list[str] | None) -> dict[str, Any]:
@@ -90,8 +116,11 @@ def _unknown(loc: str, name: str, allowed: list[str]) -> str:
 def format_validation_error(exc: ValidationError) -> str:
     """One line naming the first offending field and the allowed values."""
     err = exc.errors()[0]
-    loc = [str(p) for p in err["loc"] if not isinstance(p, int)]
+    loc = _strip_union_tags([str(p) for p in err["loc"] if not isinstance(p, int)])
     dotted = ".".join(loc) or "<root>"
+    if err["type"] == "union_tag_invalid":
+        tags = err.get("ctx", {}).get("expected_tags", "")
+        return f"field '{dotted}.family': {err.get('ctx', {}).get('tag')!r} is not a sensor family (allowed: {tags})"
     if err["type"] == "extra_forbidden":
         return _unknown(dotted, loc[-1], _fields_at(loc[:-1]))
     msg = err["msg"].removeprefix("Value error, ")
