@@ -198,3 +198,12 @@ def build_mjcf(cfg: SceneConfig) -> str:
 {"".join(sens)}  </sensor>
 </mujoco>
 """
+
+
+def shear_stiffness_n_per_m(cfg: SceneConfig) -> float:
+    """Tangential (stick) stiffness of the pad under one indenter: a sheared layer, k_t = G A / h with
+    G = E / (2 (1 + nu)) (Timoshenko & Goodier, Theory of Elasticity, 1970; Johnson 1985 sect. 7.2 for the
+    stick regime of a tangentially loaded contact). Used by the Coulomb stick-slip model of the
+    "press_stroke" stage (simulate/press_stroke.py)."""
+    g = cfg.pad.youngs_modulus_pa / (2.0 * (1.0 + cfg.pad.poisson_ratio))
+    return g * contact_area_m2(cfg) / cfg.pad.thickness_m
