@@ -35,7 +35,7 @@ class NtypeElementConfig(Strict):
     normal_length_m: PositiveFloat = 0.010  # ntype sect. 2.2: 1 cm
     inclined_length_m: PositiveFloat = 0.014142135623730951  # ntype sect. 2.2: sqrt(2) cm
     inclination_deg: Annotated[float, Field(gt=0, lt=90)] = 45.0  # ntype sect. 2.2
-    inclined_azimuth_deg: Annotated[float, Field(ge=0, le=90)] = 45.0  # estimate: F_x and F_y equally observable
+    inclined_azimuth_deg: Annotated[float, Field(ge=0, le=90)] = 60.0  # estimate: F_y observable, normal column still most sensitive to F_z
     filler_stiffness_n_per_m: NonNegFloat = 300.0  # estimate: insulating GD-401 filler around the element, isotropic
 
     @property
@@ -52,7 +52,7 @@ class NtypeResistanceConfig(Strict):
 
     rest_normal_ohm: PositiveFloat = 25e3  # ntype sect. 3.2: top of the 16-25 kOhm range (unloaded)
     rest_inclined_ohm: PositiveFloat = 50e3  # ntype sect. 3.2: top of the 32-50 kOhm range (unloaded)
-    piezo_coefficient: float = 0.5  # estimate: beta of rho(e) = rho0 exp(beta e); places 4.8 N of F_z near 16 kOhm
+    piezo_coefficient: float = 0.7  # estimate: beta of rho(e) = rho0 exp(beta e); places 4.8 N of F_z near 16 kOhm
     min_strain: Annotated[float, Field(gt=-0.9, lt=0)] = -0.6  # estimate: strain clamp (column fully squeezed)
 
 
