@@ -58,12 +58,12 @@ class NtypeResistanceConfig(Strict):
 
 class NtypeLayerConfig(Strict):
     """Elastic cover that couples neighbours (crosstalk): the load reaching an element's top electrode
-    is the Boussinesq (normal) / Cerruti (tangential) stress of every surface load at depth `depth_m`,
+    is the Boussinesq stress of every surface load at depth `depth_m` (same shape for the shear components),
     integrated over the electrode square and normalised so that a load centred on the element counts fully.
-    Source: Johnson, Contact Mechanics (1985), eqs. 3.21 and 3.22 (sigma_z, tau_zx of point loads).
+    Source: Johnson, Contact Mechanics (1985), eq. 3.21 (sigma_z under a point load).
     """
 
-    depth_m: PositiveFloat = 0.004  # estimate: crosstalk ~ 1/3 at 1 cm, a few % at 2 cm (ntype sect. 3.3: 1-2 cm)
+    depth_m: PositiveFloat = 0.010  # estimate: the array's 1 cm thickness (ntype sect. 2.2); gives ~1/3 at 1 cm, a few % at 2 cm (sect. 3.3: 1-2 cm)
     electrode_size_m: PositiveFloat = 0.010  # ntype sect. 2.2: the element spans 1 cm
     quadrature: Annotated[int, Field(ge=2, le=32)] = 8  # points per electrode side
 

@@ -4,7 +4,7 @@ Pipeline over (episode x element), ground truth and measurement both kept:
   load field of the pad (pressure, shear on the taxel grid, simulate/)
   -> labels: the force applied on each element's cell (36 x 3: F_x, F_y, F_z with F_z compressive > 0)
   -> elastic cover (crosstalk): the force reaching each element's top electrode, the Boussinesq (normal)
-     and Cerruti (tangential) stress of every surface load at the cover depth integrated over the electrode
+     stress of every surface load at the cover depth (same shape for shear) integrated over the electrode
      and normalised to 1 for a load centred on the element (Johnson, Contact Mechanics, 1985, sect. 3.2)
   -> element chain (Warp kernel sensors/ntype_warp.py, numpy reference sensors/ntype_ref.py):
      viscoelastic lag, u = K^-1 F with K = sum_j k_j n_j n_j^T (+ filler), e_j = n_j.u / l_j,
@@ -77,9 +77,11 @@ def cover_influence(cfg: SceneConfig, dxy_m: np.ndarray) -> np.ndarray:
     """[..., 3] share of a surface point load (x, y, z components) at offset dxy_m [..., 2] from an element's
     centre that reaches its top electrode, normalised to 1 at zero offset.
 
-    z: Boussinesq sigma_z = 3 P h^3 / (2 pi r^5); x: Cerruti tau_zx = 3 Q x^2 h / (2 pi r^5) (y likewise),
-    r^2 = x^2 + y^2 + h^2 at cover depth h, integrated over the electrode square by Gauss-Legendre
-    quadrature (Johnson, Contact Mechanics, 1985, eqs. 3.21-3.22).
+    Boussinesq sigma_z = 3 P h^3 / (2 pi r^5), r^2 = x^2 + y^2 + h^2 at cover depth h, integrated over the
+    electrode square by Gauss-Legendre quadrature (Johnson, Contact Mechanics, 1985, eq. 3.21), for all three
+    components. # estimate: Cerruti's tau_zx = 3 Q x^2 h / (2 pi r^5) vanishes under the load and peaks
+    off-axis, so normalised to a centred point load it over-counts a distributed shear patch (a 10 mm patch
+    read 1.4x its force); the Boussinesq shape keeps patch loads consistent across components.
     """
     ly = cfg.sensor.layer
     h, a, nq = ly.depth_m, ly.electrode_size_m / 2, ly.quadrature
@@ -93,10 +95,8 @@ def cover_influence(cfg: SceneConfig, dxy_m: np.ndarray) -> np.ndarray:
         y = pts[:, 1] - d[..., None, 1]
         r5 = (x * x + y * y + h * h) ** 2.5
         c = 3.0 / (2.0 * np.pi)
-        kz = c * h**3 / r5
-        kx = c * x * x * h / r5
-        ky = c * y * y * h / r5
-        return np.stack([(kx * ww).sum(-1), (ky * ww).sum(-1), (kz * ww).sum(-1)], -1)
+        kz = ((c * h**3 / r5) * ww).sum(-1)
+        return np.stack([kz, kz, kz], -1)
 
     return raw(np.asarray(dxy_m, float)) / raw(np.zeros(2))
 
