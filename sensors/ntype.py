@@ -185,7 +185,7 @@ class NtypeSensor:
             "elements_x": el.elements_x,
             "elements_y": el.elements_y,
             "element_xy_m": self.centres,
-            "columns": np.array(COLUMNS, dtype="S"),
+            "columns": list(COLUMNS),
             "column_normals": self.p.normals,
             "column_lengths_m": self.p.lengths_m,
             "rest_resistance_ohm": self.p.rest_ohm,
