@@ -62,6 +62,7 @@ class IndenterConfig(Strict):
     friction: NonNegFloat = 0.8  # estimate: PDMS on steel
     position_jitter_m: NonNegFloat = 0.003  # estimate: random x/y offset of the press per episode
     start_gap_m: NonNegFloat = 0.0  # gap between indenter and pad at t=0
+    count: Annotated[int, Field(ge=1, le=8)] = 1  # indenters in the scene (protocol kind "press_stroke" uses > 1)
 
 
 class ProtocolConfig(Strict):
@@ -72,9 +73,13 @@ class ProtocolConfig(Strict):
     kind = "staircase" (force control, fabric sect. 3.3): loading-unloading cycles in `stair_step_n` steps held
     `stair_dwell_s` each, between turning points: `stair_return_points_n` (0 -> r1 -> 0 -> r2 -> ...) or, when
     empty, a full cycle to amplitude_max then random minor loops (peaks in [amplitude_min, amplitude_max]).
+    kind = "press_stroke": each of indenter.count indenters (each active with `active_probability`) presses
+    at a random position to a force U[amplitude_min, amplitude_max] (force control), then strokes tangentially
+    in a random direction to a target shear force of U[0, shear_ratio_max] x friction x normal force
+    (Coulomb stick-slip; above 1 it slips), holds, then releases (ntype).
     """
 
-    kind: Literal["sinusoid", "hold", "staircase"] = "sinusoid"
+    kind: Literal["sinusoid", "hold", "staircase", "press_stroke"] = "sinusoid"
     control: Literal["displacement", "force"] = "displacement"
     frequencies_hz: list[PositiveFloat] = Field(default_factory=lambda: [0.1, 0.5, 1.0, 2.0])  # cnt_pdms
     cycles: Annotated[int, Field(ge=1, le=1000)] = 3  # estimate
@@ -89,6 +94,9 @@ class ProtocolConfig(Strict):
     stair_cycles_min: Annotated[int, Field(ge=1, le=50)] = 4  # fabric sect. 3.3: four to six cycles
     stair_cycles_max: Annotated[int, Field(ge=1, le=50)] = 6  # fabric sect. 3.3
     stair_return_points_n: list[PositiveFloat] = Field(default_factory=list)  # fixed peaks; empty: random
+    stroke_s: PositiveFloat = 0.5  # for kind="press_stroke": duration of the tangential stroke; estimate
+    shear_ratio_max: NonNegFloat = 1.2  # for kind="press_stroke": target shear / (friction x normal force); estimate
+    active_probability: Fraction = 0.7  # for kind="press_stroke": chance that each extra indenter presses; estimate
 
     @model_validator(mode="after")
     def _check(self) -> "ProtocolConfig":
@@ -199,8 +207,11 @@ class CntPdmsSensorConfig(Strict):
 
 
 from scenes.fabric_config import FabricSensorConfig  # noqa: E402  (needs Strict above)
+from scenes.ntype_config import NtypeSensorConfig  # noqa: E402  (after Strict: it builds on it)
 
-SensorConfig = Annotated[Union[CntPdmsSensorConfig, FabricSensorConfig], Field(discriminator="family")]
+SensorConfig = Annotated[
+    Union[CntPdmsSensorConfig, FabricSensorConfig, NtypeSensorConfig], Field(discriminator="family")
+]
 
 
 class GenerationConfig(Strict):

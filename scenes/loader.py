@@ -48,39 +48,40 @@ def _read_source(source: str | Path) -> dict[str, Any]:
     return data
 
 
-def _models_of(ann: object) -> list[type[BaseModel]]:
-    """The pydantic models an annotation names: the model itself, or the members of a (discriminated) union."""
+def _union_members(ann: Any) -> list[type[BaseModel]]:
+    """The models of a (discriminated) union annotation, or [ann] for a model, or []."""
     if isinstance(ann, type) and issubclass(ann, BaseModel):
         return [ann]
-    out: list[type[BaseModel]] = []
+    out = []
     for a in typing.get_args(ann):
-        out += _models_of(a)
+        out += _union_members(a)
     return out
 
 
 def _fields_at(path: list[str]) -> list[str]:
-    """Allowed field names at a dotted path inside SceneConfig (for error messages); under a union
-    (sensor families) the fields of every member."""
+    """Allowed field names at a dotted path inside SceneConfig (for error messages); a union of sensor
+    families lists the fields of all its members."""
     models: list[type[BaseModel]] = [SceneConfig]
     for part in path:
-        nxt: list[type[BaseModel]] = []
-        for m in models:
-            if part in m.model_fields:
-                nxt += _models_of(m.model_fields[part].annotation)
-        models = nxt
+        models = [m for m in models if part in m.model_fields]
         if not models:
             return []
+        models = [x for m in models for x in _union_members(m.model_fields[part].annotation)]
     return sorted({f for m in models for f in m.model_fields})
 
 
-def _union_tags() -> set[str]:
-    """Discriminator values of the sensor union: pydantic puts them in error locations ('sensor', 'fabric', ...)."""
-    tags = set()
-    for m in _models_of(SceneConfig.model_fields["sensor"].annotation):
-        fam = m.model_fields.get("family")
-        if fam is not None:
-            tags.update(str(a) for a in typing.get_args(fam.annotation))
-    return tags
+def _strip_union_tags(loc: list[str]) -> list[str]:
+    """pydantic puts the discriminator tag into error locations ('sensor', 'ntype', 'layer'): drop it."""
+    out: list[str] = []
+    models: list[type[BaseModel]] = [SceneConfig]
+    for part in loc:
+        if len(models) > 1 and any(getattr(m.model_fields.get("family"), "default", None) == part for m in models):
+            models = [m for m in models if m.model_fields["family"].default == part]
+            continue
+        out.append(part)
+        models = [m for m in models if part in m.model_fields]
+        models = [x for m in models for x in _union_members(m.model_fields[part].annotation)]
+    return out
 
 
 def apply_overrides(data: dict[str, Any], overrides: list[str] | None) -> dict[str, Any]:
@@ -115,10 +116,11 @@ def _unknown(loc: str, name: str, allowed: list[str]) -> str:
 def format_validation_error(exc: ValidationError) -> str:
     """One line naming the first offending field and the allowed values."""
     err = exc.errors()[0]
-    loc = [str(p) for p in err["loc"] if not isinstance(p, int)]
-    if len(loc) >= 2 and loc[0] == "sensor" and loc[1] in _union_tags():
-        loc = [loc[0]] + loc[2:]
+    loc = _strip_union_tags([str(p) for p in err["loc"] if not isinstance(p, int)])
     dotted = ".".join(loc) or "<root>"
+    if err["type"] == "union_tag_invalid":
+        tags = err.get("ctx", {}).get("expected_tags", "")
+        return f"field '{dotted}.family': {err.get('ctx', {}).get('tag')!r} is not a sensor family (allowed: {tags})"
     if err["type"] == "extra_forbidden":
         return _unknown(dotted, loc[-1], _fields_at(loc[:-1]))
     msg = err["msg"].removeprefix("Value error, ")

@@ -10,6 +10,7 @@ from sensors.base import SensorModel
 FAMILIES: dict[str, str] = {
     "cnt_pdms": "sensors.cnt_pdms:CntPdmsSensor",
     "fabric": "sensors.fabric:FabricSensor",
+    "ntype": "sensors.ntype:NtypeSensor",
 }
 
 

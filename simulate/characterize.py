@@ -136,6 +136,7 @@ def characterize_cnt_pdms(cfg: SceneConfig, backend: str = "warp", device: str =
 CHARACTERIZERS: dict[str, str] = {
     "cnt_pdms": "simulate.characterize:characterize_cnt_pdms",
     "fabric": "simulate.characterize_fabric:characterize_fabric",
+    "ntype": "simulate.ntype_characterize:characterize_ntype",
 }
 
 

@@ -166,8 +166,19 @@ def load_field(cfg: SceneConfig, pos_rel_m: np.ndarray, force_n: np.ndarray):
     return deform, pressure, shear
 
 
+# protocol kinds with their own contact stage: kind -> "module:function(cfg, protocols, threads) -> LoadBatch"
+CONTACT_STAGES: dict[str, str] = {
+    "press_stroke": "simulate.press_stroke:run_press_stroke",
+}
+
+
 def run_episodes(cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1) -> LoadBatch:
     """Simulate E episodes (same n_samples) in one batched rollout and return their load fields."""
+    if cfg.protocol.kind in CONTACT_STAGES:
+        import importlib
+
+        module, fn = CONTACT_STAGES[cfg.protocol.kind].split(":")
+        return getattr(importlib.import_module(module), fn)(cfg, protocols, threads)
     sens, target = simulate_sensors(cfg, protocols, threads)
     top = cfg.pad.thickness_m
     q = sens[..., _POS]

@@ -114,19 +114,27 @@ def contact_design(cfg: SceneConfig) -> ContactDesign:
     )
 
 
-def _indenter_geom(cfg: SceneConfig) -> str:
+def _indenter_geom(cfg: SceneConfig, suffix: str = "") -> str:
     ind = cfg.indenter
     if ind.shape == "box":
         h = INDENTER_BOX_THICKNESS_M / 2
         return (
-            f'<geom name="indenter" type="box" size="{ind.size_x_m / 2!r} {ind.size_y_m / 2!r} {h!r}" '
+            f'<geom name="indenter{suffix}" type="box" size="{ind.size_x_m / 2!r} {ind.size_y_m / 2!r} {h!r}" '
             f'pos="0 0 {h!r}" mass="{ind.mass_kg!r}" contype="0" conaffinity="0" rgba="0.6 0.6 0.7 1"/>'
         )
     r = ind.radius_m
     return (
-        f'<geom name="indenter" type="sphere" size="{r!r}" pos="0 0 {r!r}" mass="{ind.mass_kg!r}" '
+        f'<geom name="indenter{suffix}" type="sphere" size="{r!r}" pos="0 0 {r!r}" mass="{ind.mass_kg!r}" '
         f'contype="0" conaffinity="0" rgba="0.6 0.6 0.7 1"/>'
     )
+
+
+def indenter_suffix(i: int) -> str:
+    """Name suffix of indenter i: "" for the first (the single-indenter scene), then "1", "2", ..."""
+    return "" if i == 0 else str(i)
+
+
+SENSORS_PER_INDENTER = 3 + 17  # jointpos x, y, z + contact netforce
 
 
 def build_mjcf(cfg: SceneConfig) -> str:
@@ -135,6 +143,10 @@ def build_mjcf(cfg: SceneConfig) -> str:
     ctrl = vertical force on the indenter, N, negative = into the pad). Sensors, in order:
     jointpos x, y, z (3), then the contact sensor with reduce="netforce" (found, force(3), torque(3),
     dist, pos(3), normal(3), tangent(3): 17 values, force = force on the pad, global frame).
+
+    With indenter.count = n > 1 the scene holds n identical indenters (bodies indenter, indenter1, ...),
+    each with its own joints, actuators (x, y, z per indenter, in that order) and sensors
+    (SENSORS_PER_INDENTER values per indenter, in indenter order); indenters do not touch each other.
     """
     pad, ind = cfg.pad, cfg.indenter
     des = contact_design(cfg)
@@ -143,39 +155,55 @@ def build_mjcf(cfg: SceneConfig) -> str:
     arm_xy = des.mass_xy_kg - m
     arm_z = des.mass_z_kg - m
     kp, kv = des.servo_kp_n_per_m, des.servo_kv_n_s_per_m
-    if cfg.protocol.control == "displacement":
-        z_act = f'<position name="act_z" joint="slide_z" kp="{kp!r}" kv="{kv!r}"/>'
-    else:
-        z_act = '<motor name="act_z" joint="slide_z" gear="1"/>'
     hx, hy, hz = pad.size_x_m / 2, pad.size_y_m / 2, pad.thickness_m / 2
     d = des.impedance
+    bodies, pairs, acts, sens = [], [], [], []
+    for i in range(ind.count):
+        x = indenter_suffix(i)
+        if cfg.protocol.control == "displacement":
+            z_act = f'<position name="act_z{x}" joint="slide_z{x}" kp="{kp!r}" kv="{kv!r}"/>'
+        else:
+            z_act = f'<motor name="act_z{x}" joint="slide_z{x}" gear="1"/>'
+        bodies.append(f"""    <body name="indenter{x}" pos="0 0 {pad.thickness_m!r}" gravcomp="1">
+      <joint name="slide_x{x}" type="slide" axis="1 0 0" armature="{arm_xy!r}"/>
+      <joint name="slide_y{x}" type="slide" axis="0 1 0" armature="{arm_xy!r}"/>
+      <joint name="slide_z{x}" type="slide" axis="0 0 1" armature="{arm_z!r}" damping="{des.z_damping_n_s_per_m!r}"/>
+      {_indenter_geom(cfg, x)}
+    </body>
+""")
+        pairs.append(f"""    <pair name="press{x}" geom1="indenter{x}" geom2="pad" condim="3" friction="{mu!r} {mu!r} 0.005 0.0001 0.0001"
+          solref="{des.solref[0]!r} {des.solref[1]!r}" solimp="{d!r} {d!r} 0.001 0.5 2"/>
+""")
+        acts.append(f"""    <position name="act_x{x}" joint="slide_x{x}" kp="{kp!r}" kv="{kv!r}"/>
+    <position name="act_y{x}" joint="slide_y{x}" kp="{kp!r}" kv="{kv!r}"/>
+    {z_act}
+""")
+        sens.append(f"""    <jointpos name="pos_x{x}" joint="slide_x{x}"/>
+    <jointpos name="pos_y{x}" joint="slide_y{x}"/>
+    <jointpos name="pos_z{x}" joint="slide_z{x}"/>
+    <contact name="press_net{x}" geom1="indenter{x}" geom2="pad" data="found force torque dist pos normal tangent"
+             reduce="netforce"/>
+""")
     return f"""<mujoco model="piezotwin_{cfg.name}">
   <option timestep="{cfg.sampling.physics_timestep_s!r}" integrator="implicitfast" cone="elliptic"/>
   <worldbody>
     <geom name="pad" type="box" size="{hx!r} {hy!r} {hz!r}" pos="0 0 {hz!r}" contype="0" conaffinity="0"
           rgba="0.2 0.2 0.2 1"/>
-    <body name="indenter" pos="0 0 {pad.thickness_m!r}" gravcomp="1">
-      <joint name="slide_x" type="slide" axis="1 0 0" armature="{arm_xy!r}"/>
-      <joint name="slide_y" type="slide" axis="0 1 0" armature="{arm_xy!r}"/>
-      <joint name="slide_z" type="slide" axis="0 0 1" armature="{arm_z!r}" damping="{des.z_damping_n_s_per_m!r}"/>
-      {_indenter_geom(cfg)}
-    </body>
-  </worldbody>
+{"".join(bodies)}  </worldbody>
   <contact>
-    <pair name="press" geom1="indenter" geom2="pad" condim="3" friction="{mu!r} {mu!r} 0.005 0.0001 0.0001"
-          solref="{des.solref[0]!r} {des.solref[1]!r}" solimp="{d!r} {d!r} 0.001 0.5 2"/>
-  </contact>
+{"".join(pairs)}  </contact>
   <actuator>
-    <position name="act_x" joint="slide_x" kp="{kp!r}" kv="{kv!r}"/>
-    <position name="act_y" joint="slide_y" kp="{kp!r}" kv="{kv!r}"/>
-    {z_act}
-  </actuator>
+{"".join(acts)}  </actuator>
   <sensor>
-    <jointpos name="pos_x" joint="slide_x"/>
-    <jointpos name="pos_y" joint="slide_y"/>
-    <jointpos name="pos_z" joint="slide_z"/>
-    <contact name="press_net" geom1="indenter" geom2="pad" data="found force torque dist pos normal tangent"
-             reduce="netforce"/>
-  </sensor>
+{"".join(sens)}  </sensor>
 </mujoco>
 """
+
+
+def shear_stiffness_n_per_m(cfg: SceneConfig) -> float:
+    """Tangential (stick) stiffness of the pad under one indenter: a sheared layer, k_t = G A / h with
+    G = E / (2 (1 + nu)) (Timoshenko & Goodier, Theory of Elasticity, 1970; Johnson 1985 sect. 7.2 for the
+    stick regime of a tangentially loaded contact). Used by the Coulomb stick-slip model of the
+    "press_stroke" stage (simulate/press_stroke.py)."""
+    g = cfg.pad.youngs_modulus_pa / (2.0 * (1.0 + cfg.pad.poisson_ratio))
+    return g * contact_area_m2(cfg) / cfg.pad.thickness_m

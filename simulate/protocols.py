@@ -8,6 +8,7 @@ Displacement is positive into the pad (m); force is positive compressive (N).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -49,16 +50,17 @@ def make_episode_protocol(cfg: SceneConfig, seed: int) -> EpisodeProtocol:
     amp = float(rng.uniform(p.amplitude_min, p.amplitude_max))
     j = cfg.indenter.position_jitter_m
     off = rng.uniform(-j, j, size=2) if j > 0 else np.zeros(2)
-    params = PARAM_DRAWS[p.kind](cfg, rng) if p.kind in PARAM_DRAWS else {}
-    return EpisodeProtocol(
+    proto = EpisodeProtocol(
         frequency_hz=f,
         amplitude=amp,
         offset_xy_m=np.asarray(off, dtype=float),
         n_samples=n_samples_for(cfg, f),
         control=p.control,
         kind=p.kind,
-        params=params,
     )
+    if p.kind in PARAM_DRAWS:  # kind-specific draws continue the same stream (kinds without draws unchanged)
+        proto = PARAM_DRAWS[p.kind](proto, cfg, rng)
+    return proto
 
 
 def _sinusoid(proto: EpisodeProtocol, cfg: SceneConfig, tau: np.ndarray) -> np.ndarray:
@@ -134,10 +136,94 @@ def _staircase(proto: EpisodeProtocol, cfg: SceneConfig, tau: np.ndarray) -> np.
     return np.where(tau < 0.0, 0.0, out)
 
 
+def _smooth(t: np.ndarray, t0: float, t1: float) -> np.ndarray:
+    """Raised-cosine step from 0 at t0 to 1 at t1."""
+    u = np.clip((t - t0) / max(t1 - t0, 1e-9), 0.0, 1.0)
+    return 0.5 * (1.0 - np.cos(np.pi * u))
+
+
+def press_stroke_force(ind: dict, t: np.ndarray) -> np.ndarray:
+    """Commanded normal force (N) of one indenter of a "press_stroke" episode at absolute times t."""
+    if not ind["active"]:
+        return np.zeros_like(np.asarray(t, float))
+    up = _smooth(t, *ind["t_press_s"])
+    down = 1.0 - _smooth(t, *ind["t_release_s"])
+    return ind["force_n"] * up * down
+
+
+def press_stroke_xy(ind: dict, t: np.ndarray) -> np.ndarray:
+    """Commanded x/y (m) of one indenter of a "press_stroke" episode: shape t.shape + (2,)."""
+    t = np.asarray(t, float)
+    s = _smooth(t, *ind["t_stroke_s"])
+    return np.asarray(ind["xy_m"], float) + s[..., None] * np.asarray(ind["stroke_xy_m"], float)
+
+
+def _press_stroke(proto: EpisodeProtocol, cfg: SceneConfig, tau: np.ndarray) -> np.ndarray:
+    return press_stroke_force(proto.params["indenters"][0], tau + cfg.protocol.settle_s)
+
+
+def _draw_press_stroke(proto: EpisodeProtocol, cfg: SceneConfig, rng: np.random.Generator) -> EpisodeProtocol:
+    """Per indenter: active (the first always), position on the pad (footprint inside, apart from the others),
+    normal force U[amplitude_min, amplitude_max], a stroke in a random direction whose stick displacement
+    gives a target shear U[0, shear_ratio_max] x friction x force (ratio > 1 slips), and its timing."""
+    from simulate.mjcf import shear_stiffness_n_per_m
+
+    p, ind, pad = cfg.protocol, cfg.indenter, cfg.pad
+    half = (ind.size_x_m / 2, ind.size_y_m / 2) if ind.shape == "box" else (ind.radius_m, ind.radius_m)
+    lim = np.array([pad.size_x_m / 2 - half[0] - 1e-3, pad.size_y_m / 2 - half[1] - 1e-3]).clip(0.0)
+    k_t = shear_stiffness_n_per_m(cfg)
+    t_last = (proto.n_samples - 1) / cfg.sampling.sample_rate_hz  # the last frame is at rest
+    t_rel = (t_last - p.ramp_s - 0.1 * p.ramp_s, t_last - 0.1 * p.ramp_s)
+    placed: list[np.ndarray] = []
+    inds = []
+    for i in range(ind.count):
+        active = bool(i == 0 or rng.random() < p.active_probability)
+        for _ in range(50):
+            xy = rng.uniform(-lim, lim)
+            if all(np.abs(xy - q).max() >= 2 * max(half) for q in placed):
+                break
+        force = float(rng.uniform(p.amplitude_min, p.amplitude_max))
+        theta = float(rng.uniform(0.0, 2.0 * np.pi))
+        ratio = float(rng.uniform(0.0, p.shear_ratio_max))
+        shear = ratio * ind.friction * force
+        delay = float(rng.uniform(0.0, 0.1 * p.duration_s))
+        t0 = p.settle_s + delay
+        t1 = t0 + p.ramp_s
+        direction = np.array([np.cos(theta), np.sin(theta)])
+        if active:
+            placed.append(xy)
+        inds.append({
+            "active": active,
+            "xy_m": xy.tolist() if active else [float(lim[0]), float(lim[1])],
+            "force_n": force if active else 0.0,
+            "shear_target_n": (min(shear, ind.friction * force) * direction).tolist() if active else [0.0, 0.0],
+            "stroke_xy_m": ((shear / k_t) * direction).tolist() if active else [0.0, 0.0],
+            "t_press_s": (t0, t1),
+            "t_stroke_s": (t1, min(t1 + p.stroke_s, t_rel[0])),
+            "t_release_s": t_rel,
+        })
+    first = inds[0]
+    params = {
+        "indenters": inds,
+        "stroke_xy_m": first["stroke_xy_m"],  # xy_waveform of the first indenter
+        "stroke_start_s": first["t_stroke_s"][0],
+        "stroke_end_s": first["t_stroke_s"][1],
+    }
+    return EpisodeProtocol(
+        frequency_hz=proto.frequency_hz, amplitude=first["force_n"], offset_xy_m=np.asarray(first["xy_m"], float),
+        n_samples=proto.n_samples, control=proto.control, kind=proto.kind, params=params,
+    )
+
+
+def _draw_staircase(proto: EpisodeProtocol, cfg: SceneConfig, rng: np.random.Generator) -> EpisodeProtocol:
+    return dataclasses.replace(proto, params=_staircase_draw(cfg, rng))
+
+
 # protocol kind -> waveform(proto, cfg, tau = t - settle_s) of the normal axis; families add their kinds here
-WAVEFORMS = {"sinusoid": _sinusoid, "hold": _hold, "staircase": _staircase}
-# protocol kind -> draw(cfg, rng) -> EpisodeProtocol.params (after the shared draws, so other kinds are unchanged)
-PARAM_DRAWS = {"staircase": _staircase_draw}
+WAVEFORMS = {"sinusoid": _sinusoid, "hold": _hold, "staircase": _staircase, "press_stroke": _press_stroke}
+# protocol kind -> draw(proto, cfg, rng) -> proto with kind-specific params (after the common draws, so kinds
+# without an entry draw exactly as before)
+PARAM_DRAWS = {"staircase": _draw_staircase, "press_stroke": _draw_press_stroke}
 
 
 def target_waveform(proto: EpisodeProtocol, cfg: SceneConfig, t_s: np.ndarray) -> np.ndarray:
