@@ -37,10 +37,10 @@ class FieldSpec:
 
 FIELDS: dict[str, FieldSpec] = {
     "deformation": FieldSpec("deformation", "deformation", "µm", 1e6, "viridis"),
-    "pressure": FieldSpec("pressure", "pressure", "kPa", 1e-3, "inferno"),
-    "strain": FieldSpec("strain", "compressive strain", "%", 100.0, "plasma"),
-    "resistance": FieldSpec("resistance", "resistance", "ohm", 1.0, "cividis"),
-    "force_taxel": FieldSpec("force_taxel", "taxel force", "mN", 1e3, "magma"),
+    "pressure": FieldSpec("pressure", "pressure", "kPa", 1e-3, "plasma"),
+    "strain": FieldSpec("strain", "compressive strain", "%", 100.0, "cividis"),
+    "resistance": FieldSpec("resistance", "resistance", "ohm", 1.0, "coolwarm"),
+    "force_taxel": FieldSpec("force_taxel", "taxel force", "mN", 1e3, "plasma"),
 }
 
 # family -> "module:function" mapping a channel onto the taxels (see module docstring); one line per family
@@ -176,18 +176,16 @@ def load_episode(rec: Recording, episode: str | int | None = None, fields: list[
 
 
 def nice_exaggeration(max_deformation_m: float, thickness_m: float, target_fraction: float = 0.3) -> float:
-    """A round factor (1, 2, 5 x 10^k, >= 1) that shows the largest deflection as about
-    `target_fraction` of the thickness: a 150 µm dent in a 5 mm pad is invisible at true scale."""
+    """The round factor (1, 2, 5 x 10^k, >= 1) nearest (in log scale) to the one that shows the largest
+    deflection as `target_fraction` of the thickness: a 150 µm dent in a 5 mm pad is invisible at true scale."""
     if max_deformation_m <= 0 or thickness_m <= 0:
         return 1.0
     raw = target_fraction * thickness_m / max_deformation_m
     if raw <= 1.0:
         return 1.0
     k = np.floor(np.log10(raw))
-    for m in (5.0, 2.0, 1.0):
-        if m * 10**k <= raw:
-            return float(m * 10**k)
-    return float(10**k)
+    cands = np.array([1.0, 2.0, 5.0, 10.0]) * 10**k
+    return float(cands[np.argmin(np.abs(np.log(cands / raw)))])
 
 
 def describe(view: EpisodeView) -> str:

@@ -152,13 +152,17 @@ class Scene:
         self._texts = []
         t, f = float(view.time_s[k]), float(view.force_n[k])
         if opts.show_text:
-            self._texts.append(pl.add_text(
-                f"{view.family} · {view.ep_id}   t = {t:.2f} s   F = {f:.2f} N",
-                position="upper_left", font_size=self._font(11), color="black"))
+            w, hgt = opts.window_size
+            fs = self._font(11)
+            top = pl.add_text(  # pixel-placed text actors: corner annotations shrink away in small frames
+                f"t = {t:.2f} s   F = {f:.2f} N\n{view.family} · {view.ep_id}",
+                position=(0.01 * w, hgt - 4), font_size=fs, color="black")
+            top.GetTextProperty().SetVerticalJustificationToTop()
+            self._texts.append(top)
             foot = f"deformation shown x{self.scale:g}"
             if self.field in view.notes:
                 foot += "\n" + view.notes[self.field]
-            self._texts.append(pl.add_text(foot, position="lower_left", font_size=self._font(9), color="black"))
+            self._texts.append(pl.add_text(foot, position=(0.01 * w, 4), font_size=self._font(9), color="black"))
         if not self._camera_set:
             self._set_camera()
             self._camera_set = True
