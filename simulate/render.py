@@ -133,11 +133,14 @@ class Scene:
             smooth_shading=opts.lighting, show_scalar_bar=False,
         )
         if not self._bar:
+            w, hgt = opts.window_size
             pl.add_scalar_bar(
-                title=f"{self.spec.label}\n({self.spec.unit})", color="black", vertical=True,
-                position_x=0.85, position_y=0.12, width=0.07, height=0.66, title_font_size=self._font(15),
-                label_font_size=self._font(13), fmt="%.3g", n_labels=5, mapper=self._body_actor.mapper,
+                title=" ", color="black", vertical=True, position_x=0.86, position_y=0.1, width=0.07,
+                height=0.66, label_font_size=self._font(15), fmt="%.3g", n_labels=5, mapper=self._body_actor.mapper,
             )
+            label = pl.add_text(f"{self.spec.label}\n({self.spec.unit})", position=(0.99 * w, 0.80 * hgt),
+                                font_size=self._font(11), color="black")
+            label.GetTextProperty().SetJustificationToRight()
             self._bar = True
         self._body_actor.mapper.scalar_range = clim
         if self._ind_actor is not None:
@@ -175,14 +178,22 @@ class Scene:
         c = (0.0, 0.0, 0.5 * h)
         if self.opts.view == "top":
             pl.enable_parallel_projection()
-            pl.camera_position = [(0.0, 0.0, 10 * max(lx, ly)), c, (0.0, 1.0, 0.0)]
-            pl.reset_camera()
-            pl.camera.parallel_scale = 0.55 * max(lx, ly)
+            L = max(lx, ly)
+            c = (0.12 * L, 0.0, 0.5 * h)  # pad left of the scalar bar, clear of the captions
+            pl.camera_position = [(c[0], 0.0, 10 * L), c, (0.0, 1.0, 0.0)]
+            pl.reset_camera_clipping_range()
+            pl.camera.parallel_scale = 0.66 * L
         else:
             d = 1.9 * max(lx, ly, h)
             pl.camera_position = [(0.55 * d, -1.0 * d, 0.85 * d), c, (0.0, 0.0, 1.0)]
             pl.reset_camera()
-            pl.camera.zoom(1.0)
+            pl.camera.zoom(1.15)
+            # shift the view right (the pad moves left, clear of the scalar bar)
+            f, p = np.array(pl.camera.focal_point), np.array(pl.camera.position)
+            right = np.cross(f - p, np.array(pl.camera.up))
+            up = np.cross(right, f - p)
+            shift = max(lx, ly) * (0.12 * right / np.linalg.norm(right) - 0.07 * up / np.linalg.norm(up))
+            pl.camera.focal_point, pl.camera.position = tuple(f + shift), tuple(p + shift)
 
     def _indenter_pixel(self, k: int) -> tuple[int, int] | None:
         p = self.view.position_m[k]
