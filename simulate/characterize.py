@@ -79,26 +79,17 @@ def characterize_loops(cfg: SceneConfig, seed: int = 0, backend: str = "warp", d
 
 def plot_loops(rows: list[CharacterizationRow], path: str) -> None:
     """Force-resistance loops per frequency, loading and unloading coloured apart (matplotlib, PNG)."""
-    import matplotlib
+    from simulate import plots
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, len(rows), figsize=(3.2 * len(rows), 3.2), sharey=True, squeeze=False)
-    for ax, row in zip(axes[0], rows):
+    fig, axes = plots.figure(1, len(rows), size=(3.2 * len(rows), 3.2), sharey=True)
+    for i, (ax, row) in enumerate(zip(axes[0], rows)):
         c = row.cycle
-        k = int(np.argmax(c["displacement_m"]))
-        r0 = c["resistance_measured_ohm"][0]
-        dr = c["resistance_measured_ohm"] - r0
-        ax.plot(dr[: k + 1], c["force_n"][: k + 1], color="tab:red", label="loading")
-        ax.plot(dr[k:], c["force_n"][k:], color="tab:blue", label="unloading")
-        ax.set_title(f"{row.frequency_hz:g} Hz: {row.measured.hysteresis_fso_pct:.1f} % FSO")
-        ax.set_xlabel("ΔR measured (Ω)")
-    axes[0][0].set_ylabel("force (N)")
-    axes[0][0].legend(loc="upper right", fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+        dr = c["resistance_measured_ohm"] - c["resistance_measured_ohm"][0]
+        plots.hysteresis_loop(
+            ax, dr, c["force_n"], c["displacement_m"], xlabel="ΔR measured (Ω)", ylabel="force (N)" if i == 0 else "",
+            title=f"{row.frequency_hz:g} Hz: {row.measured.hysteresis_fso_pct:.1f} % FSO", legend=i == 0,
+        )
+    plots.save(fig, path)
 
 
 def characterize_cnt_pdms(cfg: SceneConfig, backend: str = "warp", device: str = "cpu") -> Report:

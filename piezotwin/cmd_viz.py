@@ -1,0 +1,197 @@
+"""`piezotwin show`, `piezotwin export`, `piezotwin plot`: look at a recording (registered on cli.app).
+
+Rendering needs the `viz` extra (pyvista, imageio, imageio-ffmpeg); it is imported only by these commands.
+Bad input (missing file, unknown field, episode or time out of range, wrong suffix) is one line, exit 2.
+"""
+
+from __future__ import annotations
+
+import sys
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Annotated, Iterator, Optional
+
+import typer
+
+from piezotwin.cli import _check_writable, app, console, err, fail
+
+
+@contextmanager
+def _open(path: Path, episode: Optional[str], fields: list[str] | None) -> Iterator:
+    from sensors.recording import Recording, RecordingError
+    from simulate.fields import FieldError, load_episode
+
+    if path.is_dir():
+        shards = sorted(path.glob("shard-*.h5"))
+        if not shards:
+            fail(f"'{path}' is a folder with no shard-*.h5 recordings")
+        path = shards[0]
+    if not path.is_file():
+        fail(f"'{path}' does not exist")
+    try:
+        rec = Recording(path)
+    except (RecordingError, OSError) as exc:
+        fail(f"'{path}' is not a readable recording: {str(exc).splitlines()[0]}")
+    try:
+        with rec:
+            yield load_episode(rec, episode, fields)
+    except FieldError as exc:
+        fail(str(exc))
+
+
+def _bar(label: str):
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    return Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("frames"),
+                    TimeElapsedColumn(), TimeRemainingColumn(), console=err, transient=False)
+
+
+def _viz_errors():
+    from simulate.fields import FieldError
+    from simulate.render import VizUnavailable
+
+    return (FieldError, VizUnavailable)
+
+
+Episode = Annotated[Optional[str], typer.Option("--episode", "-e", help="Episode index (0..) or id (ep-000003). Default: the first.")]
+
+
+@app.command()
+def show(
+    recording: Annotated[Path, typer.Argument(help="A recording (.h5) or a dataset folder (its first shard).")],
+    episode: Episode = None,
+    time: Annotated[Optional[float], typer.Option("--time", "-t", help="Time in s (nearest sample). Default: peak force.")] = None,
+    field: Annotated[str, typer.Option("--field", "-f", help="deformation | pressure | strain | resistance | force_taxel")] = "deformation",
+    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Write a .png (or with --animate an .mp4/.gif) instead of opening a window.")] = None,
+    animate: Annotated[bool, typer.Option("--animate", help="Animate the whole episode into -o FILE.mp4|.gif.")] = False,
+    exaggeration: Annotated[Optional[float], typer.Option(help="Deformation scale factor (default: a round factor showing the peak at ~30 % of thickness).")] = None,
+    view: Annotated[str, typer.Option(help="iso | top")] = "iso",
+    size: Annotated[str, typer.Option(help="Image size WxH in pixels.")] = "896x640",
+    fps: Annotated[float, typer.Option(help="Animation frame rate; frames are sampled for real-time playback.")] = 25.0,
+    max_frames: Annotated[Optional[int], typer.Option(help="At most this many animation frames.")] = None,
+) -> None:
+    """Render the sensor at one instant: deformed body coloured by a field, indenter where it was.
+
+    With a display and no -o: an interactive window. Without a display: a PNG (named after the recording,
+    episode and field) is written and its path printed.
+    """
+    from simulate.fields import FIELDS
+
+    if field not in FIELDS:
+        fail(f"unknown field '{field}' (allowed: {', '.join(FIELDS)})")
+    if view not in ("iso", "top"):
+        fail(f"--view must be iso or top (got '{view}')")
+    try:
+        w, h = (int(v) for v in size.lower().split("x"))
+        assert 16 <= w <= 8192 and 16 <= h <= 8192
+    except (ValueError, AssertionError):
+        fail(f"--size must be WxH in pixels, 16..8192 (got '{size}')")
+    if exaggeration is not None and not exaggeration > 0:
+        fail(f"--exaggeration must be > 0 (got {exaggeration})")
+    if animate:
+        if out is None or out.suffix.lower() not in (".mp4", ".gif"):
+            fail("--animate needs -o FILE.mp4 or -o FILE.gif")
+        if fps <= 0:
+            fail(f"--fps must be > 0 (got {fps})")
+    elif out is not None and out.suffix.lower() != ".png":
+        fail(f"-o '{out}' must end in .png (for a movie add --animate)")
+    if out is not None:
+        _check_writable(out.parent if str(out.parent) else Path("."))
+    from simulate.render import RenderOptions, has_display, render_animation, render_frame, show_window
+
+    opts = RenderOptions(window_size=(w, h), view=view, exaggeration=exaggeration)
+    with _open(recording, episode, [field]) as ev:
+        errors = _viz_errors()
+        try:
+            if animate:
+                with _bar(f"{ev.ep_id} {field}") as bar:
+                    task = bar.add_task(f"{ev.ep_id} {field}", total=None)
+
+                    def on_frame(done: int, total: int) -> None:
+                        bar.update(task, completed=done, total=total)
+
+                    path, info = render_animation(ev, field, out, fps=fps, max_frames=max_frames, opts=opts, on_frame=on_frame)
+                console.print(f"wrote {path}  (deformation x{info.exaggeration:g}, {field} {info.clim[0]:.3g}..{info.clim[1]:.3g} {info.unit})")
+                return
+            k = ev.index_at(time) if time is not None else ev.peak_index()
+            if out is None and has_display():
+                show_window(ev, field, k, opts)
+                return
+            if out is None:
+                out = Path(f"{recording.stem}-{ev.ep_id}-{field}.png")
+                _check_writable(Path("."))
+                console.print("no display: rendering offscreen")
+            _, info = render_frame(ev, field, k, out, opts)
+        except errors as exc:
+            fail(str(exc))
+    console.print(
+        f"wrote {out}  (t = {info.time_s:.2f} s, F = {info.force_n:.2f} N, deformation x{info.exaggeration:g}, "
+        f"{field} {info.clim[0]:.3g}..{info.clim[1]:.3g} {info.unit})"
+    )
+
+
+@app.command()
+def export(
+    recording: Annotated[Path, typer.Argument(help="A recording (.h5) or a dataset folder (its first shard).")],
+    out: Annotated[Path, typer.Option("-o", "--out", help="Output folder for <episode>.pvd + .vtu files.")] = Path("vtk"),
+    episode: Episode = None,
+    stride: Annotated[int, typer.Option(help="Write every N-th sample.")] = 1,
+) -> None:
+    """VTK time series of an episode (.vtu per sample + .pvd) that opens in ParaView."""
+    if stride < 1:
+        fail(f"--stride must be >= 1 (got {stride})")
+    _check_writable(out)
+    from simulate.export import export_episode
+
+    with _open(recording, episode, None) as ev:
+        try:
+            with _bar("export") as bar:
+                task = bar.add_task(f"{ev.ep_id}", total=None)
+                pvd = export_episode(ev, out, stride=stride, on_frame=lambda d, n: bar.update(task, completed=d, total=n))
+        except _viz_errors() as exc:
+            fail(str(exc))
+    console.print(f"wrote {pvd}  (open in ParaView; Warp By Vector 'displacement' to see the deflection)")
+
+
+@app.command()
+def plot(
+    recording: Annotated[Path, typer.Argument(help="A recording (.h5) or a dataset folder (its first shard).")],
+    out: Annotated[Path, typer.Option("-o", "--out", help="PNG to write.")] = Path("episode.png"),
+    episode: Episode = None,
+    field: Annotated[str, typer.Option("--field", "-f", help="Field for the per-taxel peak map.")] = "deformation",
+) -> None:
+    """One episode at a glance (matplotlib): force-resistance loop, time series, per-taxel peak map."""
+    from simulate.fields import FIELDS
+
+    if field not in FIELDS:
+        fail(f"unknown field '{field}' (allowed: {', '.join(FIELDS)})")
+    if out.suffix.lower() != ".png":
+        fail(f"-o '{out}' must end in .png")
+    _check_writable(out.parent if str(out.parent) else Path("."))
+    from simulate.plots import episode_overview
+
+    with _open(recording, episode, None) as ev:
+        if field not in ev.fields:
+            fail(f"episode {ev.ep_id} has no '{field}' field")
+        episode_overview(ev, out, field)
+    console.print(f"wrote {out}")
+
+
+def _register_on_script_app() -> None:
+    """`python -m piezotwin.cli` runs cli.py as __main__, a second module with its own `app`; give it these
+    commands too (the console script `piezotwin` uses piezotwin.cli.app and needs nothing)."""
+    main = sys.modules.get("__main__")
+    other = getattr(main, "app", None)
+    if main is None or other is None or other is app or not isinstance(other, typer.Typer):
+        return
+    import piezotwin.cli as cli
+
+    if Path(getattr(main, "__file__", "") or "").resolve() != Path(cli.__file__).resolve():
+        return
+    have = {c.callback for c in other.registered_commands}
+    for c in app.registered_commands:
+        if c.callback in (show, export, plot) and c.callback not in have:
+            other.registered_commands.append(c)
+
+
+_register_on_script_app()
