@@ -194,6 +194,7 @@ def presets() -> None:
         console.print(p)
 
 
+# command modules register on `app` when imported (one line each)
 from piezotwin import cmd_viz  # noqa: E402,F401
 
 
@@ -202,4 +203,8 @@ def main() -> None:  # pragma: no cover
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(app())
+    # `python -m piezotwin.cli` runs this file as __main__, a second copy of the module; the command modules
+    # register on the copy imported by name, so run that one
+    from piezotwin.cli import app as named_app
+
+    sys.exit(named_app())

@@ -175,23 +175,3 @@ def plot(
             fail(f"episode {ev.ep_id} has no '{field}' field")
         episode_overview(ev, out, field)
     console.print(f"wrote {out}")
-
-
-def _register_on_script_app() -> None:
-    """`python -m piezotwin.cli` runs cli.py as __main__, a second module with its own `app`; give it these
-    commands too (the console script `piezotwin` uses piezotwin.cli.app and needs nothing)."""
-    main = sys.modules.get("__main__")
-    other = getattr(main, "app", None)
-    if main is None or other is None or other is app or not isinstance(other, typer.Typer):
-        return
-    import piezotwin.cli as cli
-
-    if Path(getattr(main, "__file__", "") or "").resolve() != Path(cli.__file__).resolve():
-        return
-    have = {c.callback for c in other.registered_commands}
-    for c in app.registered_commands:
-        if c.callback in (show, export, plot) and c.callback not in have:
-            other.registered_commands.append(c)
-
-
-_register_on_script_app()
