@@ -7,9 +7,9 @@ Defaults without a source in the papers are marked `# estimate`.
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, field_validator, model_validator
 
 from scenes.units import parse_quantity
 
@@ -69,7 +69,7 @@ class ProtocolConfig(Strict):
     kind = "hold": ramp to a level in `ramp_s`, hold for the rest of the episode (creep / relaxation).
     """
 
-    kind: Literal["sinusoid", "hold"] = "sinusoid"
+    kind: Literal["sinusoid", "hold", "velostat_steps", "velostat_staircase", "velostat_calibration", "velostat_mix"] = "sinusoid"
     control: Literal["displacement", "force"] = "displacement"
     frequencies_hz: list[PositiveFloat] = Field(default_factory=lambda: [0.1, 0.5, 1.0, 2.0])  # cnt_pdms
     cycles: Annotated[int, Field(ge=1, le=1000)] = 3  # estimate
@@ -78,6 +78,14 @@ class ProtocolConfig(Strict):
     ramp_s: PositiveFloat = 0.5  # for kind="hold"
     duration_s: PositiveFloat = 20.0  # for kind="hold"; sinusoids last cycles / f
     settle_s: NonNegFloat = 0.2  # rest before loading starts
+    # velostat kinds (compression testing machine, force control; velostat sects. 3.1, 4.1, 5.4):
+    hold_min_s: PositiveFloat = 5.0  # velostat: holds of 5-30 s
+    hold_max_s: PositiveFloat = 30.0
+    loading_speeds_m_per_s: list[PositiveFloat] = Field(default_factory=lambda: [k / 60000.0 for k in (1, 2, 3, 4, 5, 6)])  # velostat Fig. 5: 1-6 mm/min
+    machine_stiffness_n_per_m: PositiveFloat = 20_000.0  # estimate: crosshead travel -> force (tip + protective layers)
+    step_force_n: PositiveFloat = 1.0  # velostat: staircases in 1 N steps
+    step_hold_s: PositiveFloat = 10.0  # velostat Fig. 6: 10 s per step
+    staircase_max_n: PositiveFloat = 10.0  # velostat Fig. 6: 1 N to 10 N
 
     @model_validator(mode="after")
     def _check(self) -> "ProtocolConfig":
@@ -87,6 +95,8 @@ class ProtocolConfig(Strict):
             )
         if not self.frequencies_hz:
             raise ValueError("protocol.frequencies_hz must list at least one frequency")
+        if self.hold_min_s > self.hold_max_s:
+            raise ValueError(f"protocol.hold_min_s ({self.hold_min_s}) must be <= protocol.hold_max_s ({self.hold_max_s})")
         return self
 
 
@@ -181,6 +191,23 @@ class CntPdmsSensorConfig(Strict):
     electronics: ElectronicsConfig = Field(default_factory=ElectronicsConfig)
 
 
+from scenes.velostat_config import VelostatSensorConfig  # noqa: E402  (needs Strict above)
+
+def _family(v: object) -> str:
+    """Discriminator of the sensor union; a sensor section without `family` is cnt_pdms (older scenes)."""
+    return v.get("family", "cnt_pdms") if isinstance(v, dict) else getattr(v, "family", "cnt_pdms")
+
+
+# one member per sensor family, tagged with its `family` literal
+SensorConfig = Annotated[
+    Union[
+        Annotated[CntPdmsSensorConfig, Tag("cnt_pdms")],
+        Annotated[VelostatSensorConfig, Tag("velostat")],
+    ],
+    Discriminator(_family),
+]
+
+
 class GenerationConfig(Strict):
     episodes: Annotated[int, Field(ge=1, le=10_000_000)] = 32
     episodes_per_shard: Annotated[int, Field(ge=1)] = 16
@@ -199,7 +226,7 @@ class SceneConfig(Strict):
     indenter: IndenterConfig = Field(default_factory=IndenterConfig)
     protocol: ProtocolConfig = Field(default_factory=ProtocolConfig)
     sampling: SamplingConfig = Field(default_factory=SamplingConfig)
-    sensor: CntPdmsSensorConfig = Field(default_factory=CntPdmsSensorConfig)
+    sensor: SensorConfig = Field(default_factory=CntPdmsSensorConfig)
     generation: GenerationConfig = Field(default_factory=GenerationConfig)
 
     @model_validator(mode="after")
@@ -211,8 +238,9 @@ class SceneConfig(Strict):
                     f"protocol.frequencies_hz: {f} Hz cannot be resolved at sampling.sample_rate_hz="
                     f"{self.sampling.sample_rate_hz} Hz (allowed: 0 < f < {nyq / 5.0:g} Hz, 10 samples per cycle)"
                 )
-        fc = self.sensor.electronics.filter_cutoff_hz
-        if self.sensor.electronics.filter_order and fc >= nyq:
+        elec = getattr(self.sensor, "electronics", None)
+        fc = elec.filter_cutoff_hz if elec is not None else 0.0
+        if elec is not None and elec.filter_order and fc >= nyq:
             raise ValueError(
                 f"sensor.electronics.filter_cutoff_hz: {fc} Hz must be below the Nyquist frequency {nyq:g} Hz"
             )

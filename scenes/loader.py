@@ -12,6 +12,8 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+import typing
+
 from pydantic import BaseModel, ValidationError
 
 from scenes.config import SceneConfig
@@ -54,8 +56,48 @@ def _fields_at(path: list[str]) -> list[str]:
         if model is None or part not in model.model_fields:
             return []
         ann = model.model_fields[part].annotation
+        members = [a for a in _union_members(ann) if isinstance(a, type) and issubclass(a, BaseModel)]
+        if members and not (isinstance(ann, type) and issubclass(ann, BaseModel)):  # a union (sensor families)
+            fields = sorted({f for m in members for f in m.model_fields})
+            rest = path[path.index(part) + 1:]
+            subs = [_fields_in(m, rest) for m in members]
+            return sorted({f for s in subs for f in s}) if rest else fields
         model = ann if isinstance(ann, type) and issubclass(ann, BaseModel) else None
     return sorted(model.model_fields) if model is not None else []
+
+
+def _fields_in(model: type[BaseModel], path: list[str]) -> list[str]:
+    for part in path:
+        if part not in model.model_fields:
+            return []
+        ann = model.model_fields[part].annotation
+        if not (isinstance(ann, type) and issubclass(ann, BaseModel)):
+            return []
+        model = ann
+    return sorted(model.model_fields)
+
+
+def _union_members(ann: object) -> list:
+    """Model classes of a (possibly Annotated / tagged) union annotation; [] for anything else."""
+    if typing.get_origin(ann) is typing.Annotated:
+        ann = typing.get_args(ann)[0]
+    out = []
+    for a in typing.get_args(ann):
+        if typing.get_origin(a) is typing.Annotated:
+            a = typing.get_args(a)[0]
+        out.append(a)
+    return out
+
+
+def _tags(loc: list[str]) -> list[str]:
+    """Drop the discriminator tag pydantic puts in the location of a union member ('sensor.velostat.film')."""
+    if len(loc) > 1 and loc[0] == "sensor":
+        from scenes.config import SensorConfig
+
+        tags = {typing.get_args(m.model_fields["family"].annotation)[0] for m in _union_members(SensorConfig)}
+        if loc[1] in tags:
+            return [loc[0], *loc[2:]]
+    return loc
 
 
 def apply_overrides(data: dict[str, Any], overrides: list[str] | None) -> dict[str, Any]:
@@ -90,7 +132,7 @@ def _unknown(loc: str, name: str, allowed: list[str]) -> str:
 def format_validation_error(exc: ValidationError) -> str:
     """One line naming the first offending field and the allowed values."""
     err = exc.errors()[0]
-    loc = [str(p) for p in err["loc"] if not isinstance(p, int)]
+    loc = _tags([str(p) for p in err["loc"] if not isinstance(p, int)])
     dotted = ".".join(loc) or "<root>"
     if err["type"] == "extra_forbidden":
         return _unknown(dotted, loc[-1], _fields_at(loc[:-1]))

@@ -9,6 +9,7 @@ from sensors.base import SensorModel
 
 FAMILIES: dict[str, str] = {
     "cnt_pdms": "sensors.cnt_pdms:CntPdmsSensor",
+    "velostat": "sensors.velostat:VelostatSensor",
 }
 
 

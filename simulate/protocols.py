@@ -49,7 +49,7 @@ def make_episode_protocol(cfg: SceneConfig, seed: int) -> EpisodeProtocol:
     amp = float(rng.uniform(p.amplitude_min, p.amplitude_max))
     j = cfg.indenter.position_jitter_m
     off = rng.uniform(-j, j, size=2) if j > 0 else np.zeros(2)
-    return EpisodeProtocol(
+    proto = EpisodeProtocol(
         frequency_hz=f,
         amplitude=amp,
         offset_xy_m=np.asarray(off, dtype=float),
@@ -57,6 +57,9 @@ def make_episode_protocol(cfg: SceneConfig, seed: int) -> EpisodeProtocol:
         control=p.control,
         kind=p.kind,
     )
+    if p.kind in DRAWERS:  # kind-specific draws (positions, levels, holds) from the same stream
+        proto = DRAWERS[p.kind](cfg, rng, proto)
+    return proto
 
 
 def _sinusoid(proto: EpisodeProtocol, cfg: SceneConfig, tau: np.ndarray) -> np.ndarray:
@@ -72,6 +75,12 @@ def _hold(proto: EpisodeProtocol, cfg: SceneConfig, tau: np.ndarray) -> np.ndarr
 
 # protocol kind -> waveform(proto, cfg, tau = t - settle_s) of the normal axis; families add their kinds here
 WAVEFORMS = {"sinusoid": _sinusoid, "hold": _hold}
+# protocol kind -> draw(cfg, rng, proto) -> proto with kind-specific params; families add their kinds here
+DRAWERS: dict = {}
+
+from simulate import velostat_protocols as _velostat  # noqa: E402
+
+_velostat.register(WAVEFORMS, DRAWERS)
 
 
 def target_waveform(proto: EpisodeProtocol, cfg: SceneConfig, t_s: np.ndarray) -> np.ndarray:
