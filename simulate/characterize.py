@@ -135,6 +135,7 @@ def characterize_cnt_pdms(cfg: SceneConfig, backend: str = "warp", device: str =
 # family -> "module:function" returning a Report; each family adds one line
 CHARACTERIZERS: dict[str, str] = {
     "cnt_pdms": "simulate.characterize:characterize_cnt_pdms",
+    "velostat": "simulate.velostat_characterize:characterize_velostat",
 }
 
 
