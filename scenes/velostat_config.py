@@ -37,9 +37,9 @@ class VelostatCreepConfig(Strict):
     Phi(p) = amplitude * p_c * ln(1 + p / p_c), so the relative creep Phi/p falls with force and a faster
     ramp leaves more creep for the hold (velostat sect. 3.1, Figs. 3, 5)."""
 
-    amplitude: NonNegFloat = 5.0  # estimate: 3-6 N error in a 30 s hold at 7 N (velostat sect. 5.4: up to 5 N)
+    amplitude: NonNegFloat = 6.0  # estimate: 3-6 N error in a 30 s hold at 7 N (velostat sect. 5.4: up to 5 N)
     saturation_pressure_pa: PositiveFloat = 30_000.0  # estimate: p_c, relative creep halves by ~7 N on 1 cm^2
-    times_s: list[PositiveFloat] = Field(default_factory=lambda: [0.3, 1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0])  # estimate: half-decade spacing
+    times_s: list[PositiveFloat] = Field(default_factory=lambda: [0.5, 1.5, 5.0, 15.0, 50.0, 150.0])  # estimate: half-decade spacing over the 1-100 s of the paper's holds
 
     @model_validator(mode="after")
     def _check(self) -> "VelostatCreepConfig":
