@@ -119,6 +119,8 @@ def readout_numpy(cond: np.ndarray, noise_v: np.ndarray, r: ReadoutParams) -> di
 
 def finish(r_film, r_true, volts, code, v_adc, r: ReadoutParams) -> dict[str, np.ndarray]:
     """Decode the ADC voltages: measured resistance, touch flag, decoded position (NaN without touch)."""
+    r_film = np.minimum(r_film, f32(1e12)).astype(f32)  # a vanishing contact is an open circuit
+    r_true = np.minimum(r_true, f32(1e12)).astype(f32)
     r_meas = (v_adc[..., 0] / f32(r.current_a)).astype(f32)
     touch = v_adc[..., 0] < f32(0.98 * r.compliance_v)
     x = (v_adc[..., 1] / f32(r.drive_v) - f32(0.5)) * f32(r.size_x_m)

@@ -20,7 +20,7 @@ FAST = ["--set", "protocol.frequencies_hz=[2.0]", "--set", "protocol.cycles=1", 
         (["generate", "cnt_pdms", "--set", "pad.thickness_m=5 N"], "allowed: cm, m, mm"),
         (["generate", "cnt_pdms", "--set", "protocol.duration_s=-1"], "protocol.duration_s"),
         (["generate", "cnt_pdms", "--set", "protocol.frequencies_hz=[30]"], "cannot be resolved"),
-        (["generate", "cnt_pdms", "--set", "protocol.kind=ramp"], "'sinusoid' or 'hold'"),
+        (["generate", "cnt_pdms", "--set", "protocol.kind=ramp"], "'sinusoid', 'hold'"),
     ],
 )
 def test_bad_input_one_line_exit_2_nothing_written(tmp_path, args, needle):
