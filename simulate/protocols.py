@@ -57,8 +57,8 @@ def make_episode_protocol(cfg: SceneConfig, seed: int) -> EpisodeProtocol:
         control=p.control,
         kind=p.kind,
     )
-    if p.kind in DRAWERS:  # kind-specific draws (positions, levels, holds) from the same stream
-        proto = DRAWERS[p.kind](cfg, rng, proto)
+    if p.kind in PARAM_DRAWS:  # kind-specific draws (positions, levels, holds) from the same stream
+        proto = PARAM_DRAWS[p.kind](proto, cfg, rng)
     return proto
 
 
@@ -75,12 +75,12 @@ def _hold(proto: EpisodeProtocol, cfg: SceneConfig, tau: np.ndarray) -> np.ndarr
 
 # protocol kind -> waveform(proto, cfg, tau = t - settle_s) of the normal axis; families add their kinds here
 WAVEFORMS = {"sinusoid": _sinusoid, "hold": _hold}
-# protocol kind -> draw(cfg, rng, proto) -> proto with kind-specific params; families add their kinds here
-DRAWERS: dict = {}
+# protocol kind -> draw(proto, cfg, rng) -> proto with kind-specific params; families add their kinds here
+PARAM_DRAWS: dict = {}
 
 from simulate import velostat_protocols as _velostat  # noqa: E402
 
-_velostat.register(WAVEFORMS, DRAWERS)
+_velostat.register(WAVEFORMS, PARAM_DRAWS)
 
 
 def target_waveform(proto: EpisodeProtocol, cfg: SceneConfig, t_s: np.ndarray) -> np.ndarray:

@@ -89,7 +89,7 @@ def _position(cfg, rng, site: str) -> np.ndarray:
     return rng.uniform([-hx, -hy], [hx, hy])
 
 
-def draw(cfg, rng: np.random.Generator, proto):
+def draw(proto, cfg, rng: np.random.Generator):
     """Fill an EpisodeProtocol of a velostat kind (offset, amplitude, params) from the episode's rng."""
     p = cfg.protocol
     kind = proto.kind
