@@ -79,7 +79,10 @@ class ProtocolConfig(Strict):
     (Coulomb stick-slip; above 1 it slips), holds, then releases (ntype).
     """
 
-    kind: Literal["sinusoid", "hold", "staircase", "press_stroke"] = "sinusoid"
+    kind: Literal[
+        "sinusoid", "hold", "staircase", "press_stroke",
+        "velostat_steps", "velostat_staircase", "velostat_calibration", "velostat_mix",
+    ] = "sinusoid"
     control: Literal["displacement", "force"] = "displacement"
     frequencies_hz: list[PositiveFloat] = Field(default_factory=lambda: [0.1, 0.5, 1.0, 2.0])  # cnt_pdms
     cycles: Annotated[int, Field(ge=1, le=1000)] = 3  # estimate
@@ -97,6 +100,14 @@ class ProtocolConfig(Strict):
     stroke_s: PositiveFloat = 0.5  # for kind="press_stroke": duration of the tangential stroke; estimate
     shear_ratio_max: NonNegFloat = 1.2  # for kind="press_stroke": target shear / (friction x normal force); estimate
     active_probability: Fraction = 0.7  # for kind="press_stroke": chance that each extra indenter presses; estimate
+    # velostat kinds (compression testing machine, force control; velostat sects. 3.1, 4.1, 5.4):
+    hold_min_s: PositiveFloat = 5.0  # velostat: holds of 5-30 s
+    hold_max_s: PositiveFloat = 30.0
+    loading_speeds_m_per_s: list[PositiveFloat] = Field(default_factory=lambda: [k / 60000.0 for k in (1, 2, 3, 4, 5, 6)])  # velostat Fig. 5: 1-6 mm/min
+    machine_stiffness_n_per_m: PositiveFloat = 20_000.0  # estimate: crosshead travel -> force (tip + protective layers)
+    step_force_n: PositiveFloat = 1.0  # velostat: staircases in 1 N steps
+    step_hold_s: PositiveFloat = 10.0  # velostat Fig. 6: 10 s per step
+    staircase_max_n: PositiveFloat = 10.0  # velostat Fig. 6: 1 N to 10 N
 
     @model_validator(mode="after")
     def _check(self) -> "ProtocolConfig":
@@ -112,6 +123,8 @@ class ProtocolConfig(Strict):
             )
         if self.kind == "staircase" and self.stair_ramp_s > self.stair_dwell_s:
             raise ValueError("protocol.stair_ramp_s must be <= protocol.stair_dwell_s")
+        if self.hold_min_s > self.hold_max_s:
+            raise ValueError(f"protocol.hold_min_s ({self.hold_min_s}) must be <= protocol.hold_max_s ({self.hold_max_s})")
         return self
 
 
@@ -208,9 +221,12 @@ class CntPdmsSensorConfig(Strict):
 
 from scenes.fabric_config import FabricSensorConfig  # noqa: E402  (needs Strict above)
 from scenes.ntype_config import NtypeSensorConfig  # noqa: E402  (after Strict: it builds on it)
+from scenes.velostat_config import VelostatSensorConfig  # noqa: E402  (needs Strict above)
 
+# one member per sensor family, told apart by its `family` literal (SceneConfig fills in cnt_pdms when missing)
 SensorConfig = Annotated[
-    Union[CntPdmsSensorConfig, FabricSensorConfig, NtypeSensorConfig], Field(discriminator="family")
+    Union[CntPdmsSensorConfig, FabricSensorConfig, NtypeSensorConfig, VelostatSensorConfig],
+    Field(discriminator="family"),
 ]
 
 

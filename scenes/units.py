@@ -21,6 +21,8 @@ UNITS_BY_SUFFIX: dict[str, dict[str, float]] = {
     "_ohm": {"ohm": 1.0, "kohm": 1e3, "mohm": 1e6},
     "_v": {"v": 1.0, "mv": 1e-3, "uv": 1e-6},
     "_s_per_m": {"s/m": 1.0, "s_per_m": 1.0},
+    "_m_per_s": {"m/s": 1.0, "mm/s": 1e-3, "mm/min": 1e-3 / 60.0},
+    "_n_per_m": {"n/m": 1.0, "n/mm": 1e3},
 }
 
 _QTY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([A-Za-zµ/0-9_]*)\s*$")

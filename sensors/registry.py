@@ -11,6 +11,7 @@ FAMILIES: dict[str, str] = {
     "cnt_pdms": "sensors.cnt_pdms:CntPdmsSensor",
     "fabric": "sensors.fabric:FabricSensor",
     "ntype": "sensors.ntype:NtypeSensor",
+    "velostat": "sensors.velostat:VelostatSensor",
 }
 
 

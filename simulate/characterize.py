@@ -128,6 +128,7 @@ CHARACTERIZERS: dict[str, str] = {
     "cnt_pdms": "simulate.characterize:characterize_cnt_pdms",
     "fabric": "simulate.characterize_fabric:characterize_fabric",
     "ntype": "simulate.ntype_characterize:characterize_ntype",
+    "velostat": "simulate.velostat_characterize:characterize_velostat",
 }
 
 

@@ -245,3 +245,7 @@ def xy_waveform(proto: EpisodeProtocol, cfg: SceneConfig, t_s: np.ndarray) -> np
         u = np.clip((t - t0) / max(t1 - t0, 1e-9), 0.0, 1.0)
         xy += (0.5 * (1.0 - np.cos(np.pi * u)))[..., None] * np.asarray(proto.params["stroke_xy_m"], float)
     return xy
+
+from simulate import velostat_protocols as _velostat  # noqa: E402  (velostat registers its compression-tester kinds)
+
+_velostat.register(WAVEFORMS, PARAM_DRAWS)

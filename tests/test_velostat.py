@@ -1,0 +1,159 @@
+"""velostat family: creep physics, readout, position decoding, clustering, Warp == numpy, config errors."""
+
+import numpy as np
+import pytest
+
+from scenes import ConfigError, load_scene
+from sensors.registry import make_sensor
+from simulate import velostat_characterize as vc
+from simulate.velostat_protocols import knots_steps, ramp_s
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    return load_scene("velostat")
+
+
+@pytest.fixture(scope="module")
+def sensor(cfg):
+    return make_sensor(cfg, "numpy")
+
+
+@pytest.fixture(scope="module")
+def report(cfg):
+    return vc.characterize_velostat(cfg, backend="numpy", load="ideal")
+
+
+def _press(cfg, sensor, level, speed_mm_min=3.0, hold=30.0, xy=(0.0, 0.0)):
+    v = speed_mm_min * vc.MM_PER_MIN
+    t, f = knots_steps(cfg, [level], [hold], [v], [0.0])[:2]
+    p = vc._proto(cfg, t, f, np.asarray(xy), ramp_s(cfg, level, v) + hold + 1.0)
+    _, out = vc.run(cfg, sensor, [p], "ideal")
+    i0 = vc._idx(cfg, ramp_s(cfg, level, v))
+    i1 = i0 + int(hold * cfg.sampling.sample_rate_hz) - 1
+    return out, i0, i1
+
+
+def test_creep_amplitude_falls_with_force(cfg, sensor):
+    rel = []
+    for lv in (1.0, 3.0, 5.0, 10.0):
+        out, i0, i1 = _press(cfg, sensor, lv)
+        r = out["resistance"][0].astype(float)  # noise-free
+        assert r[i1] < r[i0]  # resistance keeps falling under constant force
+        rel.append((r[i0] - r[i1]) / r[i0])
+    assert rel == sorted(rel, reverse=True) and rel[0] > 1.5 * rel[-1]
+
+
+def test_creep_amplitude_grows_with_loading_speed(cfg, sensor):
+    rel = []
+    for v in (1.0, 3.0, 6.0):
+        out, i0, i1 = _press(cfg, sensor, 3.0, speed_mm_min=v)
+        r = out["resistance"][0].astype(float)
+        rel.append((r[i0] - r[i1]) / r[i0])
+    assert rel == sorted(rel) and rel[-1] > 1.2 * rel[0]
+
+
+def test_creep_error_at_7n_hold_in_band(report):
+    assert 3.0 <= report.metrics["creep_error_7n_hold_n"] <= 6.0  # paper: up to 5 N
+
+
+def test_clustering_elbow_between_3_and_8(report):
+    assert 3 <= report.metrics["cluster_elbow"] <= 8  # paper: about 5
+    assert sum(report.metrics["cluster_sizes"]) == 36
+
+
+def test_position_error_grows_at_low_force(report):
+    for wiring in ("4-wire", "5-wire"):
+        e = report.metrics["position_error_mm"][wiring]
+        assert e["0.5N"][0] > e["2N"][0] > 0 and e["0.5N"][0] > e["15N"][0]
+        assert e["1N"][1] < 5.0  # paper: max 3 mm
+
+
+def test_two_contacts_give_conductance_weighted_position(report):
+    x = report.metrics["two_contacts_x_mm"]
+    assert abs(x["measured"] - x["conductance_weighted"]) < 1.5  # within ~1 mm (probe load, ADC)
+    assert x["conductance_weighted"] > 5.0  # pulled toward the harder (6 N) contact at +30 mm
+
+
+def test_two_contacts_synthetic_fields(cfg, sensor):
+    """Two equal contacts at mirrored positions decode near the middle; unequal ones toward the stronger."""
+    N = cfg.pad.n_taxels
+    xy = sensor.xy
+    a = np.argmin(np.linalg.norm(xy - [-0.035, 0.005], axis=1))
+    b = np.argmin(np.linalg.norm(xy - [0.035, 0.005], axis=1))
+    pr = np.zeros((2, 3, N), np.float32)
+    pr[0, :, a] = pr[0, :, b] = 5e4
+    pr[1, :, a], pr[1, :, b] = 2e4, 8e4
+    out = sensor.run(pr, [0, 1])
+    g = sensor.conductance(pr)
+    x0 = out["position_measured"][0, -1, 0]
+    xg = (g[1, -1] * xy[:, 0]).sum() / g[1, -1].sum()
+    x1 = out["position_measured"][1, -1, 0]
+    assert abs(x0 - (xy[a, 0] + xy[b, 0]) / 2) < 2e-3
+    assert x1 > 0.01 and abs(x1 - xg) < 2e-3
+
+
+def test_compliance_limit_clips(cfg):
+    c = cfg.model_copy(deep=True)
+    c.sensor.readout.current_a = 1e-3  # 1 mA: 3 V compliance reached at 3 kohm
+    s = make_sensor(c, "numpy")
+    pr = np.zeros((1, 3, c.pad.n_taxels), np.float32)
+    pr[0, 1, 70] = 1e4  # a light press: ~20 kohm film
+    out = s.run(pr, [0])
+    assert out["voltage_true"][0, 1, 0] == pytest.approx(c.sensor.readout.compliance_v)
+    assert out["resistance"][0, 1] * 1e-3 > 3.0  # the true resistance is beyond what the source can drive
+    assert out["resistance_measured"][0, 1] == pytest.approx(3.0 / 1e-3, rel=0.01)
+    assert np.isnan(out["position_measured"][0, 0]).all()  # unloaded: no touch, no position
+
+
+def test_warp_matches_numpy(cfg):
+    rng = np.random.default_rng(3)
+    E, T, N = 3, 80, cfg.pad.n_taxels
+    pr = np.zeros((E, T, N), np.float32)
+    ramp = np.minimum(np.arange(T) / 20.0, 1.0)[:, None]
+    idx = rng.choice(N, size=(E, 4), replace=False)
+    for e in range(E):
+        pr[e][:, idx[e]] = ramp * rng.uniform(5e3, 1.5e5, 4)
+    pr[:, 60:] *= 0.3  # partial unload
+    w = make_sensor(cfg, "warp").run(pr, [1, 2, 3])
+    n = make_sensor(cfg, "numpy").run(pr, [1, 2, 3])
+    np.testing.assert_allclose(w["resistance"], n["resistance"], rtol=2e-4)
+    np.testing.assert_allclose(w["voltage_true"], n["voltage_true"], rtol=2e-4, atol=1e-6)
+    assert np.abs(w["adc"].astype(int) - n["adc"].astype(int)).max() <= 1
+    np.testing.assert_allclose(
+        make_sensor(cfg, "warp").conductance(pr), make_sensor(cfg, "numpy").conductance(pr), rtol=2e-4, atol=1e-12
+    )
+
+
+@pytest.mark.parametrize(
+    "override, expected",
+    [
+        ("sensor.readout.sheet_resistance_ohm=50", "sensor.readout.sheet_resistance_ohm"),
+        ("sensor.film.exponnt=1", "unknown field 'sensor.film.exponnt' (did you mean 'exponent'?)"),
+        ("sensor.readout.compliance_v=9", "field 'sensor.readout.compliance_v'"),
+        ("sensor.creep.times_s=[1,2,3,4,5,6,7,8,9]", "field 'sensor.creep.times_s'"),
+        ("protocol.hold_min_s=40", "protocol.hold_min_s"),
+        ("protocol.loading_speeds_m_per_s=[-1]", "protocol.loading_speeds_m_per_s"),
+    ],
+)
+def test_bad_parameter_one_line_naming_field(override, expected):
+    with pytest.raises(ConfigError) as exc:
+        load_scene("velostat", [override])
+    assert expected in str(exc.value) and "\n" not in str(exc.value)
+
+
+def test_protocols_and_film_field(cfg):
+    from simulate.protocols import make_episode_protocol, target_waveform
+
+    kinds = set()
+    for s in range(12):
+        p = make_episode_protocol(cfg, s)
+        kinds.add(p.params["kind"])
+        t = np.arange(p.n_samples) / cfg.sampling.sample_rate_hz
+        f = target_waveform(p, cfg, t)
+        assert f.min() >= 0 and 1.0 <= f.max() <= 15.0 + 1e-9
+        assert np.all(np.abs(p.offset_xy_m) < 0.06)
+    assert kinds == {"velostat_steps", "velostat_staircase", "velostat_calibration"}
+    a, b = make_sensor(cfg, "numpy"), make_sensor(load_scene("velostat", ["sensor.film.field_seed=9"]), "numpy")
+    assert not np.allclose(a.z_g, b.z_g)
+    assert np.allclose(a.z_g, make_sensor(cfg, "numpy").z_g)  # one part per seed
