@@ -194,6 +194,9 @@ def presets() -> None:
         console.print(p)
 
 
+from piezotwin import cmd_serial  # noqa: E402,F401
+
+
 def main() -> None:  # pragma: no cover
     app()
 
