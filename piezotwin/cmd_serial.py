@@ -164,6 +164,7 @@ def serve(
     frames: Annotated[Optional[int], typer.Option(help="Stop after this many samples.")] = None,
     baudrate: Annotated[int, typer.Option(help="Baud rate (real ports).")] = 115200,
     fault_log: Annotated[Optional[Path], typer.Option(help="Write what was sent, corrupted or unsent (JSON) here.")] = None,
+    start_delay: Annotated[float, typer.Option(help="Wait this long (s) after the client appears before streaming.")] = 0.0,
 ) -> None:
     """Play a simulated sensor as a real board would, over text, poll or frames, with injectable faults."""
     from simulate.virtual_device import DeviceError, Faults, load_source
@@ -185,7 +186,8 @@ def serve(
 
     try:
         log = run_serve(src, url, protocol, rate_hz=rate, faults=faults, duration_s=duration, max_frames=frames,
-                        baudrate=baudrate, on_ready=ready, should_stop=stop.is_set)
+                        baudrate=baudrate, on_ready=ready, should_stop=stop.is_set,
+                        start_delay_s=start_delay)
     except DeviceError as exc:
         fail(str(exc))
     except KeyboardInterrupt:

@@ -142,6 +142,9 @@ class _Transport:
     def disconnect(self) -> None:
         pass
 
+    def linger(self, timeout: float = 1.0) -> None:
+        pass
+
     def close(self) -> None:
         pass
 
@@ -247,6 +250,22 @@ class _PtyTransport(_Transport):
         self.close()
         self._open()
 
+    def linger(self, timeout: float = 1.0) -> None:
+        """Wait until the host has read what was written (closing the master discards it)."""
+        import fcntl
+        import termios
+
+        buf = bytearray(4)
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            try:
+                fcntl.ioctl(self.slave, termios.FIONREAD, buf)
+            except OSError:
+                return
+            if int.from_bytes(buf, "little") == 0:
+                return
+            time.sleep(0.01)
+
     def close(self) -> None:
         for fd in (self.master, self.slave):
             try:
@@ -324,6 +343,7 @@ def serve(
     on_ready: Callable[[str], None] | None = None,
     should_stop: Callable[[], bool] | None = None,
     client_timeout_s: float = 30.0,
+    start_delay_s: float = 0.0,
 ) -> ServeLog:
     """Serve ``src`` until duration, max_frames or should_stop(); returns what was sent."""
     if protocol not in PROTOCOLS:
@@ -341,6 +361,8 @@ def serve(
     try:
         if not tr.wait_client(client_timeout_s):
             return log
+        if start_delay_s:  # e.g. a pty: give the host time to open the port (opening flushes its input)
+            time.sleep(start_delay_s)
         t0 = time.monotonic()
         base_t, base_k = t0, 0  # schedule anchor: sample k is due at base_t + (k - base_k) / rate
         next_stall = t0 + faults.stall_every_s if faults.stall_s else None
@@ -389,6 +411,7 @@ def serve(
             _send(tr, data, k, faults, rng, log)
             tr.read()  # drain what the host sent
             k += 1
+        tr.linger()
     finally:
         tr.close()
     return log
