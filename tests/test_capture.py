@@ -230,7 +230,7 @@ def test_cli_serve_preset_over_pty(tmp_path):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     flog = tmp_path / "faults.json"
     p = subprocess.Popen([sys.executable, "-m", "piezotwin.cli", "serve", "cnt_pdms", "--url", f"pty:{link}",
-                          "--protocol", "frames", "--rate", "500", "--frames", "300", "--start-delay", "0.5",
+                          "--protocol", "frames", "--rate", "500", "--frames", "300", "--start-delay", "1.0",
                           "--fault-log", str(flog), "--set", "pad.taxels_x=5", "--set", "pad.taxels_y=5"],
                          env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
@@ -247,7 +247,10 @@ def test_cli_serve_preset_over_pty(tmp_path):
     with Recording(tmp_path / "s.h5") as rec:
         ep = rec.episode_ids[0]
         r = rec.read(ep, "r")
-        assert rec.units(ep, "r") == "ohm" and len(r) == 300 and np.all(r > 0)
+        seq = rec.read(ep, "seq")
+        assert rec.units(ep, "r") == "ohm" and np.all(r > 0)
+    # opening a pty flushes what is already in it: on a very busy machine the first frames may go there
+    assert seq[-1] == 299 and np.all(np.diff(seq) == 1) and len(seq) >= 290
 
 
 def test_capture_errors():
