@@ -144,12 +144,13 @@ def import_logs(
     if not rate > 0:
         raise ImportLogError(f"rate must be > 0 Hz, got {rate}")
     n = int(math.floor((t1 - t0) * rate)) + 1
-    grid = t0 + np.arange(n) / rate
+    t_rel = np.arange(n) / rate  # exact; absolute unix times near 1.6e9 s carry only ~0.2 us resolution
+    grid = t0 + t_rel
     s_i = interp_onto(grid, st, sv)[:, 0]
     f_i = interp_onto(grid, ft, fv)[:, 0]
     ep = episode or _NAME_BAD.sub("_", sensor_log.stem)
     ch = {
-        "time": Channel(grid - t0, "s", ("time",), "common clock: seconds since the later of the two streams' starts"),
+        "time": Channel(t_rel, "s", ("time",), "common clock: seconds since the later of the two streams' starts"),
         "unix_time": Channel(grid, "s", ("time",), "host unix time of the common clock"),
         "sensor": Channel(s_i.astype(np.float32)[:, None], sensor_units, ("time", "channel"),
                           "sensor board reading, linearly interpolated onto the common clock"),
