@@ -256,6 +256,7 @@ class _PtyTransport(_Transport):
         import termios
 
         buf = bytearray(4)
+        time.sleep(0.1)  # the pty moves bytes from master to slave asynchronously
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             try:
@@ -379,6 +380,7 @@ def serve(
                 log.disconnects += 1
                 time.sleep(0.05)
                 tr.wait_client(client_timeout_s)
+                time.sleep(start_delay_s)
                 next_disc = time.monotonic() + faults.disconnect_every_s
                 base_t, base_k = time.monotonic(), k
                 continue

@@ -160,7 +160,8 @@ def test_restart_appends_and_torn_tail_is_dropped(tmp_path):
 
 def test_disconnect_and_reconnect(tmp_path):
     src = ramp_source(1000, rate=500.0)
-    sv = Served(src, "socket://127.0.0.1:0", "frames", duration_s=1.0, faults=Faults(disconnect_every_s=0.3))
+    sv = Served(src, "socket://127.0.0.1:0", "frames", duration_s=1.0, faults=Faults(disconnect_every_s=0.25),
+                start_delay_s=0.05)
     res = capture([StreamSpec(sv.url, "frames", "b")], tmp_path / "d.h5", duration_s=1.6, reconnect_s=1.0)
     log = sv.join()
     assert log.disconnects >= 2
