@@ -117,9 +117,10 @@ def capture(
 
 @app.command("import")
 def import_(
-    sensor_log: Annotated[Path, typer.Argument(help="Sensor log: 'value unix_time_s' per line.")],
-    force_log: Annotated[Path, typer.Argument(help="Load-cell log: 'force unix_time_s' per line.")],
-    out: Annotated[Path, typer.Option("-o", "--out", help="Recording to write (.h5).")],
+    sensor_log: Annotated[Optional[Path], typer.Argument(help="Sensor log: 'value unix_time_s' per line.")] = None,
+    force_log: Annotated[Optional[Path], typer.Argument(help="Load-cell log: 'force unix_time_s' per line.")] = None,
+    out: Annotated[Path, typer.Option("-o", "--out", help="Recording to write (.h5).")] = Path("real.h5"),
+    lupasic_dir: Annotated[Optional[Path], typer.Option("--dir", help="Instead of two logs: every run of a Lupasic folder (velostat_data/, futek_data/), one episode each.")] = None,
     rate: Annotated[Optional[float], typer.Option(help="Common clock rate in Hz (default: the sensor's rate, rounded).")] = None,
     force_units: Annotated[str, typer.Option(help="Units of the force log: N | kg | counts (counts need --calibration).")] = "N",
     calibration: Annotated[Optional[Path], typer.Option(help="'counts kg' pairs, e.g. futek_calibration.txt.")] = None,
@@ -128,20 +129,26 @@ def import_(
 ) -> None:
     """Import a sensor log and a load-cell log (host unix time) into a recording with source="real"."""
     _check_writable, _print_summary = _cli._check_writable, _cli._print_summary
-    from sensors.real_import import ImportLogError, import_logs
+    from sensors.real_import import ImportLogError, import_runs, lupasic_pairs
 
+    n_logs = (sensor_log is not None) + (force_log is not None)
+    if (lupasic_dir is None and n_logs != 2) or (lupasic_dir is not None and n_logs):
+        fail("give either SENSOR_LOG FORCE_LOG or --dir FOLDER")
     _check_writable(out.parent if str(out.parent) else Path("."))
     try:
-        p = import_logs(sensor_log, force_log, out, rate_hz=rate, force_units=force_units, calibration=calibration,
+        pairs = lupasic_pairs(lupasic_dir) if lupasic_dir is not None else [(sensor_log, force_log)]
+        p = import_runs(pairs, out, rate_hz=rate, force_units=force_units, calibration=calibration,
                         sensor_units=sensor_units, family=family)
     except ImportLogError as exc:
         fail(str(exc))
     from sensors.recording import Recording
 
     with Recording(p) as rec:
-        a = rec.episode_attrs(rec.episode_ids[0])
-    console.print(f"sensor {a['sensor_rate_hz']:.1f} Hz, force {a['force_rate_hz']:.1f} Hz -> {a['rate_hz']:g} Hz common clock, "
-                  f"{a['duration_s']:.1f} s, force {a['force_min_n']:.2f} .. {a['force_max_n']:.2f} N", highlight=False)
+        for ep in rec.episode_ids:
+            a = rec.episode_attrs(ep)
+            console.print(f"{ep}: sensor {a['sensor_rate_hz']:.1f} Hz, force {a['force_rate_hz']:.1f} Hz -> {a['rate_hz']:g} Hz "
+                          f"common clock, {a['duration_s']:.1f} s, force {a['force_min_n']:.2f} .. {a['force_max_n']:.2f} N",
+                          highlight=False, soft_wrap=True)
     _print_summary(p)
 
 

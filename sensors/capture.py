@@ -391,7 +391,14 @@ def capture(
         raise CaptureError(f"stream names must differ, got {names}")
     out = Path(out)
     stop = stop or threading.Event()
-    ports = [open_port(s) for s in streams]
+    ports: list = []
+    try:
+        for s in streams:
+            ports.append(open_port(s))
+    except CaptureError:
+        for p in ports:
+            p.close()
+        raise
     log = RawLog(rawlog_path(out))
     session = log.n_sessions
     start_ns = time.monotonic_ns()

@@ -27,7 +27,7 @@ G = 9.80665
 FORCE_UNITS = ("N", "kg", "counts")
 _NAME_BAD = re.compile(r"[^A-Za-z0-9_.\-]")
 
-__all__ = ["ImportLogError", "import_logs", "read_calibration", "read_log"]
+__all__ = ["ImportLogError", "import_logs", "import_runs", "lupasic_pairs", "read_calibration", "read_log"]
 
 
 class ImportLogError(ValueError):
@@ -106,9 +106,31 @@ def _rate(t: np.ndarray) -> float:
     return (len(t) - 1) / (t[-1] - t[0]) if t[-1] > t[0] else float("nan")
 
 
+def lupasic_pairs(root: str | os.PathLike) -> list[tuple[Path, Path]]:
+    """(sensor log, force log) pairs of a Lupasic data folder: velostat_data/<run>/F beside futek_data/<run>/F."""
+    root = Path(root)
+    pairs = []
+    for s in sorted((root / "velostat_data").glob("*/*.txt"), key=lambda p: (p.parent.name, p.name)):
+        f = root / "futek_data" / s.parent.name / s.name
+        if f.is_file():
+            pairs.append((s, f))
+    if not pairs:
+        raise ImportLogError(f"{root}: no velostat_data/<run>/*.txt with a matching futek_data/<run>/*.txt")
+    return pairs
+
+
 def import_logs(
     sensor_log: str | os.PathLike,
     force_log: str | os.PathLike,
+    out: str | os.PathLike,
+    **kw,
+) -> Path:
+    """One sensor log + one force log -> a recording with one episode (see ``import_runs``)."""
+    return import_runs([(sensor_log, force_log)], out, **kw)
+
+
+def import_runs(
+    pairs,
     out: str | os.PathLike,
     *,
     rate_hz: float | None = None,
@@ -116,24 +138,52 @@ def import_logs(
     calibration: str | os.PathLike | None = None,
     sensor_units: str = "raw",
     family: str = "velostat",
-    episode: str | None = None,
 ) -> Path:
-    """Write a recording (source="real") with one episode; see the module docstring."""
-    from sensors.capture import interp_onto
-    from sensors.recording import Channel, write_recording
+    """Write a recording (source="real") with one episode per (sensor log, force log) pair, named after
+    the sensor log's file stem; see the module docstring. Each run is resampled on its own clock."""
+    from sensors.recording import write_recording
 
-    sensor_log, force_log = Path(sensor_log), Path(force_log)
     if force_units not in FORCE_UNITS:
         raise ImportLogError(f"force units must be one of {', '.join(FORCE_UNITS)}; got {force_units!r}")
-    sv, st = read_log(sensor_log, "value")
-    fv, ft = read_log(force_log, "force")
     cal = None
     if force_units == "counts":
         if calibration is None:
             raise ImportLogError("force units 'counts' need a calibration file (counts kg per line)")
         slope, offset, resid = read_calibration(calibration)
-        fv = (fv * slope + offset) * G
         cal = {"file": str(calibration), "kg_per_count": slope, "kg_offset": offset, "rms_residual_kg": resid, "g": G}
+    episodes, ep_attrs, runs = {}, {}, []
+    for sensor_log, force_log in pairs:
+        ep = _NAME_BAD.sub("_", Path(sensor_log).stem)
+        if ep in episodes:
+            ep = f"{ep}-{len(episodes)}"
+        episodes[ep], ep_attrs[ep] = _import_pair(Path(sensor_log), Path(force_log), rate_hz, force_units, cal,
+                                                  sensor_units)
+        runs.append({"episode": ep, "sensor_log": Path(sensor_log).name, "force_log": Path(force_log).name})
+        rate_hz = rate_hz or ep_attrs[ep]["rate_hz"]  # one clock rate for every run of the file
+    rate = rate_hz
+    cfg = {"import": {"runs": runs, "rate_hz": rate, "force_units": force_units, "calibration": cal,
+                      "sensor_units": sensor_units}}
+    return write_recording(
+        out,
+        episodes,
+        source="real",
+        config_json=json.dumps(cfg, sort_keys=True),
+        root_seed=None,
+        shard_index=0,
+        sensor_attrs={"family": family, "sample_rate_hz": rate, "units": sensor_units, "n_channels": 1},
+        episode_attrs=ep_attrs,
+        extra_attrs={"importer": "sensors.real_import"},
+    )
+
+
+def _import_pair(sensor_log: Path, force_log: Path, rate_hz, force_units: str, cal: dict | None, sensor_units: str):
+    from sensors.capture import interp_onto
+    from sensors.recording import Channel
+
+    sv, st = read_log(sensor_log, "value")
+    fv, ft = read_log(force_log, "force")
+    if cal is not None:
+        fv = (fv * cal["kg_per_count"] + cal["kg_offset"]) * G
     elif force_units == "kg":
         fv = fv * G
     t0, t1 = max(st[0], ft[0]), min(st[-1], ft[-1])
@@ -148,7 +198,6 @@ def import_logs(
     grid = t0 + t_rel
     s_i = interp_onto(grid, st, sv)[:, 0]
     f_i = interp_onto(grid, ft, fv)[:, 0]
-    ep = episode or _NAME_BAD.sub("_", sensor_log.stem)
     ch = {
         "time": Channel(t_rel, "s", ("time",), "common clock: seconds since the later of the two streams' starts"),
         "unix_time": Channel(grid, "s", ("time",), "host unix time of the common clock"),
@@ -177,16 +226,4 @@ def import_logs(
         "calibration": cal,
         "n_samples": n,
     }
-    cfg = {"import": {"sensor_log": sensor_log.name, "force_log": force_log.name, "rate_hz": rate,
-                      "force_units": force_units, "calibration": cal, "sensor_units": sensor_units}}
-    return write_recording(
-        out,
-        {ep: ch},
-        source="real",
-        config_json=json.dumps(cfg, sort_keys=True),
-        root_seed=None,
-        shard_index=0,
-        sensor_attrs={"family": family, "sample_rate_hz": rate, "units": sensor_units, "n_channels": 1},
-        episode_attrs={ep: attrs},
-        extra_attrs={"importer": "sensors.real_import"},
-    )
+    return ch, attrs
