@@ -200,3 +200,4 @@ def main() -> None:  # pragma: no cover
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(app())
+from piezotwin import cmd_learn  # noqa: E402,F401  (registers `experiment`)
