@@ -64,10 +64,10 @@ def _modes() -> dict[str, Mode]:
                "generation.episodes_per_shard=12", "generation.threads=1"]
     quick = Mode("quick", q_scene, {
         "mean": {}, "linear": {}, "cubic": {},
-        "mlp": {"max_epochs": 40, "patience": 10},
-        "gru": {"max_epochs": 25, "patience": 8, "train_stride": 2},
-        "lstm": {"max_epochs": 25, "patience": 8, "train_stride": 2},
-        "tcn": {"max_epochs": 80, "patience": 15},
+        "mlp": {"max_epochs": 40, "patience": 10, "max_batches_per_epoch": 60},
+        "gru": {"max_epochs": 25, "patience": 8, "max_batches_per_epoch": 40, "valid_stride": 2},
+        "lstm": {"max_epochs": 25, "patience": 8, "max_batches_per_epoch": 40, "valid_stride": 2},
+        "tcn": {"max_epochs": 60, "patience": 15},
     })
     t_scene = ["pad.taxels_x=3", "pad.taxels_y=3", "protocol.cycles=1", "generation.episodes=12",
                "generation.episodes_per_shard=12", "generation.threads=1"]
