@@ -50,6 +50,8 @@ def _check_writable(out: Path) -> None:
 
 SetOpt = Annotated[Optional[list[str]], typer.Option("--set", help="Override a config field: key.path=value (repeatable).")]
 
+from piezotwin import cmd_learn  # noqa: E402,F401  (registers `experiment`; needs fail, _check_writable, SetOpt above)
+
 
 @app.command()
 def generate(
@@ -200,4 +202,3 @@ def main() -> None:  # pragma: no cover
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(app())
-from piezotwin import cmd_learn  # noqa: E402,F401  (registers `experiment`)

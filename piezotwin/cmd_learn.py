@@ -6,12 +6,27 @@ cli.py imports this module at its bottom.
 
 from __future__ import annotations
 
+import importlib
+import sys
 from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
 
-from piezotwin.cli import SetOpt, _check_writable, app, console, err, fail
+
+def _cli_module():
+    """The piezotwin.cli whose `app` runs: `__main__` under `python -m piezotwin.cli`, else the package module
+    (importing it here would make a second app that never runs)."""
+    main = sys.modules.get("__main__")
+    f = getattr(main, "__file__", None)
+    if f and Path(f).resolve() == Path(__file__).with_name("cli.py").resolve():
+        return main
+    return sys.modules.get("piezotwin.cli") or importlib.import_module("piezotwin.cli")
+
+
+_cli = _cli_module()
+app, console, err, fail, _check_writable, SetOpt = (
+    _cli.app, _cli.console, _cli.err, _cli.fail, _cli._check_writable, _cli.SetOpt)
 
 
 @app.command()
