@@ -195,6 +195,7 @@ def presets() -> None:
 
 
 # command modules register on `app` when imported (one line each)
+from piezotwin import cmd_learn  # noqa: E402,F401
 from piezotwin import cmd_viz  # noqa: E402,F401
 from piezotwin import cmd_serial  # noqa: E402,F401
 

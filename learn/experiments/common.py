@@ -1,0 +1,93 @@
+"""Pieces every experiment uses: evaluation on held-out episodes, latency, markdown tables."""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any, Callable, Sequence as Seq
+
+import numpy as np
+import torch
+
+from learn import metrics as M
+from learn.data import Sequence
+from learn.models.base import Compensator
+
+__all__ = ["evaluate", "streaming_latency", "batch_latency", "md_table", "fmt"]
+
+
+def evaluate(comp: Compensator, seqs: Seq[Sequence], drive: str | None = None) -> dict[str, Any]:
+    """Point metrics over all samples of ``seqs`` and, with a drive channel, the hysteresis error of
+    each cycle (% FSO): 'hyst_mean' (mean over cycles) and 'hyst_worst'."""
+    preds = [comp.predict(s.x) for s in seqs]
+    ref = np.concatenate([s.y[:, 0] for s in seqs])
+    est = np.concatenate([p[:, 0] for p in preds])
+    out: dict[str, Any] = M.regression_metrics(ref, est)
+    out["n_samples"] = int(len(ref))
+    if drive is not None:
+        cyc = [h for s, p in zip(seqs, preds) for h in M.loop_hysteresis(s.y[:, 0], p[:, 0], s.extra[drive])]
+        cyc = [h for h in cyc if np.isfinite(h)]
+        out["hyst_mean"] = float(np.mean(cyc)) if cyc else float("nan")
+        out["hyst_worst"] = float(np.max(cyc)) if cyc else float("nan")
+        out["n_cycles"] = len(cyc)
+    return out
+
+
+def raw_hysteresis(seqs: Seq[Sequence], drive: str) -> dict[str, float]:
+    """Hysteresis error of the uncompensated sensor (force vs its first input channel)."""
+    cyc = [h for s in seqs for h in M.loop_hysteresis(s.y[:, 0], s.x[:, 0], s.extra[drive])]
+    cyc = [h for h in cyc if np.isfinite(h)]
+    return {"hyst_mean": float(np.mean(cyc)) if cyc else float("nan"),
+            "hyst_worst": float(np.max(cyc)) if cyc else float("nan"), "n_cycles": len(cyc)}
+
+
+def streaming_latency(comp: Compensator, x: np.ndarray, n: int = 300, warmup: int = 20, threads: int = 1) -> dict[str, float]:
+    """Per-sample latency of comp.stream() on one CPU thread (median and mean, ms), and the largest
+    difference between the streamed and the batch estimates on the same samples."""
+    old = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        x = np.asarray(x)[: n + warmup]
+        st = comp.stream()
+        ts, ys = [], []
+        for v in x:
+            t0 = time.perf_counter()
+            ys.append(st.step(v))
+            ts.append(time.perf_counter() - t0)
+        ts = np.asarray(ts[warmup:]) * 1e3
+        diff = float(np.max(np.abs(np.stack(ys) - comp.predict(x))))
+        return {"median_ms": float(np.median(ts)), "mean_ms": float(ts.mean()), "p99_ms": float(np.percentile(ts, 99)),
+                "n": int(len(ts)), "threads": threads, "stream_vs_batch_max_abs": diff}
+    finally:
+        torch.set_num_threads(old)
+
+
+def batch_latency(comp: Compensator, x: np.ndarray, threads: int = 1, repeat: int = 3) -> float:
+    """Amortised batch inference time per sample (ms) over one episode, one thread."""
+    old = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        best = math.inf
+        for _ in range(repeat):
+            t0 = time.perf_counter()
+            comp.predict(x)
+            best = min(best, time.perf_counter() - t0)
+        return 1e3 * best / len(x)
+    finally:
+        torch.set_num_threads(old)
+
+
+def fmt(v: Any, nd: int = 3) -> str:
+    if v is None:
+        return "–"
+    if isinstance(v, float):
+        if not math.isfinite(v):
+            return "–"
+        return f"{v:.{nd}f}"
+    return str(v)
+
+
+def md_table(header: Seq[str], rows: Seq[Seq[Any]]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+    return "\n".join(lines)

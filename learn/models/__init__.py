@@ -1,0 +1,11 @@
+"""Compensator registry: ``make_model(kind, **hparams)``; ``MODELS`` maps kind -> class.
+
+Built in: mean (trivial baseline), linear, cubic (learn.models.classical), mlp, lstm, gru
+(learn.models.neural), tcn (ours, learn.models.tcn). Another family's models register themselves with
+``@register("name")`` in their own module, imported here.
+"""
+
+from learn.models.base import MODELS, Compensator, Streamer, edge_windows, make_model, register
+from learn.models import classical, neural, tcn  # noqa: F401,E402  (register)
+
+__all__ = ["MODELS", "Compensator", "Streamer", "edge_windows", "make_model", "register"]

@@ -1,0 +1,129 @@
+"""Our model: a causal temporal convolution net (TCN) over the resistance history.
+
+Why it fits this sensor: what separates loading from unloading at equal resistance is mostly a linear
+causal filter (the 4th-order 10 Hz Butterworth delays the signal ~40 ms) plus viscoelastic memory,
+followed by a static nonlinearity (tunneling). Dilated causal convolutions see 1.27 s of history
+(receptive field 1 + (k-1) sum(d) = 127 samples at k=3, d=1..32) at a cost that does not grow with it,
+train on whole chunks (one forward gives every output of a chunk), and stream in O(1) per sample:
+each layer keeps a ring buffer of its last (k-1) d + 1 inputs, so no window is recomputed.
+
+    h_0 = W_in x                                (1x1 conv)
+    h_{l+1} = h_l + SiLU(conv_{k, d_l}(h_l))     (causal, valid, residual)
+    y = W_out h_L + W_skip x                     (1x1 convs; the skip is a linear path from input)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+
+from learn.models.base import Streamer, register
+from learn.models.neural import TRAIN_DEFAULTS, TorchCompensator, _f32
+
+__all__ = ["CausalTCN", "TCNCompensator"]
+
+
+class CausalTCN(nn.Module):
+    """[B, L, n_in] -> [B, L - rf + 1, n_out] (valid causal convolutions)."""
+
+    def __init__(self, n_in: int, n_out: int, channels: int, kernel: int, dilations: list[int]):
+        super().__init__()
+        self.kernel, self.dilations = int(kernel), [int(d) for d in dilations]
+        self.rf = 1 + (self.kernel - 1) * sum(self.dilations)
+        self.inp = nn.Conv1d(n_in, channels, 1)
+        self.convs = nn.ModuleList(nn.Conv1d(channels, channels, kernel, dilation=d) for d in self.dilations)
+        self.out = nn.Conv1d(channels, n_out, 1)
+        self.skip = nn.Conv1d(n_in, n_out, 1)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        x = x.transpose(1, 2)
+        h = self.inp(x)
+        for conv, d in zip(self.convs, self.dilations):
+            h = h[..., d * (self.kernel - 1) :] + nn.functional.silu(conv(h))
+        y = self.out(h) + self.skip(x[..., self.rf - 1 :])
+        return y.transpose(1, 2)
+
+
+@register("tcn")
+class TCNCompensator(TorchCompensator):
+    """Causal TCN (ours). Trained on chunks of ``chunk`` outputs (stride chunk/2) with the same Adam /
+    early-stopping loop as the paper's models."""
+
+    DEFAULTS = {**TRAIN_DEFAULTS, "channels": 32, "kernel": 3, "dilations": [1, 2, 4, 8, 16, 32],
+                "chunk": 64, "batch_size": 16, "lr": 2e-3}
+    temporal = True
+
+    @property
+    def context(self) -> int:
+        h = self.hparams
+        return 1 + (int(h["kernel"]) - 1) * sum(int(d) for d in h["dilations"])
+
+    def _build(self):
+        h = self.hparams
+        return CausalTCN(self.n_in, self.n_out, int(h["channels"]), int(h["kernel"]), list(h["dilations"]))
+
+    def _pad(self, z: np.ndarray) -> np.ndarray:
+        return np.concatenate([np.repeat(z[:1], self.context - 1, axis=0), z], axis=0)
+
+    def _examples(self, zx, zy, train):
+        L = min(int(self.hparams["chunk"]), min(len(x) for x in zx))
+        rf = self.context
+        X, Y = [], []
+        for x, y in zip(zx, zy):
+            xp = self._pad(x)
+            starts = sorted(set(range(0, len(x) - L + 1, max(1, L // 2))) | {len(x) - L})
+            for s in starts:
+                X.append(xp[s : s + L + rf - 1])
+                Y.append(y[s : s + L])
+        return _f32(np.stack(X)), _f32(np.stack(Y))
+
+    def _forward_seq(self, z):
+        return self.net(_f32(self._pad(z))[None])[0].double().numpy()
+
+    def _streamer(self) -> Streamer:
+        return TCNStreamer(self)
+
+
+class TCNStreamer(Streamer):
+    """Per-layer ring buffers in numpy (float64): O(1) work per sample, equal to the batch forward."""
+
+    def __init__(self, comp: TCNCompensator):
+        net = comp.net
+        g = lambda t: t.detach().double().numpy()  # noqa: E731
+        self.xm, self.xs = comp.x_norm.mean, comp.x_norm.std
+        self.ym, self.ys = comp.y_norm.mean, comp.y_norm.std
+        self.w_in, self.b_in = g(net.inp.weight)[:, :, 0], g(net.inp.bias)
+        self.k = net.kernel
+        self.dil = net.dilations
+        # conv weight [C, C, k]; tap j multiplies the input (k-1-j) d samples back -> one [C, k C] matrix
+        self.w = [np.concatenate([g(c.weight)[:, :, j] for j in range(self.k)], axis=1) for c in net.convs]
+        self.b = [g(c.bias) for c in net.convs]
+        self.w_out, self.b_out = g(net.out.weight)[:, :, 0], g(net.out.bias)
+        self.w_skip, self.b_skip = g(net.skip.weight)[:, :, 0], g(net.skip.bias)
+        self.lens = [(self.k - 1) * d + 1 for d in self.dil]
+        self.reset()
+
+    def reset(self) -> None:
+        self.bufs: list[np.ndarray] | None = None
+        self.t = 0
+
+    def step(self, x: np.ndarray) -> np.ndarray:
+        z = (np.asarray(x, np.float64).reshape(-1) - self.xm) / self.xs
+        h = self.w_in @ z + self.b_in
+        first = self.bufs is None
+        if first:
+            self.bufs = [np.empty((n, len(h))) for n in self.lens]
+        t = self.t
+        for l, d in enumerate(self.dil):
+            buf, n = self.bufs[l], self.lens[l]
+            if first:  # the input has rested at its first value forever: constant history
+                buf[:] = h
+            else:
+                buf[t % n] = h
+            taps = buf[[(t - (self.k - 1 - j) * d) % n for j in range(self.k)]].reshape(-1)
+            a = self.w[l] @ taps + self.b[l]
+            h = h + a / (1.0 + np.exp(-a))
+        self.t += 1
+        y = self.w_out @ h + self.b_out + self.w_skip @ z + self.b_skip
+        return y * self.ys + self.ym

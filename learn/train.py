@@ -1,0 +1,148 @@
+"""A seeded mini-batch training loop: Adam on MSE, early stopping on the validation loss, rich progress.
+
+Deterministic for a given seed on CPU: the weights are initialised under ``torch.manual_seed(seed)``
+(the caller builds the net inside `seeded`), the batch order comes from a private generator, and the
+best epoch's weights are restored at the end. Inputs and targets arrive already z-scored; the
+statistics live with the compensator (learn.models.base), not here.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import copy
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Any, Callable, Iterator
+
+import numpy as np
+import torch
+from torch import nn
+
+__all__ = ["TrainConfig", "TrainHistory", "train_model", "seeded"]
+
+
+@dataclass
+class TrainConfig:
+    lr: float = 1e-3
+    batch_size: int = 64
+    max_epochs: int = 200
+    patience: int = 15  # epochs without a validation improvement before stopping
+    min_delta: float = 0.0  # an improvement must lower the loss by more than this
+    weight_decay: float = 0.0
+    grad_clip: float | None = 1.0
+    max_batches_per_epoch: int | None = None  # a random subset of batches each epoch (quick runs)
+    seed: int = 0
+
+    def to_json(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass
+class TrainHistory:
+    train_loss: list[float] = field(default_factory=list)
+    valid_loss: list[float] = field(default_factory=list)
+    best_epoch: int = -1
+    best_loss: float = math.inf
+    stopped_early: bool = False
+    seconds: float = 0.0
+
+    @property
+    def epochs(self) -> int:
+        return len(self.train_loss)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "epochs": self.epochs, "best_epoch": self.best_epoch, "best_loss": self.best_loss,
+            "stopped_early": self.stopped_early, "seconds": self.seconds,
+            "train_loss": self.train_loss, "valid_loss": self.valid_loss,
+        }
+
+
+@contextlib.contextmanager
+def seeded(seed: int) -> Iterator[None]:
+    """Fork torch's global RNG, seed it, and restore it afterwards (so building a net is reproducible
+    without disturbing the caller's randomness)."""
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(int(seed))
+        yield
+
+
+def _batches(n: int, bs: int, gen: torch.Generator, limit: int | None) -> list[torch.Tensor]:
+    perm = torch.randperm(n, generator=gen)
+    out = list(perm.split(bs))
+    if limit is not None and len(out) > limit:
+        out = out[:limit]
+    return out
+
+
+@torch.no_grad()
+def evaluate(net: nn.Module, x: torch.Tensor, y: torch.Tensor, bs: int = 1024,
+             loss_fn: Callable | None = None) -> float:
+    loss_fn = loss_fn or nn.functional.mse_loss
+    net.eval()
+    tot, n = 0.0, 0
+    for i in range(0, len(x), bs):
+        xb, yb = x[i : i + bs], y[i : i + bs]
+        tot += float(loss_fn(net(xb), yb, reduction="sum"))
+        n += yb.numel()
+    return tot / max(n, 1)
+
+
+def train_model(
+    net: nn.Module,
+    train: tuple[torch.Tensor, torch.Tensor],
+    valid: tuple[torch.Tensor, torch.Tensor] | None,
+    cfg: TrainConfig,
+    *,
+    progress: bool = True,
+    description: str = "train",
+) -> TrainHistory:
+    """Train ``net`` so that ``net(x) ~ y`` in MSE; returns the history; leaves the best weights loaded.
+
+    ``train``/``valid`` are (inputs, targets) tensors whose first axis indexes examples; any
+    shapes the net accepts. Without ``valid`` the training loss drives early stopping.
+    """
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    xt, yt = train
+    gen = torch.Generator().manual_seed(int(cfg.seed))
+    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    hist = TrainHistory()
+    best_state = copy.deepcopy(net.state_dict())
+    bad = 0
+    t0 = time.perf_counter()
+    cols = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("epochs"),
+            TimeElapsedColumn(), TextColumn("{task.fields[info]}"))
+    with Progress(*cols, console=Console(stderr=True), transient=True, disable=not progress) as bar:
+        task = bar.add_task(description, total=cfg.max_epochs, info="")
+        for epoch in range(cfg.max_epochs):
+            net.train()
+            tot, n = 0.0, 0
+            for idx in _batches(len(xt), cfg.batch_size, gen, cfg.max_batches_per_epoch):
+                xb, yb = xt[idx], yt[idx]
+                opt.zero_grad(set_to_none=True)
+                loss = nn.functional.mse_loss(net(xb), yb)
+                loss.backward()
+                if cfg.grad_clip:
+                    nn.utils.clip_grad_norm_(net.parameters(), cfg.grad_clip)
+                opt.step()
+                tot += float(loss.detach()) * len(idx)
+                n += len(idx)
+            hist.train_loss.append(tot / max(n, 1))
+            vl = evaluate(net, *valid) if valid is not None else hist.train_loss[-1]
+            hist.valid_loss.append(vl)
+            if vl < hist.best_loss - cfg.min_delta:
+                hist.best_loss, hist.best_epoch, bad = vl, epoch, 0
+                best_state = copy.deepcopy(net.state_dict())
+            else:
+                bad += 1
+            bar.update(task, advance=1, info=f"loss {hist.train_loss[-1]:.4g} valid {vl:.4g} best {hist.best_loss:.4g}@{hist.best_epoch}")
+            if bad >= cfg.patience:
+                hist.stopped_early = True
+                break
+    net.load_state_dict(best_state)
+    net.eval()
+    hist.seconds = time.perf_counter() - t0
+    return hist

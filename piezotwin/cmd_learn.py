@@ -1,0 +1,54 @@
+"""`piezotwin experiment ...`: the learn commands, registered on the app of piezotwin.cli.
+
+Kept out of cli.py so that the learn commands and the simulator commands are edited independently;
+cli.py imports this module at its bottom.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+
+from piezotwin.cli import SetOpt, _check_writable, app, console, err, fail  # noqa: E402
+
+
+@app.command()
+def experiment(
+    key: Annotated[str, typer.Argument(help="Paper key (cnt_pdms) or 'all'.")],
+    quick: Annotated[bool, typer.Option("--quick", help="Small data and capped epochs: a few minutes on 2 cores.")] = False,
+    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Report folder (default runs/experiment-<key>[-quick]).")] = None,
+    data: Annotated[Optional[Path], typer.Option("--data", help="Dataset folder to make or reuse (default <out>/data).")] = None,
+    set_: SetOpt = None,
+    models: Annotated[Optional[str], typer.Option(help="Comma-separated subset of models (the trivial 'mean' always runs).")] = None,
+    seed: Annotated[int, typer.Option(help="Seed of the data, the split and the training.")] = 0,
+    mode: Annotated[Optional[str], typer.Option(hidden=True, help="full | quick | tiny (overrides --quick).")] = None,
+) -> None:
+    """Generate (or reuse) data, train the paper's compensators and ours, write report.md + metrics.json + plots."""
+    from learn.experiments import EXPERIMENTS, get_experiment
+
+    keys = sorted(EXPERIMENTS) if key == "all" else [key]
+    for k in keys:
+        if k not in EXPERIMENTS:
+            fail(f"unknown experiment '{k}' (known: {', '.join(sorted(EXPERIMENTS))}, all)")
+    run_mode = mode or ("quick" if quick else "full")
+    sel = [m.strip() for m in models.split(",") if m.strip()] if models else None
+    for k in keys:
+        exp = get_experiment(k)
+        if run_mode not in exp.MODES:
+            fail(f"--mode must be one of: {', '.join(exp.MODES)} (got '{run_mode}')")
+        if sel is not None:
+            known = set(exp.MODES[run_mode].models)
+            bad = [m for m in sel if m not in known]
+            if bad:
+                fail(f"unknown model(s) {', '.join(bad)} for {k} (known: {', '.join(sorted(known))})")
+        dest = out / k if (out is not None and len(keys) > 1) else out
+        dest = dest or Path("runs") / (f"experiment-{k}" + ("" if run_mode == "full" else f"-{run_mode}"))
+        _check_writable(dest)
+        try:
+            exp.run(dest, mode=run_mode, data_dir=data, overrides=list(set_ or []), models=sel, seed=seed,
+                    progress=err.is_terminal, log=lambda s: console.print(s, highlight=False))
+        except ValueError as exc:
+            fail(str(exc))

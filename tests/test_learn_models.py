@@ -1,0 +1,139 @@
+"""learn models on a small synthetic hysteretic sensor: each beats the trivial mean on held-out
+episodes, streaming equals batch, checkpoints round-trip, training is seeded, estimators are exact."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from learn.checkpoint import load_checkpoint, save_checkpoint
+from learn.data import Sequence, stratified_split
+from learn.models import MODELS, edge_windows, make_model
+from learn.models.classical import PolynomialRegression
+from learn.train import TrainConfig, train_model
+
+torch.set_num_threads(1)
+
+TINY = {
+    "mean": {}, "linear": {}, "cubic": {},
+    "mlp": {"max_epochs": 15, "patience": 5, "hidden": [16]},
+    "gru": {"max_epochs": 15, "patience": 5, "hidden": [8], "window": 20, "train_stride": 3, "lr": 1e-2, "batch_size": 32},
+    "lstm": {"max_epochs": 15, "patience": 5, "hidden": [16, 8], "window": 20, "train_stride": 3, "lr": 1e-2, "batch_size": 32},
+    "tcn": {"max_epochs": 15, "patience": 5, "channels": 8, "dilations": [1, 2, 4, 8]},
+}
+
+
+def synth(n=12, seed=0):
+    """Force sinusoids at 0.5/1/2 Hz; the 'sensor' is a lagged (first-order, 60 ms), exponential reading."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for k in range(n):
+        f = [0.5, 1.0, 2.0][k % 3]
+        t = np.arange(220) / 100.0
+        tau = np.clip(t - 0.2, 0, None)
+        F = rng.uniform(1, 5) * 0.5 * (1 - np.cos(2 * np.pi * f * tau)) * (tau < 2 / f)
+        lag = np.zeros_like(F)
+        a = np.exp(-0.01 / 0.06)
+        for i in range(1, len(F)):
+            lag[i] = a * lag[i - 1] + (1 - a) * F[i]
+        R = 40.0 * np.exp(-0.08 * lag) + rng.normal(0, 0.01, len(F))
+        out.append(Sequence(R[:, None], F[:, None], ["r"], ["f"], {"r": "ohm", "f": "N"},
+                            {"key": f"s/ep-{k}", "frequency_hz": f}, {"drive": F.copy()}))
+    return out
+
+
+@pytest.fixture(scope="module")
+def fitted():
+    sp = stratified_split(synth(), "frequency_hz", 0, (0.6, 0.1, 0.3))
+    tr, va = sp["train"], sp["valid"]
+    models = {}
+    for kind, hp in TINY.items():
+        m = make_model(kind, **hp)
+        m.fit([s.x for s in tr], [s.y for s in tr], valid=([s.x for s in va], [s.y for s in va]), seed=3,
+              inputs=["r"], targets=["f"], units={"r": "ohm", "f": "N"})
+        models[kind] = m
+    return models, sp["test"]
+
+
+def _rmse(m, seqs):
+    return float(np.sqrt(np.mean(np.concatenate([(m.predict(s.x) - s.y) ** 2 for s in seqs]))))
+
+
+def test_registry_has_the_paper_models_and_ours():
+    assert {"mean", "linear", "cubic", "mlp", "gru", "lstm", "tcn"} <= set(MODELS)
+    with pytest.raises(ValueError, match="unknown hyper-parameters"):
+        make_model("lstm", hiden=[3])
+
+
+@pytest.mark.parametrize("kind", [k for k in TINY if k != "mean"])
+def test_each_model_beats_the_mean_on_held_out(fitted, kind):
+    models, test = fitted
+    assert _rmse(models[kind], test) < 0.5 * _rmse(models["mean"], test)
+
+
+@pytest.mark.parametrize("kind", list(TINY))
+def test_streaming_equals_batch(fitted, kind):
+    models, test = fitted
+    m, x = models[kind], test[0].x
+    st = m.stream()
+    y_stream = st.run(x)
+    np.testing.assert_allclose(y_stream, m.predict(x), rtol=1e-4, atol=1e-4)
+    st.reset()  # reset starts over
+    np.testing.assert_allclose(st.run(x[:30]), y_stream[:30], rtol=1e-6, atol=1e-6)
+
+
+@pytest.mark.parametrize("kind", list(TINY))
+def test_checkpoint_round_trip(fitted, kind, tmp_path):
+    m = fitted[0][kind]
+    x = fitted[1][0].x
+    d = save_checkpoint(m, tmp_path / kind, dataset={"manifest_sha256": "abc"})
+    cfg = json.loads((d / "config.json").read_text())
+    assert cfg["model_class"] == kind and cfg["inputs"] == [{"name": "r", "units": "ohm"}]
+    assert cfg["normalization"]["x"]["mean"] == pytest.approx(list(m.x_norm.mean))
+    assert cfg["dataset"]["manifest_sha256"] == "abc" and cfg["seed"] == 3 and "version" in cfg
+    assert (d / "model.safetensors").is_file() and not list(d.glob("*.pt")) and not list(d.glob("*.pkl"))
+    m2 = load_checkpoint(d)
+    np.testing.assert_array_equal(m2.predict(x), m.predict(x))
+    np.testing.assert_allclose(m2.stream().run(x[:40]), m.predict(x[:40]), rtol=1e-4, atol=1e-4)
+
+
+def test_training_is_seeded():
+    seqs = synth(6)
+    xs, ys = [s.x for s in seqs], [s.y for s in seqs]
+    hp = {"max_epochs": 2, "patience": 2, "channels": 4, "dilations": [1, 2]}
+    a = make_model("tcn", **hp).fit(xs, ys, seed=5).predict(xs[0])
+    b = make_model("tcn", **hp).fit(xs, ys, seed=5).predict(xs[0])
+    c = make_model("tcn", **hp).fit(xs, ys, seed=6).predict(xs[0])
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, c)
+
+
+def test_early_stopping_stops_after_patience():
+    net = torch.nn.Linear(1, 1)
+    x = torch.randn(64, 1)
+    h = train_model(net, (x, 2 * x), (x, 2 * x), TrainConfig(lr=0.0, max_epochs=50, patience=3), progress=False)
+    assert h.stopped_early and h.epochs == 4 and h.best_epoch == 0
+
+
+def test_polynomial_regression_exact_and_online():
+    rng = np.random.default_rng(0)
+    X = rng.uniform(-2, 2, (200, 1))
+    y = 1.0 - 2.0 * X + 0.5 * X**3
+    est = PolynomialRegression(3).fit(X, y)
+    np.testing.assert_allclose(est.coef_, [[1.0, -2.0, 0.0, 0.5]], atol=1e-6)
+    online = PolynomialRegression(3).partial_fit(X[:80], y[:80]).partial_fit(X[80:], y[80:])
+    np.testing.assert_allclose(online.predict(X), est.predict(X), atol=1e-9)
+    assert est.get_params() == {"degree": 3, "ridge": 1e-10}
+
+
+def test_edge_windows_and_split():
+    z = np.arange(5.0)[:, None]
+    w = edge_windows(z, 3)
+    assert w.shape == (5, 3, 1)
+    np.testing.assert_array_equal(w[0, :, 0], [0, 0, 0])
+    np.testing.assert_array_equal(w[4, :, 0], [2, 3, 4])
+    sp = stratified_split(synth(), "frequency_hz", 1)
+    assert {s.meta["frequency_hz"] for s in sp["test"]} == {0.5, 1.0, 2.0}
+    keys = [s.key for v in sp.values() for s in v]
+    assert len(keys) == len(set(keys)) == 12
