@@ -182,7 +182,7 @@ class VelostatFilmGeometry(FamilyGeometry):
         self.decoded_xy = read_channel(view, "position_measured")
         self.caption = ("film between PET-ITO sheets (top one translucent)"
                         + (f", thickness x{self.z_stretch:g}" if self.z_stretch != 1 else "")
-                        + ("\nred dot: ITO-decoded position" if self.decoded_xy is not None else ""))
+                        + ("\nred pin: ITO-decoded position" if self.decoded_xy is not None else ""))
 
     def _levels(self, d: np.ndarray, zs, scale: float):
         return [self.z_stretch * z - scale * d * z / self.h for z in zs]
@@ -227,10 +227,13 @@ class VelostatFilmGeometry(FamilyGeometry):
         parts = [(top, dict(color=self.SHEET_COLOR, opacity=0.22, lighting=True, smooth_shading=True))]
         if self.decoded_xy is not None and index is not None:
             xy = self.decoded_xy[index]
-            if np.all(np.isfinite(xy)):
-                r = 0.012 * max(self.lx, self.ly)
-                c = (float(xy[0]), float(xy[1]), self.top_z_m + r)
-                parts.append((pv.Sphere(radius=r, center=c), dict(color="red", lighting=True)))
+            if np.all(np.isfinite(xy)):  # a red pin, standing clear of the (translucent) tip
+                L = max(self.lx, self.ly)
+                z1 = self.top_z_m + 0.2 * L
+                stem = pv.Cylinder(center=(float(xy[0]), float(xy[1]), 0.5 * (self.top_z_m + z1)), direction=(0, 0, 1),
+                                   radius=0.004 * L, height=z1 - self.top_z_m)
+                head = pv.Sphere(radius=0.015 * L, center=(float(xy[0]), float(xy[1]), z1))
+                parts.append((stem.merge(head), dict(color="red", lighting=True)))
         return parts
 
     def taxel_points(self) -> np.ndarray:

@@ -211,11 +211,15 @@ class Scene:
         p = self.view.position_m[k]
         if not np.all(np.isfinite(p)):
             return None
+        return self.world_to_pixel((p[0], p[1], self.geom.top_z_m))
+
+    def world_to_pixel(self, xyz) -> tuple[int, int]:
+        """(row, col) in the image of a point in drawn world coordinates (after draw)."""
         from vtkmodules.vtkRenderingCore import vtkCoordinate
 
         coord = vtkCoordinate()
         coord.SetCoordinateSystemToWorld()
-        coord.SetValue(float(p[0]), float(p[1]), float(self.geom.top_z_m))
+        coord.SetValue(float(xyz[0]), float(xyz[1]), float(xyz[2]))
         x, y = coord.GetComputedDisplayValue(self.pl.renderer)
         w, hgt = self.pl.window_size
         return (int(hgt - 1 - y), int(x))
