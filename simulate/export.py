@@ -3,7 +3,9 @@ plus a .pvd collection that holds the times.
 
 Points are the undeformed geometry (m) with point data "displacement" (m, the true deflection: use
 ParaView's *Warp By Vector* with a scale factor to see it) and every field in SI units as recorded
-(deformation m, pressure Pa, strain 1, resistance ohm, force_taxel N). Field data: time (s), force (N).
+(deformation m, pressure Pa, strain 1, resistance ohm, force_taxel N; NaN where a field has no value, e.g.
+the N-type column fields on the top surface). Thin stacks are written at their true thickness (the
+pictures' z stretch is not applied). Field data: time (s), force (N).
 Layout::
 
     DIR/<episode>.pvd
@@ -37,13 +39,13 @@ def export_episode(
     out = Path(out_dir)
     sub = out / view.ep_id
     sub.mkdir(parents=True, exist_ok=True)
-    geom = make_geometry(view)
+    geom = make_geometry(view, display=False)
     idx = np.arange(0, view.n_samples, max(1, int(stride)))
     entries: list[str] = []
     for j, k in enumerate(idx):
         k = int(k)
         t = float(view.time_s[k])
-        body = geom.body(view.deformation_m[k], {n: v[k] for n, v in view.fields.items()}, 0.0)
+        body = geom.body(view.deformation_m[k], {n: v[k] for n, v in view.fields.items()}, 0.0, index=k)
         grid = body.cast_to_unstructured_grid()
         grid.field_data["time"] = np.array([t])
         grid.field_data["force"] = np.array([float(view.force_n[k])])

@@ -9,7 +9,9 @@ A *field* is a recorded channel mapped onto the taxels, shape (T, N):
     `taxel_channel` (N,) (every taxel shows the value of the channel it is wired to; cnt_pdms has one
     channel for the whole pad, so its resistance colours the pad uniformly, frame by frame).
 Families whose channels have other shapes register a mapper in `FIELD_MAPPERS` (family -> "module:fn",
-fn(rec, ep_id, channel) -> (T, N) array).
+fn(rec, ep_id, channel) -> (T, n) array, or ((T, n) array, caption)); n need not be the taxel count (the
+N-type columns are (T, 36 x 3)): the family's geometry knows where each value sits. See
+simulate/fields_families.py.
 """
 
 from __future__ import annotations
@@ -44,7 +46,11 @@ FIELDS: dict[str, FieldSpec] = {
 }
 
 # family -> "module:function" mapping a channel onto the taxels (see module docstring); one line per family
-FIELD_MAPPERS: dict[str, str] = {}
+FIELD_MAPPERS: dict[str, str] = {
+    "fabric": "simulate.fields_families:fabric_field",
+    "velostat": "simulate.fields_families:velostat_field",
+    "ntype": "simulate.fields_families:ntype_field",
+}
 
 
 class FieldError(ValueError):
@@ -68,13 +74,20 @@ def _default_mapper(rec: Recording, ep_id: str, channel: str) -> np.ndarray:
     raise FieldError(f"channel '{channel}' has dims {dims}; no mapping onto taxels for this family")
 
 
-def map_to_taxels(rec: Recording, ep_id: str, channel: str) -> np.ndarray:
-    """(T, N) SI values of `channel` on the taxels."""
+def _map(rec: Recording, ep_id: str, channel: str) -> tuple[np.ndarray, str | None]:
     fam = rec.sensor_attrs.get("family", "")
     if fam in FIELD_MAPPERS:
         module, fn = FIELD_MAPPERS[fam].split(":")
-        return getattr(importlib.import_module(module), fn)(rec, ep_id, channel)
-    return _default_mapper(rec, ep_id, channel)
+        out = getattr(importlib.import_module(module), fn)(rec, ep_id, channel)
+        if isinstance(out, tuple):
+            return np.asarray(out[0], dtype=np.float64), out[1]
+        return np.asarray(out, dtype=np.float64), None
+    return _default_mapper(rec, ep_id, channel), None
+
+
+def map_to_taxels(rec: Recording, ep_id: str, channel: str) -> np.ndarray:
+    """(T, N) SI values of `channel` on the taxels (or on the family's own value sites, see FIELD_MAPPERS)."""
+    return _map(rec, ep_id, channel)[0]
 
 
 @dataclass
@@ -148,9 +161,11 @@ def load_episode(rec: Recording, episode: str | int | None = None, fields: list[
     for name in want:
         ch = FIELDS[name].channel
         if ch in have:
-            out[name] = map_to_taxels(rec, ep, ch)
+            out[name], note = _map(rec, ep, ch)
             units[name] = rec.units(ep, ch)
-            if rec.dim_names(ep, ch) == ("time", "channel"):
+            if note:
+                notes[name] = note
+            elif rec.dim_names(ep, ch) == ("time", "channel"):
                 nc = rec.shape(ep, ch)[1]
                 notes[name] = (f"{name}: {nc} readout channel{'s' if nc != 1 else ''} over "
                                f"{out[name].shape[1]} taxels, shown on the taxels wired to {'them' if nc != 1 else 'it'}")

@@ -21,39 +21,66 @@ from simulate.fields import EpisodeView, config_section
 # family -> "module:Class"; one line per family
 GEOMETRIES: dict[str, str] = {
     "cnt_pdms": "simulate.geometry:PadGeometry",
+    "fabric": "simulate.geometry_families:FabricStackGeometry",
+    "velostat": "simulate.geometry_families:VelostatFilmGeometry",
+    "ntype": "simulate.geometry_families:NtypeArrayGeometry",
 }
 
 
 class FamilyGeometry:
     """Interface. Built once per episode view; `body` is called per frame.
 
-    body(deformation_m (N,), point_fields {name: (N,) SI}, scale) -> pyvista dataset of the sensing body,
-        deformed by `scale` x the deflection, with each field as point data and the true (unscaled)
-        displacement vectors in point data "displacement" (m).
+    body(deformation_m (N,), point_fields {name: (n,) SI}, scale, index=k) -> pyvista dataset of the sensing
+        body, deformed by `scale` x the deflection, with each field as point data and the true (unscaled)
+        displacement vectors in point data "displacement" (m). `index` is the sample (for families that
+        draw more recorded state than the deformation field, e.g. the N-type top electrodes).
     static_parts() -> [(mesh, add_mesh kwargs)]: layers that do not deform (electrodes, substrate, sheets).
-    top_z_m: height of the contact surface; size_m: (x, y, z) extent, for the camera.
+    frame_parts(deformation_m, scale, index, field) -> [(mesh, add_mesh kwargs)]: parts redrawn every frame
+        that are not coloured by the field (a translucent sheet over the film, columns under a skin).
+    top_z_m: height of the contact surface as drawn; size_m: (x, y, z) extent as drawn, for the camera.
+    real_top_z_m: the true height of the contact surface (differs from top_z_m where `z_stretch` != 1).
+    z_stretch: thin stacks are drawn this many times thicker than they are (stated on the picture); the
+        export (display=False) always writes true geometry.
+    caption: a line added under the picture (what is drawn how). smooth: smooth shading suits the body.
+    peak_deflection_m: the largest deflection the body shows over the episode (sets the exaggeration).
     taxel_points(scale=0) -> (N, 3): where each taxel's value sits on the body (for tests and probes).
     """
 
     top_z_m: float
     size_m: tuple[float, float, float]
+    z_stretch: float = 1.0
+    caption: str = ""
+    smooth: bool = True
 
-    def body(self, deformation_m: np.ndarray, point_fields: dict[str, np.ndarray], scale: float) -> Any:
+    @property
+    def real_top_z_m(self) -> float:
+        return self.top_z_m / self.z_stretch
+
+    @property
+    def peak_deflection_m(self) -> float:
+        return float(np.nanmax(self.view.deformation_m, initial=0.0)) if hasattr(self, "view") else 0.0
+
+    def body(self, deformation_m: np.ndarray, point_fields: dict[str, np.ndarray], scale: float,
+             index: int | None = None) -> Any:
         raise NotImplementedError
 
     def static_parts(self) -> list[tuple[Any, dict]]:
+        return []
+
+    def frame_parts(self, deformation_m: np.ndarray, scale: float, index: int, field: str) -> list[tuple[Any, dict]]:
         return []
 
     def taxel_points(self) -> np.ndarray:
         raise NotImplementedError
 
 
-def make_geometry(view: EpisodeView) -> FamilyGeometry:
+def make_geometry(view: EpisodeView, display: bool = True) -> FamilyGeometry:
+    """The family's geometry for `view`; display=False: true proportions (no z_stretch), for the export."""
     fam = view.family
     if fam not in GEOMETRIES:
         raise ValueError(f"no geometry for sensor family '{fam}' (allowed: {', '.join(sorted(GEOMETRIES))})")
     module, cls = GEOMETRIES[fam].split(":")
-    return getattr(importlib.import_module(module), cls)(view)
+    return getattr(importlib.import_module(module), cls)(view, display=display)
 
 
 def _pv():
@@ -79,7 +106,8 @@ class PadGeometry(FamilyGeometry):
 
     n_layers = 4
 
-    def __init__(self, view: EpisodeView):
+    def __init__(self, view: EpisodeView, display: bool = True):
+        self.view = view
         pad = config_section(view, "pad")
         self.lx, self.ly, self.h = float(pad["size_x_m"]), float(pad["size_y_m"]), float(pad["thickness_m"])
         self.nx, self.ny = int(pad["taxels_x"]), int(pad["taxels_y"])
@@ -103,7 +131,7 @@ class PadGeometry(FamilyGeometry):
         self._ref = np.stack([self._x.ravel(), self._y.ravel(), self._z.ravel()], axis=1)
         self._dims = (self.nx + 2, self.ny + 2, self.n_layers + 1)
 
-    def body(self, deformation_m, point_fields, scale):
+    def body(self, deformation_m, point_fields, scale, index=None):
         pv = _pv()
         d = np.asarray(deformation_m, dtype=np.float64)[self._node_taxel] * self._zfrac  # (P,), + down
         disp = np.zeros_like(self._ref)
@@ -124,20 +152,22 @@ class PadGeometry(FamilyGeometry):
         return np.stack([gx.ravel(), gy.ravel(), np.full(gx.size, self.h)], axis=1)
 
 
-def indenter_mesh(view: EpisodeView, k: int, top_z_m: float, scale: float):
+def indenter_mesh(view: EpisodeView, k: int, top_z_m: float, scale: float, real_top_z_m: float | None = None):
     """The indenter at sample k, its penetration below `top_z_m` exaggerated by `scale` like the body.
 
     Box: a block of the configured footprint, 1.5 x its larger side tall; sphere: the configured radius.
-    None when the recording has no indenter position.
+    None when the recording has no indenter position. `real_top_z_m`: the true surface height when the
+    body is drawn thicker than it is (top_z_m is then the drawn one); the gap above it is kept true.
     """
     pv = _pv()
     ind = config_section(view, "indenter")
     p = np.asarray(view.position_m[k], dtype=np.float64)
     if not np.all(np.isfinite(p)):
         return None
-    z = p[2]
-    if z < top_z_m:  # penetrating: drawn as deep as the exaggerated dent
-        z = top_z_m - scale * (top_z_m - z)
+    real_top = top_z_m if real_top_z_m is None else real_top_z_m
+    z = top_z_m + (p[2] - real_top)
+    if p[2] < real_top:  # penetrating: drawn as deep as the exaggerated dent
+        z = top_z_m - scale * (real_top - p[2])
     if ind.get("shape", "box") == "sphere":
         r = float(ind["radius_m"])
         return pv.Sphere(radius=r, center=(p[0], p[1], z + r), theta_resolution=32, phi_resolution=32)

@@ -7,6 +7,9 @@ a figure and `save()` writes a PNG and closes it. Any family, any experiment:
     time_series(axes, t, {label: (values, unit)})  stacked channels against time
     creep_curve(ax, t, values, hold_start_s)       change since the start of a hold, log time
     taxel_map(ax, values, taxel_xy_m, label, unit) a per-taxel field on its grid (errors, sensitivities...)
+    unit_dendrogram(ax, curves)                    Ward linkage of units' R(F) curves (velostat's 36 units)
+    position_error_map(ax, truth_xy, decoded_xy)   decoded vs true contact position over the film (one force)
+    position_error_maps(axes, truth, decoded, F)   the same, one panel per force, one colour range
     episode_overview(view, path)                   force, deformation peak and resistance of one episode
 """
 
@@ -134,7 +137,8 @@ def creep_curve(ax, t: np.ndarray, values: np.ndarray, hold_start_s: float, *, l
 
 
 def taxel_map(ax, values: np.ndarray, taxel_xy_m: np.ndarray, *, label: str = "", unit: str = "",
-              cmap: str = "viridis", annotate: bool | None = None, vmin: float | None = None, vmax: float | None = None):
+              cmap: str = "viridis", annotate: bool | None = None, vmin: float | None = None, vmax: float | None = None,
+              colorbar: bool = True):
     """A per-taxel value (N,) drawn on its grid (taxel centres (N, 2) in m, regular grid assumed), mm axes,
     colour bar in `unit`. Annotated with the numbers when the grid is small (<= 8 x 8) unless told."""
     xy = np.asarray(taxel_xy_m, dtype=np.float64)
@@ -150,8 +154,9 @@ def taxel_map(ax, values: np.ndarray, taxel_xy_m: np.ndarray, *, label: str = ""
     py = (ys[1] - ys[0]) if ys.size > 1 else px
     ext = np.array([xs[0] - px / 2, xs[-1] + px / 2, ys[0] - py / 2, ys[-1] + py / 2]) * 1e3
     im = ax.imshow(grid, origin="lower", extent=ext, cmap=cmap, vmin=vmin, vmax=vmax, interpolation="nearest")
-    cb = ax.figure.colorbar(im, ax=ax, shrink=0.85)
-    cb.set_label(f"{label} ({unit})" if unit else label)
+    if colorbar:
+        cb = ax.figure.colorbar(im, ax=ax, shrink=0.85)
+        cb.set_label(f"{label} ({unit})" if unit else label)
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("y (mm)")
     ax.set_aspect("equal")
@@ -174,6 +179,101 @@ def taxel_error_map(ax, predicted: np.ndarray, truth: np.ndarray, taxel_xy_m: np
     if metric not in per:
         raise ValueError(f"taxel_error_map: metric must be one of {', '.join(per)} (got '{metric}')")
     return taxel_map(ax, per[metric](e), taxel_xy_m, label=f"{metric.upper()} error", unit=unit, cmap="magma", **kw)
+
+
+def unit_dendrogram(ax, curves: np.ndarray, *, labels: Sequence[str] | None = None, n_groups: int | None = None,
+                    log: bool = False, unit: str = "ohm", Z: np.ndarray | None = None, title: str | None = None):
+    """Ward dendrogram (scipy.cluster.hierarchy) of units' response curves, (U, K): one row per unit (e.g.
+    the resistance at K force levels). Leaves are labelled 1..U (unit index + 1) unless told; with n_groups
+    the branches of the cut that leaves n_groups clusters are coloured apart and the cut is drawn.
+    log=True clusters log(curves). Returns (ax, Z, leaves): Z the linkage, leaves the unit order drawn."""
+    from scipy.cluster.hierarchy import dendrogram, linkage
+
+    X = np.asarray(curves, dtype=np.float64)
+    if X.ndim != 2 or X.shape[0] < 2:
+        raise ValueError(f"unit_dendrogram: curves must be (units >= 2, levels); got shape {X.shape}")
+    if log:
+        X = np.log(X)
+    if Z is None:
+        Z = linkage(X, method="ward")
+    labels = list(labels) if labels is not None else [str(i + 1) for i in range(X.shape[0])]
+    h = np.sort(Z[:, 2])
+    thr = None
+    if n_groups and 1 < n_groups <= X.shape[0]:
+        thr = 0.5 * (h[-n_groups] + h[-n_groups + 1]) if n_groups > 1 else None
+    d = dendrogram(Z, ax=ax, labels=labels, color_threshold=thr if thr is not None else 0.0,
+                   above_threshold_color="0.4", leaf_font_size=7)
+    if thr is not None:
+        ax.axhline(thr, color="0.3", lw=0.8, ls="--")
+    ax.set_xlabel("unit")
+    ax.set_ylabel("Ward merge distance" + (" (log R)" if log else f" ({unit})"))
+    if title:
+        ax.set_title(title)
+    return ax, Z, d["leaves"]
+
+
+def _regular_grid(xy: np.ndarray) -> bool:
+    xs, ys = np.unique(np.round(xy[:, 0], 9)), np.unique(np.round(xy[:, 1], 9))
+    return xs.size * ys.size == xy.shape[0] and len(np.unique(np.round(xy, 9), axis=0)) == xy.shape[0]
+
+
+def position_error_map(ax, truth_xy_m: np.ndarray, decoded_xy_m: np.ndarray, *, size_m: tuple[float, float] | None = None,
+                       vmax: float | None = None, arrows: float | None = 5.0, title: str | None = None,
+                       colorbar: bool = True):
+    """Decoded vs true contact position over the film: |decoded - true| (mm) at each true site (P, 2 in m;
+    NaN decoded = no reading, left blank), on the site grid when the sites are one, else as squares; arrows
+    from each true site toward its decoded position, `arrows` x longer than the error (None: none). The
+    film outline is drawn when size_m is given. Returns (ax, error_mm (P,))."""
+    t = np.asarray(truth_xy_m, dtype=np.float64).reshape(-1, 2)
+    d = np.asarray(decoded_xy_m, dtype=np.float64).reshape(-1, 2)
+    if t.shape != d.shape:
+        raise ValueError(f"position_error_map: {t.shape[0]} true sites but {d.shape[0]} decoded positions")
+    err = np.linalg.norm(d - t, axis=1) * 1e3
+    vmax = vmax if vmax is not None else (float(np.nanmax(err)) if np.isfinite(err).any() else 1.0)
+    if _regular_grid(t):
+        taxel_map(ax, err, t, label="position error", unit="mm", cmap="magma_r", vmin=0.0, vmax=vmax,
+                  annotate=False, colorbar=colorbar)
+    else:
+        sc = ax.scatter(t[:, 0] * 1e3, t[:, 1] * 1e3, c=err, cmap="magma_r", vmin=0.0, vmax=vmax, marker="s", s=60)
+        if colorbar:
+            ax.figure.colorbar(sc, ax=ax, shrink=0.85).set_label("position error (mm)")
+        ax.set_xlabel("x (mm)")
+        ax.set_ylabel("y (mm)")
+        ax.set_aspect("equal")
+    if arrows:
+        ok = np.isfinite(d).all(axis=1)
+        v = (d - t)[ok] * 1e3 * arrows
+        ax.quiver(t[ok, 0] * 1e3, t[ok, 1] * 1e3, v[:, 0], v[:, 1], angles="xy", scale_units="xy", scale=1.0,
+                  color="tab:cyan", width=0.006)
+    if size_m is not None:
+        lx, ly = size_m[0] * 1e3 / 2, size_m[1] * 1e3 / 2
+        ax.plot([-lx, lx, lx, -lx, -lx], [-ly, -ly, ly, ly, -ly], color="0.3", lw=0.8)
+        ax.set_xlim(-lx * 1.05, lx * 1.05)
+        ax.set_ylim(-ly * 1.05, ly * 1.05)
+    if title is not None:
+        ax.set_title(title + (f" (arrows x{arrows:g})" if arrows else ""), fontsize=9)
+    return ax, err
+
+
+def position_error_maps(axes: Sequence, truth_xy_m: np.ndarray, decoded_xy_m: np.ndarray, forces_n: Sequence[float], *,
+                        size_m: tuple[float, float] | None = None, arrows: float | None = 5.0, label: str = ""):
+    """position_error_map per force level: decoded_xy_m (F, P, 2) at the P sites truth_xy_m (P, 2), one panel
+    per force on `axes`, one colour range (0 .. the largest error) so the panels compare.
+    Returns (axes, error_mm (F, P))."""
+    axes = list(np.ravel(axes))
+    d = np.asarray(decoded_xy_m, dtype=np.float64)
+    if d.ndim != 3 or d.shape[0] != len(forces_n):
+        raise ValueError(f"position_error_maps: decoded_xy_m must be (forces={len(forces_n)}, sites, 2); got {d.shape}")
+    if len(axes) < len(forces_n):
+        raise ValueError(f"position_error_maps: {len(forces_n)} forces but {len(axes)} axes")
+    t = np.asarray(truth_xy_m, dtype=np.float64)
+    err = np.linalg.norm(d - t[None], axis=-1) * 1e3
+    vmax = float(np.nanmax(err)) if np.isfinite(err).any() else 1.0
+    for i, (ax, f) in enumerate(zip(axes, forces_n)):
+        position_error_map(ax, t, d[i], size_m=size_m, vmax=vmax, arrows=arrows,
+                           title=f"{label + ' ' if label else ''}{f:g} N: mean {np.nanmean(err[i]):.2f} mm",
+                           colorbar=(i == len(forces_n) - 1))
+    return axes, err
 
 
 def episode_overview(view, path: str | Path, field: str = "deformation") -> Path:

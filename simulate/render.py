@@ -21,6 +21,7 @@ from simulate.fields import FIELDS, EpisodeView, FieldError, nice_exaggeration
 from simulate.geometry import FamilyGeometry, indenter_mesh, make_geometry
 
 BACKGROUND = "white"
+NAN_COLOR = "#d9d9d9"  # where a field has no value (velostat resistance off the contact, N-type columns vs skin)
 
 
 class VizUnavailable(RuntimeError):
@@ -73,6 +74,7 @@ class RenderOptions:
     show_indenter: bool = True
     lighting: bool = True
     show_text: bool = True
+    show_parts: bool = True  # the family's uncoloured parts (sheets, electrodes, base); off for pixel probes
 
 
 class Scene:
@@ -88,7 +90,7 @@ class Scene:
         self.spec = FIELDS[field]
         self.geom: FamilyGeometry = make_geometry(view)
         h = self.geom.top_z_m
-        self.scale = opts.exaggeration or nice_exaggeration(float(np.nanmax(view.deformation_m, initial=0.0)), h)
+        self.scale = opts.exaggeration or nice_exaggeration(self.geom.peak_deflection_m, h)
         try:
             self.pl = self.pv.Plotter(off_screen=off_screen, window_size=list(opts.window_size))
         except Exception as exc:  # pragma: no cover - no OpenGL at all
@@ -96,18 +98,20 @@ class Scene:
         self.pl.set_background(BACKGROUND)
         self._body_actor = None
         self._ind_actor = None
+        self._part_actors: list = []
         self._texts: list = []
         self._bar = False
         self._camera_set = False
-        for mesh, kw in self.geom.static_parts():
-            self.pl.add_mesh(mesh, **kw)
+        if opts.show_parts:
+            for mesh, kw in self.geom.static_parts():
+                self.pl.add_mesh(mesh, **_lit(kw, opts.lighting))
 
     def values(self, k: int) -> np.ndarray:
         return self.view.fields[self.field][k] * self.spec.scale
 
     def episode_clim(self) -> tuple[float, float]:
         v = self.view.fields[self.field] * self.spec.scale
-        return _clim(float(np.nanmin(v)), float(np.nanmax(v)))
+        return _clim(*_nanrange(v))
 
     def _font(self, base: int) -> int:
         return max(6, int(round(base * self.opts.window_size[1] / 640)))
@@ -116,7 +120,7 @@ class Scene:
         """The colour range of sample k: the frame's own range; the episode's where the frame is uniform
         (a single readout channel colours the whole pad alike)."""
         vals = self.values(k)
-        lo, hi = float(np.nanmin(vals)), float(np.nanmax(vals))
+        lo, hi = _nanrange(vals)
         if not hi - lo > 1e-9 * max(abs(hi), abs(lo), 1e-30):
             return self.episode_clim()
         return _clim(lo, hi)
@@ -125,13 +129,19 @@ class Scene:
         pl, opts, view = self.pl, self.opts, self.view
         vals = self.values(k)
         clim = clim or opts.clim or self.frame_clim(k)
-        body = self.geom.body(view.deformation_m[k], {self.field: vals}, self.scale)
+        body = self.geom.body(view.deformation_m[k], {self.field: vals}, self.scale, index=k)
         if self._body_actor is not None:
             pl.remove_actor(self._body_actor, render=False)
         self._body_actor = pl.add_mesh(
             body, scalars=self.field, cmap=self.spec.cmap, clim=list(clim), lighting=opts.lighting,
-            smooth_shading=opts.lighting, show_scalar_bar=False,
+            smooth_shading=opts.lighting and self.geom.smooth, show_scalar_bar=False, nan_color=NAN_COLOR,
         )
+        for a in self._part_actors:
+            pl.remove_actor(a, render=False)
+        self._part_actors = []
+        if opts.show_parts:
+            for mesh, kw in self.geom.frame_parts(view.deformation_m[k], self.scale, k, self.field):
+                self._part_actors.append(pl.add_mesh(mesh, **_lit(kw, opts.lighting)))
         if not self._bar:
             w, hgt = opts.window_size
             pl.add_scalar_bar(
@@ -147,7 +157,7 @@ class Scene:
             pl.remove_actor(self._ind_actor, render=False)
             self._ind_actor = None
         if opts.show_indenter:
-            ind = indenter_mesh(view, k, self.geom.top_z_m, self.scale)
+            ind = indenter_mesh(view, k, self.geom.top_z_m, self.scale, self.geom.real_top_z_m)
             if ind is not None:
                 self._ind_actor = pl.add_mesh(ind, color="#9aa4ad", opacity=0.35, lighting=opts.lighting)
         for a in self._texts:
@@ -163,6 +173,8 @@ class Scene:
             top.GetTextProperty().SetVerticalJustificationToTop()
             self._texts.append(top)
             foot = f"deformation shown x{self.scale:g}"
+            if self.geom.caption:
+                foot += "; " + self.geom.caption
             if self.field in view.notes:
                 foot += "\n" + view.notes[self.field]
             self._texts.append(pl.add_text(foot, position=(0.01 * w, 4), font_size=self._font(9), color="black"))
@@ -199,11 +211,15 @@ class Scene:
         p = self.view.position_m[k]
         if not np.all(np.isfinite(p)):
             return None
+        return self.world_to_pixel((p[0], p[1], self.geom.top_z_m))
+
+    def world_to_pixel(self, xyz) -> tuple[int, int]:
+        """(row, col) in the image of a point in drawn world coordinates (after draw)."""
         from vtkmodules.vtkRenderingCore import vtkCoordinate
 
         coord = vtkCoordinate()
         coord.SetCoordinateSystemToWorld()
-        coord.SetValue(float(p[0]), float(p[1]), float(self.geom.top_z_m))
+        coord.SetValue(float(xyz[0]), float(xyz[1]), float(xyz[2]))
         x, y = coord.GetComputedDisplayValue(self.pl.renderer)
         w, hgt = self.pl.window_size
         return (int(hgt - 1 - y), int(x))
@@ -213,6 +229,22 @@ class Scene:
 
     def close(self) -> None:
         self.pl.close()
+
+
+def _lit(kw: dict, lighting: bool) -> dict:
+    """add_mesh kwargs of a part, unlit (flat colours) where the frame is drawn without lighting."""
+    kw = dict(kw)
+    if not lighting:
+        kw["lighting"] = False
+        kw.pop("smooth_shading", None)
+    return kw
+
+
+def _nanrange(v: np.ndarray) -> tuple[float, float]:
+    """(min, max) over the finite values; (nan, nan) where there are none (no touch)."""
+    v = np.asarray(v, dtype=np.float64)
+    f = v[np.isfinite(v)]
+    return (float(f.min()), float(f.max())) if f.size else (float("nan"), float("nan"))
 
 
 def _clim(lo: float, hi: float) -> tuple[float, float]:

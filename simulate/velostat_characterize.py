@@ -160,7 +160,7 @@ def characterize_velostat(cfg: SceneConfig, backend: str = "warp", device: str =
 
     # --- position error vs force, 4-wire and 5-wire, at the 36 unit centres
     forces = np.array([0.5, 1.0, 2.0, 3.0, 5.0, 7.0, 10.0, 15.0])
-    pos_err = {}
+    pos_err, pos_decoded = {}, {}
     for wiring in ("4-wire", "5-wire"):
         c2 = cfg.model_copy(deep=True)
         c2.sensor.readout.position_wiring = wiring
@@ -173,7 +173,9 @@ def characterize_velostat(cfg: SceneConfig, backend: str = "warp", device: str =
                 protos.append(_proto(c2, tt, ff, xy, dur_p))
                 truth.append(xy)
         _, out = run(c2, s2, protos, load)
-        e = np.linalg.norm(out["position_measured"][:, -1].astype(float) - np.asarray(truth), axis=-1) * 1e3
+        dec = out["position_measured"][:, -1].astype(float)
+        pos_decoded[wiring] = dec.reshape(len(forces), len(centres), 2)
+        e = np.linalg.norm(dec - np.asarray(truth), axis=-1) * 1e3
         e = e.reshape(len(forces), len(centres))
         pos_err[wiring] = (np.nanmean(e, axis=1), np.nanmax(e, axis=1))
 
@@ -230,7 +232,14 @@ def characterize_velostat(cfg: SceneConfig, backend: str = "warp", device: str =
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
-        fig, ax = plt.subplots(1, 3, figsize=(13, 3.6))
+        from simulate.plots import position_error_maps, unit_dendrogram
+
+        fig, ax = plt.subplots(2, 3, figsize=(13, 7.4))
+        unit_dendrogram(ax[1, 0], R, Z=Z, n_groups=k_elbow, title=f"36 units, Ward on R(F): {k_elbow} groups")
+        sel = [0, len(forces) - 1]
+        position_error_maps(ax[1, 1:], centres, pos_decoded["4-wire"][sel], forces[sel],
+                            size_m=(cfg.pad.size_x_m, cfg.pad.size_y_m), label="4-wire")
+        ax = ax[0]
         ax[0].semilogy(levels, r_load, "o-", label="end of ramp")
         ax[0].semilogy(levels, r_end, "s--", label="after 30 s hold")
         ax[0].set_xlabel("force (N)"), ax[0].set_ylabel("R measured (ohm)"), ax[0].legend()
