@@ -1,0 +1,275 @@
+"""Fine-tuning a compensator pre-trained on piezotwin data on a real recording (sim-to-real).
+
+Input mapping (simulated channel <-> real channel), explicit and recorded in every checkpoint:
+  1. rate: the real recording is resampled to the checkpoint's sample rate (moving average over one
+     output period, then linear interpolation onto a uniform clock), so that a temporal model sees
+     the same seconds of history it was trained on.
+  2. transform ``log``: x = ln(reading). The simulated input is ln(resistance_measured / ohm), the real
+     one ln(raw board reading) (the Lupasic board reads higher = more resistance). A power law
+     G ~ p^n makes ln R ~ a - n ln F, so an unknown gain between raw counts and ohms is a pure offset
+     in x, and the exponent mismatch a scale.
+  3. input z-score over the real fine-tuning runs pooled (not per recording: a per-recording z-score
+     would depend on how much of the run is unloaded and on its peak force, 2 N vs 45 N in the
+     Lupasic runs, and would erase the absolute level that says which force it is). This replaces the
+     simulator's statistics and needs inputs only, no labels (it is also the "zero-shot, restandardised"
+     baseline).
+
+Freeze policy (``head``, the default): the feature layers are frozen (TCN: the input 1x1 conv and
+the dilated causal convolutions; MLP: every layer but the last; GRU/LSTM: the recurrent layers); they
+hold the temporal dynamics (creep and loading-history memory) learned from plenty of simulated data.
+Retrained: the output head (TCN: output conv + the linear skip path from the input; MLP/RNN: the last
+dense layer) and a learnable affine of the normalised input (scale a, shift b per channel, started at
+1, 0 after the re-standardisation of step 3), folded back into the checkpoint's input z-score when
+saved. With one to a few real runs (a few thousand samples) this is tens of parameters instead of
+thousands. ``none`` retrains every layer (same small learning rate), for comparison.
+
+Early stopping uses held-out real runs (whole episodes, never samples of a training run).
+"""
+
+from __future__ import annotations
+
+import copy
+import fnmatch
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Sequence as Seq
+
+import numpy as np
+import torch
+from torch import nn
+
+from learn.data import Sequence
+from learn.models.base import Compensator, make_model
+from learn.normalize import ZScore
+from sensors.resample import resample
+
+__all__ = [
+    "InputMap", "FREEZE_POLICIES", "load_recording", "resample", "apply_map", "head_parameter_names",
+    "finetune", "train_from_scratch", "restandardise", "split_runs", "RealSplit",
+]
+
+FREEZE_POLICIES = ("head", "none")
+TRANSFORMS = ("log", "none")
+
+
+@dataclass
+class InputMap:
+    """How a recording's input channel becomes the model's input (see the module docstring)."""
+
+    transform: str = "log"
+    rate_hz: float | None = None  # resample to this rate (the checkpoint's); None: keep
+
+    def __post_init__(self):
+        if self.transform not in TRANSFORMS:
+            raise ValueError(f"input transform must be one of {', '.join(TRANSFORMS)}; got {self.transform!r}")
+
+    def to_json(self) -> dict[str, Any]:
+        return {"transform": self.transform, "rate_hz": self.rate_hz}
+
+    def describe(self) -> str:
+        t = "x = ln(reading)" if self.transform == "log" else "x = reading"
+        r = f", resampled to {self.rate_hz:g} Hz" if self.rate_hz else ""
+        return t + r
+
+
+def forward_transform(x: np.ndarray, transform: str) -> np.ndarray:
+    x = np.asarray(x, np.float64)
+    if transform == "log":
+        return np.log(np.maximum(x, 1e-12))
+    return x
+
+
+def load_recording(path: str | Path, inputs: Seq[str], targets: Seq[str], *, rate_hz: float | None = None,
+                   episodes: Seq[str] | None = None) -> list[Sequence]:
+    """Episodes of one recording file (or a dataset folder) as Sequences in physical units, optionally
+    resampled to ``rate_hz``; ``meta['key']`` is the episode id."""
+    from sensors.manifest import shard_files
+    from sensors.recording import Recording
+
+    path = Path(path)
+    files = [path] if path.is_file() else shard_files(path)
+    out: list[Sequence] = []
+    for f in files:
+        with Recording(f) as rec:
+            for ep in rec.episode_ids:
+                if episodes is not None and ep not in episodes:
+                    continue
+                def flat(c):
+                    a = np.asarray(rec.read(ep, c), np.float64)
+                    return a.reshape(len(a), -1)
+
+                try:
+                    x = np.concatenate([flat(c) for c in inputs], axis=1)
+                    y = np.concatenate([flat(c) for c in targets], axis=1)
+                except KeyError as exc:
+                    raise ValueError(str(exc.args[0])) from None
+                t = np.asarray(rec.read(ep, "time"), np.float64)
+                if rate_hz:
+                    _, x = resample(t, x, rate_hz)
+                    t, y = resample(t, y, rate_hz)
+                units = {c: rec.units(ep, c) for c in [*inputs, *targets]}
+                meta = dict(rec.episode_attrs(ep))
+                meta["key"] = ep if len(files) == 1 else f"{f.stem}/{ep}"
+                out.append(Sequence(x, y, list(inputs), list(targets), units, meta, {"time": t - t[0]}))
+    return out
+
+
+def apply_map(seqs: Seq[Sequence], transform: str) -> list[Sequence]:
+    """Copies of ``seqs`` with the input transform applied (x -> ln x for 'log')."""
+    return [Sequence(forward_transform(s.x, transform), s.y, s.inputs, s.targets, s.units, s.meta, s.extra) for s in seqs]
+
+
+# ---------------------------------------------------------------------------------------------- splits
+
+
+@dataclass
+class RealSplit:
+    train: list[Sequence]
+    valid: list[Sequence]
+    test: list[Sequence]
+    order: list[str] = field(default_factory=list)  # training runs in the order the learning curve adds them
+
+    def keys(self) -> dict[str, list[str]]:
+        return {k: [s.key for s in getattr(self, k)] for k in ("train", "valid", "test")}
+
+
+def split_runs(seqs: Seq[Sequence], *, train_fraction: float | None, test_glob: str | None, seed: int,
+               n_valid: int | None = None) -> RealSplit:
+    """Split whole episodes (runs): test = episodes matching ``test_glob``, else a seeded
+    (1 - train_fraction) share; of the rest (the fine-tuning pool; a train_fraction share of it when a
+    glob fixes the test runs) ``n_valid`` runs (default max(1, round(pool / 4))) hold out for early
+    stopping, the others train. Raises ValueError when a part would be empty."""
+    seqs = sorted(seqs, key=lambda s: s.key)
+    n = len(seqs)
+    if n < 3:
+        raise ValueError(f"need at least 3 episodes (runs) to split train/valid/test by run; the recording has {n}")
+    rng = np.random.default_rng(int(seed))
+    if test_glob:
+        test = [s for s in seqs if fnmatch.fnmatch(s.key, test_glob)]
+        pool = [s for s in seqs if not fnmatch.fnmatch(s.key, test_glob)]
+        if not test:
+            raise ValueError(f"--test-episodes {test_glob!r} matches no episode (episodes: {', '.join(s.key for s in seqs[:4])}, ...)")
+        frac = 1.0 if train_fraction is None else train_fraction
+        pool = [pool[i] for i in rng.permutation(len(pool))]
+        pool = pool[: max(2, int(round(frac * len(pool))))] if pool else pool
+    else:
+        frac = 0.5 if train_fraction is None else train_fraction
+        perm = [seqs[i] for i in rng.permutation(n)]
+        n_pool = min(n - 1, max(2, int(round(frac * n))))
+        pool, test = perm[:n_pool], perm[n_pool:]
+    if len(pool) < 2:
+        raise ValueError(f"the fine-tuning part has {len(pool)} run(s); needs 2 (one trains, one stops early)")
+    nv = max(1, int(round(len(pool) / 4))) if n_valid is None else int(n_valid)
+    nv = min(nv, len(pool) - 1)
+    valid, train = pool[:nv], pool[nv:]
+    return RealSplit(sorted(train, key=lambda s: s.key), sorted(valid, key=lambda s: s.key),
+                     sorted(test, key=lambda s: s.key), order=[s.key for s in train])
+
+
+# ---------------------------------------------------------------------------------------------- freezing
+
+
+def head_parameter_names(comp: Compensator) -> list[str]:
+    """Names (in comp.net) of the parameters the ``head`` policy retrains."""
+    net = comp.net
+    names = [n for n, _ in net.named_parameters()]
+    if comp.kind == "tcn":
+        return [n for n in names if n.startswith(("out.", "skip."))]
+    if comp.kind in ("gru", "lstm"):
+        return [n for n in names if n.startswith("head.")]
+    lin = [n for n, m in net.named_modules() if isinstance(m, nn.Linear)]
+    if not lin:
+        raise ValueError(f"{comp.kind}: no layer to retrain")
+    return [n for n in names if n.startswith(lin[-1] + ".")]
+
+
+class _InputAffine(nn.Module):
+    """z' = a z + b on the last axis, in front of a net (a, b per input channel)."""
+
+    def __init__(self, net: nn.Module, n_in: int):
+        super().__init__()
+        self.net = net
+        self.a = nn.Parameter(torch.ones(n_in))
+        self.b = nn.Parameter(torch.zeros(n_in))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.net(x * self.a + self.b)
+
+
+def restandardise(comp: Compensator, seqs: Seq[Sequence]) -> Compensator:
+    """A copy whose input z-score comes from ``seqs`` (mapped inputs pooled): label-free adaptation."""
+    c = copy.deepcopy(comp)
+    c.x_norm = ZScore.fit([s.x for s in seqs])
+    return c
+
+
+def _torch_only(comp: Compensator) -> None:
+    if getattr(comp, "net", None) is None or not hasattr(comp, "_examples"):
+        raise ValueError(f"model {comp.kind!r} has no neural layers to fine-tune (use a tcn, mlp, gru or lstm checkpoint)")
+
+
+def finetune(comp: Compensator, train: Seq[Sequence], valid: Seq[Sequence], *, policy: str = "head",
+             lr: float = 3e-4, max_epochs: int = 300, patience: int = 30, batch_size: int | None = None,
+             seed: int = 0, progress: bool = False) -> tuple[Compensator, dict[str, Any]]:
+    """Fine-tune a copy of ``comp`` on mapped real runs; returns (compensator, info). See the module docstring."""
+    from learn.train import TrainConfig, train_model
+
+    if policy not in FREEZE_POLICIES:
+        raise ValueError(f"freeze policy must be one of {', '.join(FREEZE_POLICIES)}; got {policy!r}")
+    _torch_only(comp)
+    c = restandardise(comp, train)
+    head = set(head_parameter_names(c))
+    frozen = []
+    for n, p in c.net.named_parameters():
+        train_it = policy == "none" or n in head
+        p.requires_grad_(train_it)
+        if not train_it:
+            frozen.append(n)
+    wrapped = _InputAffine(c.net, c.n_in)
+    zx = [c.x_norm.apply(s.x) for s in train]
+    zy = [c.y_norm.apply(s.y) for s in train]
+    vx = [c.x_norm.apply(s.x) for s in valid]
+    vy = [c.y_norm.apply(s.y) for s in valid]
+    tr = c._examples(zx, zy, True)
+    va = c._examples(vx, vy, False)
+    with torch.no_grad():
+        before = torch.nn.functional.mse_loss(wrapped(va[0]), va[1]).item()
+    cfg = TrainConfig(lr=lr, batch_size=int(batch_size or c.hparams.get("batch_size", 32)), max_epochs=max_epochs,
+                      patience=patience, grad_clip=1.0, seed=seed)
+    hist = train_model(wrapped, tr, va, cfg, progress=progress, description=f"finetune[{policy}]")
+    a = wrapped.a.detach().double().numpy()
+    b = wrapped.b.detach().double().numpy()
+    # fold z' = a (x - m) / s + b into the z-score: mean m - b s / a, std s / a
+    m, s = c.x_norm.mean, c.x_norm.std
+    c.x_norm = ZScore(m - b * s / a, s / a)
+    for p in c.net.parameters():
+        p.requires_grad_(True)
+    c.net.eval()
+    n_trainable = sum(p.numel() for n, p in c.net.named_parameters() if n not in frozen) + 2 * c.n_in
+    info = {"policy": policy, "frozen": frozen, "trained": sorted(set(n for n, _ in c.net.named_parameters()) - set(frozen)) + ["input affine a, b"],
+            "n_trainable": int(n_trainable), "n_parameters": int(sum(p.numel() for p in c.net.parameters())),
+            "lr": lr, "valid_mse_z_before": before, "input_affine": {"a": a.tolist(), "b": b.tolist()},
+            "n_train_runs": len(train), "n_valid_runs": len(valid), **hist.to_json()}
+    c.history = {k: v for k, v in info.items() if k not in ("train_loss", "valid_loss")}
+    return c, info
+
+
+def train_from_scratch(kind: str, hparams: dict[str, Any], train: Seq[Sequence], valid: Seq[Sequence], *,
+                       seed: int = 0, progress: bool = False, **overrides: Any) -> Compensator:
+    """The same architecture, fresh weights, trained on the real runs only (its own z-score)."""
+    hp = {**hparams, **overrides}
+    comp = make_model(kind, **hp)
+    comp.fit([s.x for s in train], [s.y for s in train], valid=([s.x for s in valid], [s.y for s in valid]),
+             seed=seed, progress=progress, inputs=train[0].inputs, targets=train[0].targets, units=train[0].units)
+    return comp
+
+
+def rmse_on(comp: Compensator, seqs: Seq[Sequence]) -> float:
+    est = np.concatenate([comp.predict(s.x)[:, 0] for s in seqs])
+    ref = np.concatenate([s.y[:, 0] for s in seqs])
+    return float(np.sqrt(np.mean((est - ref) ** 2)))
+
+
+def per_run(comp: Compensator, seqs: Seq[Sequence], fn: Callable[[np.ndarray, np.ndarray], float]) -> dict[str, float]:
+    return {s.key: fn(s.y[:, 0], comp.predict(s.x)[:, 0]) for s in seqs}

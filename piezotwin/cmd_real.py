@@ -1,0 +1,154 @@
+"""`piezotwin pretrain / finetune / fit`: sim-to-real commands, registered on the app of piezotwin.cli.
+
+pretrain  a compensator on a generated dataset, input map recorded in the checkpoint (learn/sim2real.py)
+finetune  that checkpoint on a real recording: zero-shot vs fine-tuned vs from scratch (learn/finetune.py)
+fit       the velostat film model's parameters to a real recording, writes the fitted preset (sensors/velostat_fit.py)
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from piezotwin.cli import _check_writable, app, console, err, fail  # noqa: E402
+
+
+def _need_file(p: Path, what: str) -> None:
+    if not p.exists():
+        fail(f"{what} '{p}' does not exist")
+
+
+def _need_recording(p: Path) -> None:
+    _need_file(p, "recording")
+    if p.is_file():
+        import h5py
+
+        if not h5py.is_hdf5(p):
+            fail(f"recording '{p}' is not an HDF5 recording (import text logs with `piezotwin import`)")
+
+
+@app.command()
+def pretrain(
+    data: Annotated[Path, typer.Argument(help="Generated dataset folder (piezotwin generate).")],
+    out: Annotated[Path, typer.Option("-o", "--out", help="Checkpoint folder.")],
+    model: Annotated[str, typer.Option(help="Model kind (tcn, mlp, gru, lstm).")] = "tcn",
+    input_channel: Annotated[str, typer.Option("--input", help="Simulated input channel.")] = "resistance_measured",
+    transform: Annotated[str, typer.Option(help="Input transform: log | none.")] = "log",
+    max_epochs: Annotated[Optional[int], typer.Option(help="Cap on training epochs.")] = None,
+    seed: Annotated[int, typer.Option(help="Seed of the split and the training.")] = 0,
+) -> None:
+    """Pre-train a compensator on simulated data; the checkpoint records its input map (channel, transform, rate)."""
+    from learn.models.base import MODELS, make_model  # noqa: F401
+    from learn.sim2real import pretrain as _pretrain
+
+    _need_file(data, "dataset folder")
+    if transform not in ("log", "none"):
+        fail(f"--transform must be one of: log, none (got '{transform}')")
+    import learn.models  # noqa: F401
+
+    if model not in MODELS:
+        fail(f"unknown model '{model}' (known: {', '.join(sorted(MODELS))})")
+    _check_writable(out)
+    hp = {"max_epochs": max_epochs} if max_epochs else {}
+    try:
+        r = _pretrain(data, out, kind=model, hparams=hp, input_channel=input_channel, transform=transform, seed=seed,
+                      progress=err.is_terminal)
+    except (ValueError, KeyError) as exc:
+        fail(str(exc.args[0] if exc.args else exc))
+    console.print(f"wrote {out}: {model}, simulated valid RMSE {r['sim_valid_rmse']:.3f} N, {r['seconds']:.0f} s, "
+                  f"input map {r['input_map']}", highlight=False)
+
+
+@app.command()
+def finetune(
+    checkpoint: Annotated[Path, typer.Argument(help="Pre-trained checkpoint folder.")],
+    recording: Annotated[Path, typer.Argument(help="Real recording (piezotwin import / capture).")],
+    out: Annotated[Path, typer.Option("-o", "--out", help="Report folder.")],
+    train_fraction: Annotated[Optional[float], typer.Option(help="Share of the runs for fine-tuning (rest: test); with --test-episodes, share of the non-test runs.")] = None,
+    test_episodes: Annotated[Optional[str], typer.Option(help="Glob of episode names held out as the test set (e.g. '*exp2').")] = None,
+    freeze: Annotated[str, typer.Option(help="Freeze policy: head (features frozen) | none (all layers).")] = "head",
+    lr: Annotated[float, typer.Option(help="Fine-tuning learning rate (Adam).")] = 3e-4,
+    max_epochs: Annotated[int, typer.Option(help="Cap on epochs (fine-tuning and from scratch).")] = 300,
+    patience: Annotated[int, typer.Option(help="Early-stopping patience on the held-out real runs.")] = 30,
+    input_channel: Annotated[str, typer.Option("--input", help="Real input channel.")] = "sensor",
+    target: Annotated[str, typer.Option(help="Label channel.")] = "force",
+    rate: Annotated[Optional[float], typer.Option(help="Resample the real recording to this rate (default: the checkpoint's).")] = None,
+    no_curve: Annotated[bool, typer.Option("--no-curve", help="Skip the learning curve.")] = False,
+    seed: Annotated[int, typer.Option(help="Seed of the split and the training.")] = 0,
+) -> None:
+    """Fine-tune a pre-trained compensator on a real recording; report zero-shot / fine-tuned / from scratch."""
+    from learn.sim2real import run_finetune
+
+    _need_file(checkpoint, "checkpoint")
+    if not (checkpoint / "config.json").is_file():
+        fail(f"'{checkpoint}' is not a checkpoint folder (no config.json)")
+    _need_recording(recording)
+    if train_fraction is not None and not 0 < train_fraction <= 1:
+        fail(f"--train-fraction must be in (0, 1] (got {train_fraction})")
+    if freeze not in ("head", "none"):
+        fail(f"--freeze must be one of: head, none (got '{freeze}')")
+    if not lr > 0:
+        fail(f"--lr must be > 0 (got {lr})")
+    _check_writable(out)
+    try:
+        m = run_finetune(checkpoint, recording, out, train_fraction=train_fraction, test_glob=test_episodes,
+                         policy=freeze, lr=lr, max_epochs=max_epochs, patience=patience, scratch_epochs=max_epochs,
+                         input_channel=input_channel, target=target, rate_hz=rate, curve=not no_curve, seed=seed,
+                         progress=err.is_terminal, log=lambda s: console.print(s, highlight=False))
+    except (ValueError, KeyError) as exc:
+        fail(str(exc.args[0] if exc.args else exc))
+    r = m["results"]
+    console.print(f"test RMSE (N): zero-shot {r['zero_shot']['rmse']:.3f}, zero-shot restandardised "
+                  f"{r['zero_shot_restandardised']['rmse']:.3f}, fine-tuned {r['finetuned']['rmse']:.3f}, "
+                  f"from scratch {r['scratch']['rmse']:.3f}; wrote {out}/report.md, metrics.json", highlight=False)
+
+
+@app.command()
+def fit(
+    preset: Annotated[str, typer.Argument(help="Preset name or scene YAML (velostat family).")],
+    recording: Annotated[Path, typer.Argument(help="Real recording with the reading and the force.")],
+    out: Annotated[Path, typer.Option("-o", "--out", help="Report folder (fitted preset YAML, fit.json, fit.png).")] = Path("runs/fit"),
+    input_channel: Annotated[str, typer.Option("--input", help="Real reading channel (proportional to resistance).")] = "sensor",
+    target: Annotated[str, typer.Option(help="Force channel (N).")] = "force",
+    episodes: Annotated[Optional[str], typer.Option(help="Glob of episodes to fit (default all).")] = None,
+    rate: Annotated[float, typer.Option(help="Rate the recording is resampled to for the fit (Hz).")] = 20.0,
+    min_force: Annotated[float, typer.Option(help="Samples below this force (N) are left out of the residual.")] = 0.5,
+) -> None:
+    """Fit the film's conductance law, creep and noise to a real recording (least squares on a fast numpy model)."""
+    from scenes import ConfigError, load_scene
+    from sensors import velostat_fit as VF
+
+    try:
+        cfg = load_scene(preset)
+    except ConfigError as exc:
+        fail(str(exc))
+    if cfg.sensor.family != "velostat":
+        fail(f"fit supports the velostat family only (preset '{preset}' is {cfg.sensor.family})")
+    _need_recording(recording)
+    if not rate > 0:
+        fail(f"--rate must be > 0 (got {rate})")
+    _check_writable(out)
+    try:
+        runs = VF.load_runs(recording, input_channel=input_channel, target=target, rate_hz=rate, episodes=episodes,
+                            min_force_n=min_force)
+        res = VF.fit_recording(cfg, runs, min_force_n=min_force)
+    except (ValueError, KeyError) as exc:
+        fail(str(exc.args[0] if exc.args else exc))
+    out.mkdir(parents=True, exist_ok=True)
+    name = (Path(preset).stem if Path(preset).is_file() else preset) + "_fitted.yaml"
+    yml = VF.write_fitted_preset(preset, res, out / name, str(recording))
+    VF.plot_fit(cfg, res, runs, out / "fit.png", min_force)
+    info = {"preset": preset, "recording": str(recording), "episodes": [r.key for r in runs], "rate_hz": rate,
+            "min_force_n": min_force, "before": res.before.to_json(), "after": res.after.to_json(),
+            "error_before": res.err_before, "error_after": res.err_after, "per_run_rms_log_before": res.per_run_before,
+            "per_run_rms_log_after": res.per_run_after, "noise_v": res.noise_v, "noise_reading": res.noise_reading,
+            "least_squares": res.result, "fitted_preset": str(yml)}
+    (out / "fit.json").write_text(json.dumps(info, indent=2))
+    eb, ea = res.err_before, res.err_after
+    console.print(f"fit error (rms ln reading, {ea['n_samples']} loaded samples): before {eb['rms_log']:.3f} "
+                  f"(within press {eb['rms_log_within_press']:.3f}), after {ea['rms_log']:.3f} "
+                  f"(within press {ea['rms_log_within_press']:.3f}); wrote {yml}, {out}/fit.json, {out}/fit.png",
+                  highlight=False)
