@@ -1,0 +1,162 @@
+"""Fine-tuning a simulated-data compensator on a (synthetic or Lupasic) real recording."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from learn import finetune as FT
+from learn.checkpoint import load_checkpoint, save_checkpoint
+from learn.data import Sequence
+from learn.models.base import make_model
+from learn.sim2real import run_finetune
+from piezotwin.cli import app
+from sensors.recording import Channel, write_recording
+from sensors.velostat_fit import FitParams, Model, forward_reading
+
+torch.set_num_threads(1)
+runner = CliRunner()
+REAL = Path(__file__).resolve().parents[1].parent / "shared" / "real" / "velostat-lupasic"
+if not REAL.is_dir():
+    REAL = Path("/work/shared/real/velostat-lupasic")
+needs_real = pytest.mark.skipif(not (REAL / "velostat_data").is_dir(), reason="real Lupasic logs not present")
+
+RATE = 20.0
+MODEL = Model(area_m2=1e-4, r_ref_ohm=20_000.0, p_ref_pa=1e4, r_series_ohm=0.0, current_a=50e-6)
+SIM = FitParams(gain=1.0, exponent=1.0, amplitude=0.5, p_c_pa=3e4, tau_min_s=0.5, tau_max_s=20.0, n_creep=4)
+# the "real" sensor: another gain (raw counts, not ohms), a steeper conductance law, more creep
+REALP = FitParams(gain=0.03, exponent=1.3, amplitude=1.0, p_c_pa=3e4, tau_min_s=0.5, tau_max_s=20.0, n_creep=4)
+
+
+def presses(seed: int, T: int = 600, fmax: float = 30.0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    f = np.zeros(T)
+    t = 10
+    while t < T - 20:
+        up, hold, down = rng.integers(3, 12), rng.integers(5, 60), rng.integers(3, 12)
+        peak = rng.uniform(1.0, fmax)
+        seg = np.concatenate([np.linspace(0, peak, up), np.full(hold, peak), np.linspace(peak, 0, down)])
+        seg = seg[: T - t]
+        f[t : t + len(seg)] = seg
+        t += len(seg) + int(rng.integers(10, 40))
+    return f
+
+
+def reading(f: np.ndarray, p: FitParams, seed: int, rest: float) -> np.ndarray:
+    r = forward_reading(f, 1 / RATE, p, MODEL)
+    r = np.where(np.isfinite(r), np.minimum(r, rest), rest)  # unloaded: the board's rest level
+    return r * np.exp(0.01 * np.random.default_rng(seed + 99).standard_normal(len(f)))
+
+
+def sim_seqs(n: int, p: FitParams = SIM, rest: float = 60_000.0) -> list[Sequence]:
+    out = []
+    for i in range(n):
+        f = presses(i)
+        x = np.log(reading(f, p, i, rest))[:, None]
+        out.append(Sequence(x, f[:, None], ["resistance_measured"], ["force"], {"force": "N"}, {"key": f"ep-{i}"}))
+    return out
+
+
+def tiny_checkpoint(tmp: Path, epochs: int = 30) -> Path:
+    seqs = sim_seqs(8)
+    comp = make_model("tcn", channels=8, dilations=[1, 2, 4, 8], max_epochs=epochs, patience=10, chunk=64)
+    comp.fit([s.x for s in seqs[:6]], [s.y for s in seqs[:6]], valid=([s.x for s in seqs[6:]], [s.y for s in seqs[6:]]),
+             seed=0, inputs=["resistance_measured"], targets=["force"], units={"resistance_measured": "ohm", "force": "N"})
+    d = tmp / "ckpt"
+    save_checkpoint(comp, d, extra={"input_map": {"channel": "resistance_measured", "transform": "log", "rate_hz": RATE}})
+    return d
+
+
+def real_recording(tmp: Path, n: int = 6) -> Path:
+    eps = {}
+    for i in range(n):
+        f = presses(100 + i)
+        s = reading(f, REALP, 100 + i, rest=800.0)
+        t = np.arange(len(f)) / RATE
+        eps[f"run{i}"] = {"time": Channel(t, "s", ("time",)), "sensor": Channel(s[:, None].astype(np.float32), "raw", ("time", "channel")),
+                          "force": Channel(f.astype(np.float32), "N", ("time",))}
+    return write_recording(tmp / "real.h5", eps, source="real", config_json="{}", root_seed=None, shard_index=0,
+                           sensor_attrs={"family": "velostat", "sample_rate_hz": RATE})
+
+
+@pytest.fixture(scope="module")
+def ckpt(tmp_path_factory):
+    return tiny_checkpoint(tmp_path_factory.mktemp("ft"))
+
+
+def test_finetune_beats_zero_shot_on_a_different_sensor(ckpt, tmp_path):
+    rec = real_recording(tmp_path)
+    m = run_finetune(ckpt, rec, tmp_path / "out", train_fraction=0.67, max_epochs=40, patience=10, scratch_epochs=40,
+                     curve=True, compare_policies=False)
+    r = m["results"]
+    assert r["finetuned"]["rmse"] < 0.7 * r["zero_shot_restandardised"]["rmse"]
+    assert r["finetuned"]["rmse"] < 0.5 * r["zero_shot"]["rmse"]
+    sp = m["split"]  # whole runs, disjoint
+    assert not (set(sp["train"]) & set(sp["test"])) and not (set(sp["valid"]) & set(sp["test"]))
+    assert sp["valid"] and sp["test"] and sp["train"]
+    saved = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    assert saved["results"]["finetuned"]["rmse"] == pytest.approx(r["finetuned"]["rmse"])
+    assert [c["n_runs"] for c in saved["learning_curve"]][-1] == len(sp["train"])
+    for f in ("report.md", "learning_curve.png", "predictions.png", "checkpoints/finetuned/config.json",
+              "checkpoints/scratch/model.safetensors"):
+        assert (tmp_path / "out" / f).is_file(), f
+    # the saved fine-tuned checkpoint reproduces its test score (input affine folded into the z-score)
+    ft = load_checkpoint(tmp_path / "out" / "checkpoints" / "finetuned")
+    test = FT.apply_map(FT.load_recording(rec, ["sensor"], ["force"], episodes=sp["test"]), "log")
+    assert FT.rmse_on(ft, test) == pytest.approx(r["finetuned"]["rmse"], rel=1e-4)
+
+
+def test_head_policy_freezes_feature_layers(ckpt):
+    base = load_checkpoint(ckpt)
+    real = FT.apply_map(sim_seqs(3, REALP, rest=800.0), "log")
+    before = {k: v.clone() for k, v in base.net.state_dict().items()}
+    ft, info = FT.finetune(base, real[:2], real[2:], policy="head", lr=1e-2, max_epochs=5, patience=5)
+    after = ft.net.state_dict()
+    head = set(FT.head_parameter_names(ft))
+    assert head == {"out.weight", "out.bias", "skip.weight", "skip.bias"}
+    assert set(info["frozen"]) == set(before) - head
+    for k in info["frozen"]:
+        assert torch.equal(before[k], after[k]), k
+    assert any(not torch.equal(before[k], after[k]) for k in head)
+    # the original checkpoint object is untouched, and 'none' moves the features too
+    assert all(torch.equal(before[k], v) for k, v in base.net.state_dict().items())
+    ft2, info2 = FT.finetune(base, real[:2], real[2:], policy="none", lr=1e-2, max_epochs=3, patience=3)
+    assert info2["frozen"] == [] and not torch.equal(before["convs.0.weight"], ft2.net.state_dict()["convs.0.weight"])
+
+
+def test_split_by_run_and_bad_input(tmp_path):
+    seqs = [Sequence(np.zeros((5, 1)), np.zeros((5, 1)), ["s"], ["f"], {}, {"key": f"r{i}_exp{1 + i % 2}"}) for i in range(8)]
+    sp = FT.split_runs(seqs, train_fraction=None, test_glob="*exp2", seed=0)
+    assert [s.key for s in sp.test] == ["r1_exp2", "r3_exp2", "r5_exp2", "r7_exp2"]
+    assert len(sp.valid) == 1 and len(sp.train) == 3
+    with pytest.raises(ValueError, match="matches no episode"):
+        FT.split_runs(seqs, train_fraction=None, test_glob="*exp9", seed=0)
+    with pytest.raises(ValueError, match="at least 3"):
+        FT.split_runs(seqs[:2], train_fraction=0.5, test_glob=None, seed=0)
+    res = runner.invoke(app, ["finetune", str(tmp_path / "nope"), str(tmp_path / "x.h5"), "-o", str(tmp_path / "o")])
+    assert res.exit_code == 2 and "does not exist" in res.output
+    bad = tmp_path / "bad.h5"
+    bad.write_text("not hdf5")
+    (tmp_path / "ck").mkdir()
+    (tmp_path / "ck" / "config.json").write_text("{}")
+    res = runner.invoke(app, ["finetune", str(tmp_path / "ck"), str(bad), "-o", str(tmp_path / "o")])
+    assert res.exit_code == 2 and "not an HDF5 recording" in res.output
+
+
+@needs_real
+def test_lupasic_import_and_tiny_finetune_end_to_end(ckpt, tmp_path):
+    from sensors.real_import import import_runs, lupasic_pairs
+
+    pairs = [p for p in lupasic_pairs(REAL) if p[0].parent.name in ("pike1", "pike1_force_10")]
+    rec = import_runs(pairs, tmp_path / "lupasic.h5")
+    res = runner.invoke(app, ["finetune", str(ckpt), str(rec), "-o", str(tmp_path / "out"), "--test-episodes", "*exp2",
+                              "--max-epochs", "5", "--patience", "3", "--no-curve"])
+    assert res.exit_code == 0, res.output
+    m = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    assert m["input_map"]["transform"] == "log" and m["input_map"]["rate_hz"] == RATE
+    assert sorted(m["split"]["test"]) == ["exp_pike1_force_10_sensor1_exp2", "exp_pike1_sensor1_exp2"]
+    for k in ("zero_shot", "zero_shot_restandardised", "finetuned", "scratch"):
+        assert np.isfinite(m["results"][k]["rmse"])
