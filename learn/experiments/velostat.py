@@ -75,8 +75,8 @@ MODES = {
     "quick": Mode("quick", _gen(36, 18, 120), CAL + _gen(72, 24, 100), AE + _gen(10, 10, 110),
                   {"max_epochs": 300, "patience": 40}, list(range(3, 13)),
                   {**TCN_BASE, "max_epochs": 40, "patience": 10, "max_batches_per_epoch": 40}),
-    "tiny": Mode("tiny", _gen(8, 8, 60), CAL + _gen(16, 16, 60), AE + _gen(3, 3, 60),
-                 {"max_epochs": 150, "patience": 30}, [3, 6],
+    "tiny": Mode("tiny", _gen(6, 6, 60), CAL + _gen(12, 12, 60), AE + _gen(2, 2, 60),
+                 {"max_epochs": 60, "patience": 20}, [4],
                  {"channels": 8, "dilations": [1, 2, 4, 8], "chunk": 64, "max_epochs": 4, "patience": 3,
                   "max_batches_per_epoch": 10}),
 }
