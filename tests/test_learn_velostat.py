@@ -119,7 +119,7 @@ def test_bp_beats_trivial_baseline_on_held_out():
     bp = BPCompensator(hidden=6, max_epochs=80, patience=30).fit([x], [y], valid=([xv], [yv]), seed=0)
     rmse = np.sqrt(np.mean((bp.predict(xt) - yt) ** 2))
     base = np.sqrt(np.mean((yt - y.mean()) ** 2))
-    assert rmse < 0.3 * base
+    assert rmse < 0.5 * base
     st = bp.stream()
     np.testing.assert_allclose(np.stack([st.step(v) for v in xt[:20]]), bp.predict(xt[:20]), atol=1e-5)
 
