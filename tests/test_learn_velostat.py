@@ -1,0 +1,168 @@
+"""velostat paper compensators: K-means / G_J, silhouette, memberships, creep tracking, BP net, experiment."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from learn.models.velostat import (BPCompensator, CreepTracker, KMeans, gj_criterion, semi_trapezoid,
+                                   silhouette_samples, silhouette_score)
+
+torch.set_num_threads(1)
+
+
+def test_kmeans_hand_made_1d():
+    x = np.array([0.0, 1.0, 2.0, 10.0, 11.0, 12.0, 50.0, 52.0])
+    km = KMeans(3).fit(x)
+    np.testing.assert_array_equal(km.cluster_centers_[:, 0], [1.0, 11.0, 51.0])
+    np.testing.assert_array_equal(km.labels_, [0, 0, 0, 1, 1, 1, 2, 2])
+    # G_J: p_k * mean pairwise distance: 3/8 * 4/3 + 3/8 * 4/3 + 2/8 * 2
+    assert km.gj_ == pytest.approx(3 / 8 * 4 / 3 * 2 + 2 / 8 * 2)
+    assert gj_criterion(x, km.labels_) == pytest.approx(km.gj_)
+    np.testing.assert_array_equal(km.predict([0.4, 30.0, 40.0]), [0, 1, 2])
+    # online update moves the nearest centre by 1/n of the gap
+    km.partial_fit([15.0])
+    assert km.cluster_centers_[1, 0] == pytest.approx(11.0 + 4.0 / 4)
+
+
+def test_kmeans_2d_and_kmeanspp():
+    rng = np.random.default_rng(0)
+    c = np.array([[0, 0], [5, 5], [0, 8]], float)
+    X = np.concatenate([c[k] + 0.1 * rng.standard_normal((20, 2)) for k in range(3)])
+    km = KMeans(3, init="k-means++", n_init=3, seed=1).fit(X)
+    got = km.cluster_centers_[np.argsort(km.cluster_centers_[:, 0] + 10 * km.cluster_centers_[:, 1])]
+    np.testing.assert_allclose(got, c[np.argsort(c[:, 0] + 10 * c[:, 1])], atol=0.1)
+
+
+def test_silhouette_exact_values():
+    x = np.array([0.0, 1.0, 10.0, 11.0])
+    lab = np.array([0, 0, 1, 1])
+    # point 0: a = 1, b = (10 + 11) / 2 = 10.5 -> s = 9.5 / 10.5; point 1: a = 1, b = 9.5 -> 8.5 / 9.5
+    want = np.array([9.5 / 10.5, 8.5 / 9.5, 8.5 / 9.5, 9.5 / 10.5])
+    np.testing.assert_allclose(silhouette_samples(x, lab), want)
+    assert silhouette_score(x, lab) == pytest.approx(want.mean())
+    # the n-D path agrees with the 1-D path; a singleton scores 0
+    np.testing.assert_allclose(silhouette_samples(np.column_stack([x, 0 * x]), lab), want)
+    s = silhouette_samples(np.array([0.0, 1.0, 5.0]), np.array([0, 0, 1]))
+    assert s[2] == 0.0 and s[0] == pytest.approx((5.0 - 1.0) / 5.0)  # a = 1, b = 5
+
+
+def test_semi_trapezoid_shapes():
+    lo, hi = 0.00612, 0.02374  # the paper's eqs. 8-9
+    d = np.array([0.0, lo, (lo + hi) / 2, hi, 0.1])
+    t1, t2 = semi_trapezoid(d, lo, hi)
+    np.testing.assert_allclose(t1, [0, 0, 0.5, 1, 1])
+    np.testing.assert_allclose(t2, [1, 1, 0.5, 0, 0])
+    g = np.linspace(0, 0.05, 200)
+    t1, t2 = semi_trapezoid(g, lo, hi)
+    assert np.all(np.diff(t1) >= 0) and np.all(np.diff(t2) <= 0) and np.allclose(t1 + t2, 1)
+    assert t1[g > 0.01] .min() >= 0 and (0.00612 + 0.01762 == pytest.approx(hi))
+    with pytest.raises(ValueError):
+        semi_trapezoid(d, hi, lo)
+
+
+def _creep_recording(rng, levels=(2.0, 5.0, 9.0), hold=300, ramp=20, rest=50, r_open=60000.0, noise=0.0):
+    """Synthetic recording at 10 Hz: G = k (F + c), c relaxes in log time during holds (creep adds
+    conductance); returns R (ohm), the creep-free R, the force."""
+    k = 1.0 / 5000.0
+    F, C = [np.zeros(rest)], [np.zeros(rest)]
+    for lv in levels:
+        F += [np.linspace(0, lv, ramp, endpoint=False) + lv / ramp, np.full(hold, lv), np.linspace(lv, 0, ramp)]
+        t = np.arange(1, hold + 1) / 10.0
+        c = 0.25 * lv * np.log1p(t / 0.5) / np.log1p(30 / 0.5)
+        C += [np.zeros(ramp), c, np.full(ramp, c[-1])]
+        F.append(np.zeros(rest)), C.append(np.zeros(rest))
+    F, C = np.concatenate(F), np.concatenate(C)
+    g = k * (F + C)
+    with np.errstate(divide="ignore"):
+        R = np.minimum(1.0 / g, r_open)
+        R0 = np.minimum(1.0 / (k * F), r_open)
+    R = R * (1 + noise * rng.standard_normal(len(R)))
+    return np.minimum(R, r_open), R0, F
+
+
+def test_creep_compensation_removes_most_hold_error():
+    rng = np.random.default_rng(0)
+    train = [_creep_recording(rng, lv)[0] for lv in ((1.0, 4.0, 8.0), (3.0, 6.0, 12.0))]
+    tr = CreepTracker(smooth=1, lag=1, domain="conductance").fit(train)
+    lo, hi = tr.bounds
+    assert 0 < lo < hi and 0 < tr.silhouette_ <= 1
+    R, R0, F = _creep_recording(rng, (2.0, 5.0, 9.0))
+    Rc, stage = tr.transform(R)
+    hold = (F > 0) & (np.abs(np.gradient(F)) < 1e-9)
+    err_raw = np.abs(1 / R[hold] - 1 / R0[hold]).max()
+    err_comp = np.abs(1 / Rc[hold] - 1 / R0[hold]).max()
+    assert err_comp < 0.1 * err_raw  # most of the log-creep error is gone
+    assert np.mean(stage[hold] == 0) > 0.9 and np.all(stage[R >= 60000.0] == -1)
+    # streaming == batch, partial_fit keeps a valid band
+    st = tr.stream()
+    np.testing.assert_allclose([st.step(v)[0] for v in R], Rc)
+    tr.partial_fit(R)
+    assert tr.bounds[0] < tr.bounds[1]
+    # state round trip
+    assert np.allclose(CreepTracker.from_state(tr.state()).predict(R), tr.predict(R))
+
+
+def test_bp_beats_trivial_baseline_on_held_out():
+    rng = np.random.default_rng(1)
+
+    def data(n):
+        unit = rng.integers(0, 6, n).astype(float)
+        F = rng.uniform(1, 15, n)
+        R = 3000.0 / (F * (1 + 0.1 * unit))
+        return np.column_stack([unit, R]), F[:, None]
+
+    x, y = data(300)
+    xv, yv = data(60)
+    xt, yt = data(200)
+    bp = BPCompensator(hidden=6, max_epochs=80, patience=30).fit([x], [y], valid=([xv], [yv]), seed=0)
+    rmse = np.sqrt(np.mean((bp.predict(xt) - yt) ** 2))
+    base = np.sqrt(np.mean((yt - y.mean()) ** 2))
+    assert rmse < 0.5 * base
+    st = bp.stream()
+    np.testing.assert_allclose(np.stack([st.step(v) for v in xt[:20]]), bp.predict(xt[:20]), atol=1e-5)
+
+
+def test_bp_registered_and_checkpoint_roundtrip(tmp_path):
+    from learn.checkpoint import load_checkpoint, save_checkpoint
+    from learn.models import MODELS
+
+    assert "bp" in MODELS
+    x = np.column_stack([np.zeros(50), np.linspace(200, 3000, 50)])
+    y = 3000 / x[:, 1:]
+    bp = BPCompensator(hidden=3, max_epochs=5).fit([x], [y])
+    back = load_checkpoint(save_checkpoint(bp, tmp_path / "bp"))
+    np.testing.assert_allclose(back.predict(x), bp.predict(x))
+
+
+def test_experiment_velostat_tiny(tmp_path):
+    from learn.experiments import EXPERIMENTS, get_experiment
+
+    assert "velostat" in EXPERIMENTS
+    out = tmp_path / "exp"
+    m = get_experiment("velostat").run(out, mode="tiny", models=["paper_unit", "paper_cluster"], progress=False,
+                                       log=lambda s: None)
+    j = json.loads((out / "metrics.json").read_text())
+    assert set(j) >= {"creep", "clustering", "bp_search", "models", "paper", "findings", "datasets", "split"}
+    assert set(j["models"]) == {"mean", "raw_bp", "paper_unit", "paper_cluster"}
+    assert {"silhouette", "bounds", "centres", "gj", "r_drift_raw_mean", "r_drift_comp_mean"} <= set(j["creep"])
+    assert j["clustering"]["k_elbow"] >= 1 and j["paper"]["silhouette"] == 0.931
+    for k in ("raw_bp", "paper_unit"):
+        assert {"holds", "ae", "test"} <= set(j["models"][k])
+        assert {"max_err_mean", "drift_mean"} <= set(j["models"][k]["holds"])
+    assert j["creep"]["r_drift_comp_mean"] < j["creep"]["r_drift_raw_mean"]
+    text = (out / "report.md").read_text()
+    assert "0.931" in text and "Where we differ" in text
+    for p in ("delta_clusters.png", "units.png", "creep.png", "ae_error.png"):
+        assert (out / p).stat().st_size > 1000
+    assert m["mode"] == "tiny"
+
+
+@pytest.mark.slow
+def test_experiment_velostat_quick(tmp_path):
+    from learn.experiments import get_experiment
+
+    m = get_experiment("velostat").run(tmp_path / "q", mode="quick", progress=False, log=lambda s: None)
+    assert m["findings"]["r_drift_removed_frac"] > 0.5
+    assert all(m["findings"]["all_beat_mean"].values())
