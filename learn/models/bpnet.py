@@ -14,7 +14,9 @@ closed form (backpropagation of d y / d a per sample), so one LM epoch is one fo
 one P x P solve (P = 51 for 2-5-5-1). Initial weights: Nguyen-Widrow (MATLAB's initnw); the best of
 ``restarts`` seeded initialisations on the validation SSE is kept.
 
-``history`` (set of inputs): ``lags`` previous samples besides the current one; 1 = the paper's (R_t, R_{t-1}).
+``lags``: previous samples besides the current one as inputs; 1 = the paper's (R_t, R_{t-1}).
+``observations``: train on a random subset of this many (input, target) examples (the fabric paper's Appendix
+Table 2 varies it); None = all.
 Before the first sample the input is taken to have rested at its first value, as for every model here.
 """
 
@@ -100,7 +102,8 @@ class BPNetCompensator(Compensator):
     """fabric sect. 4: BP network (R_t, R_{t-1}) -> 5 sigmoid -> 5 sigmoid -> R_static, Levenberg-Marquardt."""
 
     DEFAULTS: dict[str, Any] = {"hidden": [5, 5], "lags": 1, "restarts": 3, "max_epochs": 1000, "max_fail": 6,
-                                "mu": 1e-3, "mu_dec": 0.1, "mu_inc": 10.0, "mu_max": 1e10, "min_grad": 1e-7}
+                                "mu": 1e-3, "mu_dec": 0.1, "mu_inc": 10.0, "mu_max": 1e10, "min_grad": 1e-7,
+                                "observations": None}
     temporal = True
 
     @property
@@ -125,6 +128,11 @@ class BPNetCompensator(Compensator):
             raise ValueError("bp_lm: one output only (the paper's static resistance)")
         X = np.concatenate([self._features(x) for x in zx])
         y = np.concatenate([v[:, 0] for v in zy])
+        rng = np.random.default_rng(int(seed))
+        idx = None
+        if self.hparams["observations"] is not None:  # train on a random subset of n (input, target) examples
+            idx = np.sort(rng.choice(len(y), size=min(int(self.hparams["observations"]), len(y)), replace=False))
+            X, y = X[idx], y[idx]
         net = self._net()
         if zv is not None:
             Xv = np.concatenate([self._features(x) for x in zv[0]])
@@ -132,7 +140,6 @@ class BPNetCompensator(Compensator):
             valid = lambda th: float(np.sum((yv - net.forward(th, Xv)) ** 2))  # noqa: E731
         else:
             valid = None
-        rng = np.random.default_rng(int(seed))
         best = None
         runs = []
         for k in range(int(self.hparams["restarts"])):
@@ -149,7 +156,8 @@ class BPNetCompensator(Compensator):
                 "epochs": h.epochs, "best_epoch": h.best_epoch, "stop_reason": h.stop_reason, "restarts": runs,
                 "train_loss": [v / len(y) for v in h.sse],
                 "valid_loss": [v / max(1, len(yv)) for v in h.valid_sse] if valid else [],
-                "mu": h.mu, "grad_norm": h.grad_norm, "rejected_steps": h.rejected}
+                "mu": h.mu, "grad_norm": h.grad_norm, "rejected_steps": h.rejected,
+                "observation_index": None if idx is None else idx.tolist()}
 
     def _predict_z(self, z):
         return self._net().forward(self.theta, self._features(z))[:, None]
