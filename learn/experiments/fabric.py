@@ -21,8 +21,9 @@
            on those observations and on the test episodes, per layer count.
   report   report.md, metrics.json, loops.png, hysteresis.png, table2.png, lm_training.png, checkpoints/.
 
-Modes: "full" = the presets' episode counts; "quick" = fewer episodes (a few minutes on 2 cores);
-"tiny" = 1 and 3 layers with coarse steps, seconds, for tests only.
+Modes: "full" = the presets' episode counts, the paper's 0.1 N steps for every sensor; "quick" = 7 training and 3
+test episodes per sensor, 0.1 N steps for 1 layer and 0.2 / 0.4 / 0.5 N for 3 / 6 / 12 layers (about 40 levels
+up the full range, as for 1 layer; a few minutes on 2 cores); "tiny" = 1 and 3 layers, seconds, for tests only.
 """
 
 from __future__ import annotations
@@ -82,8 +83,11 @@ def _modes() -> dict[str, Mode]:
            "max_epochs": 200, "patience": 25}
     full = Mode("full", LAYERS, {1: 16, 3: 16, 6: 16, 12: 8}, 4, ["generation.threads=1"],
                 models={"mean": {}, "linear": {}, "cubic": {}, "bp_lm": {"restarts": 5}, "tcn": tcn}, obs_repeats=5)
-    quick = Mode("quick", LAYERS, {n: 8 for n in LAYERS}, 3, ["generation.threads=1"],
-                 models={"mean": {}, "linear": {}, "cubic": {}, "bp_lm": bp, "tcn": {**tcn, "max_epochs": 120}})
+    # quick: the full-range cycle keeps ~40 levels up for every sensor (1 layer: the paper's 0.1 N steps)
+    coarse = {3: ["protocol.stair_step_n=0.2"], 6: ["protocol.stair_step_n=0.4"], 12: ["protocol.stair_step_n=0.5"]}
+    quick = Mode("quick", LAYERS, {n: 7 for n in LAYERS}, 3, ["generation.threads=1"], per_layer=coarse,
+                 models={"mean": {}, "linear": {}, "cubic": {}, "bp_lm": bp,
+                         "tcn": {**tcn, "max_epochs": 100, "batch_size": 32, "patience": 20}})
     tiny = Mode("tiny", (1, 3), {1: 5, 3: 5}, 2,
                 ["generation.threads=1", "protocol.stair_cycles_min=3", "protocol.stair_cycles_max=4"],
                 per_layer={3: ["protocol.stair_step_n=0.4"]},
@@ -246,6 +250,17 @@ def run(
     if unknown:
         raise ValueError(f"unknown model(s) {unknown}; known: {sorted(md.models)}")
     cfgs = {n: scenes_for(md, n, list(overrides or []), seed) for n in md.layers}  # validate before writing
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # small nets: one thread is fastest, and the machine is shared
+    try:
+        return _run(md, cfgs, out_dir, data_dir, models, seed, progress, log)
+    finally:
+        torch.set_num_threads(threads)
+
+
+def _run(md: Mode, cfgs, out_dir, data_dir, models, seed, progress, log) -> dict[str, Any]:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     root = Path(data_dir) if data_dir else out / "data"
@@ -258,7 +273,7 @@ def run(
         per_layer[str(n)], keep[n] = run_layer(n, md, cfgs[n], root, out, kinds, seed, progress, log)
 
     metrics = {
-        "experiment": KEY, "mode": mode, "seed": seed, "layers": per_layer,
+        "experiment": KEY, "mode": md.name, "seed": seed, "layers": per_layer,
         "paper": {"hysteresis_fso": {str(k): {"before": v[0], "after": v[1]} for k, v in PAPER_HYST.items()},
                   "table2": {str(n): {str(o): {"mse": v[0], "r": v[1]} for o, v in t.items()} for n, t in PAPER_TABLE2.items()},
                   "table1_r": PAPER_TABLE1_R, "curves_kohm": _paper_curves()},
