@@ -192,7 +192,8 @@ def test_experiment_fabric_tiny(tmp_path):
     for n, L in m["layers"].items():
         assert set(L["models"]) == {"mean", "linear", "bp_lm"}
         assert {"dataset", "split", "target_poly", "raw", "table2"} <= set(L)
-        assert not set(L["split"]["test"]) & set(L["split"]["train"])  # (different datasets too)
+        assert not set(L["split"]["test"]) & set(L["split"]["train"] + L["split"]["valid"])
+        assert not set(L["episode_seeds"]["test"]) & set(L["episode_seeds"]["train"])  # new random force sequences
         assert L["dataset"]["test"]["dataset_sha256"] != L["dataset"]["train"]["dataset_sha256"]
         bp, raw = L["models"]["bp_lm"]["test"], L["raw"]
         for k in ("mse", "r", "hyst_full_mean", "hyst_loops_max"):

@@ -149,7 +149,10 @@ def make_data(root: Path, n: int, cfgs, log: Callable[[str], None]) -> tuple[lis
         t0 = time.perf_counter()
         generate(cfg, d)
         seqs = load_sequences(d, ["resistance_measured"], ["force"], extra=["target", "force", "resistance"])
-        parts.append(readings(seqs, cfg))
+        seqs = readings(seqs, cfg)
+        for q in seqs:
+            q.meta["key"] = f"{name}/{q.key}"  # the two datasets number their episodes alike
+        parts.append(seqs)
         fps[name] = dataset_fingerprint(d)
         log(f"data: {d} ({cfg.generation.episodes} episodes, {sum(len(s) for s in parts[-1])} readings, "
             f"{time.perf_counter() - t0:.1f} s incl. reuse)")
@@ -323,6 +326,7 @@ def run_layer(n, md: Mode, cfgs, root: Path, out: Path, kinds, seed, progress, l
 
     res: dict[str, Any] = {
         "dataset": fps, "split": {"train": [s.key for s in tr], "valid": [s.key for s in va], "test": [s.key for s in test]},
+        "episode_seeds": {"train": [int(s.meta["seed"]) for s in train_all], "test": [int(s.meta["seed"]) for s in test]},
         "observations": {"train": sum(map(len, tr)), "valid": sum(map(len, va)), "test": sum(map(len, test))},
         "force_max_n": f_max,
         "target_poly": {"degree": POLY_DEGREE[n], "coeffs_kohm": poly.coeffs_kohm(),
@@ -410,6 +414,11 @@ def findings(L: dict[str, Any]) -> dict[str, Any]:
         cand = {k: v["test"]["mse"] for k, v in m.items() if k != "mean"}
         if cand:
             out["best_model"][n] = min(cand, key=cand.get)
+        t2 = r.get("table2", {})
+        if t2:
+            big = str(max(int(o) for o in t2))
+            out.setdefault("bp_hyst_at_paper_data_size", {})[n] = {"observations": int(big),
+                                                                  "hyst_full_mean": t2[big]["test_hyst_full"]}
         if "tcn" in m and "bp_lm" in m:
             a, b = m["tcn"]["test"], m["bp_lm"]["test"]
             out.setdefault("tcn_beats_bp_lm", {})[n] = {
@@ -435,7 +444,7 @@ def plots(out: Path, keep: dict[int, Any], L: dict[str, Any]) -> None:
         sl = slice(a, b + 1)
         lv = s.extra["level"][sl]
         h = hysteresis(s.extra["level"], s.x[:, 0])["full_range"]
-        ax.plot(lv, s.x[sl, 0] / KOHM, "-", color="0.5", lw=1, label=f"reading ({h:.1f} % FSO)")
+        ax.plot(lv, s.x[sl, 0] / KOHM, "-", color="0.45", lw=2.2, alpha=0.6, label=f"reading ({h:.1f} % FSO)")
         for kind, col in (("bp_lm", "tab:red"), ("tcn", "tab:blue")):
             if kind in k["comps"]:
                 p = k["comps"][kind].predict(s.x)[:, 0]
@@ -574,6 +583,10 @@ def report(m: dict[str, Any]) -> str:
         lines.append("- TCN (ours) vs the BP network: " + "; ".join(
             f"{n} layer(s): " + ", ".join(f"{k} {'better' if v else 'not better'}" for k, v in d.items())
             for n, d in F["tcn_beats_bp_lm"].items()) + ".")
+    if F.get("bp_hyst_at_paper_data_size"):
+        lines.append("- BP network trained on the paper's amount of data (Table 2's largest column), test max hysteresis: "
+                     + ", ".join(f"{n} layer(s) {fmt(v['hyst_full_mean'], 1)} % FSO ({v['observations']} observations)"
+                                 for n, v in F["bp_hyst_at_paper_data_size"].items()) + " (paper, 1 layer: 13.5 %).")
     lines.append("- Lowest test MSE: " + ", ".join(f"{n} layer(s) {k}" for n, k in F["best_model"].items()) + ".")
     lines += ["", "![loops](loops.png)", "", "![hysteresis](hysteresis.png)", "", "![table 2](table2.png)", "",
               "![LM training](lm_training.png)", ""]
@@ -595,11 +608,20 @@ DIFFERENCES = """
 - **What "max hysteresis error" is.** Ours: max |y_up - y_down| at equal nominal force over the output span of the
   full-range cycle, for the raw reading and for the network's output alike (the paper refers the error to "the
   highest output value"; see the fabric section of README.md). Taken on held-out test episodes.
+- **Far below the paper's 13.5 % with all our data, close to it with the paper's amount.** Trained on ~1000-2000
+  observations per sensor, the BP network leaves a few % FSO on new force sequences; trained on 46 observations
+  (Table 2's largest, and about the 41 samples behind eq. 6) it leaves ~10-20 % (column "test max hyst." of
+  Table 2), where the paper's 13.5 % lies. Our readings are also cleaner than a hand-loaded sample on a kitchen
+  scale read off a multimeter (no placement or operator variation; the multimeter's counts and noise only), and
+  the loop repeats from episode to episode, which makes it learnable.
 - **How much the BP network can remove.** Its only memory is one previous reading. At equal (R_t, R_{t-1}) a
   loading and an unloading observation differ only in the sign of the last step, so the net can undo the part of
   the loop that the last step reveals (branch direction, creep since the last level); the rest of the
-  Prandtl-Ishlinskii memory (where the last turn was) is invisible to it. The TCN sees the history of readings and
-  removes more.
+  Prandtl-Ishlinskii memory (where the last turn was) is invisible to it, which is why its worst minor loop keeps
+  more error than the full-range cycle. The TCN sees the history of readings and removes more in most cases.
+- **Quick mode** uses coarser force steps for 3, 6 and 12 layers (0.2 / 0.4 / 0.5 N, ~40 levels up the full
+  range): fewer dwells mean less creep per newton, so the uncompensated loop is wider there than at the paper's
+  0.1 N steps (e.g. 6 layers: ~34 % against ~25 %). The full mode uses 0.1 N everywhere.
 - **Table 2.** The paper does not define "observation"; we read it as the number of training observations (random
   (R_t, R_{t-1}) -> target pairs drawn from the training episodes), with LM's validation checks on separate
   episodes, and report MSE/R both on those observations (comparable to the paper's, which look in-sample: R near 1)
