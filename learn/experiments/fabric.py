@@ -383,17 +383,16 @@ def table2(md: Mode, xs, ys, valid, test, seed, units) -> dict[str, Any]:
             comp.fit(xs, ys, valid=valid, seed=seed + 17 * rep + 1, inputs=["resistance_measured"], targets=["r_static"],
                      units=units)
             idx = comp.history["observation_index"]
-            X = np.concatenate(xs)
             Y = np.concatenate(ys)[:, 0]
             # in-sample: the network's output on its own n observations (features from the full episodes)
             P = np.concatenate([comp.predict(x)[:, 0] for x in xs])
             te = test
-            pt = np.concatenate([comp.predict(s.x)[:, 0] for s in te])
+            pt_list = comp.predict([s.x for s in te])
+            pt = np.concatenate([p[:, 0] for p in pt_list])
             yt = np.concatenate([s.y[:, 0] for s in te])
             runs.append({"train_mse": M.mse(Y[idx] / KOHM, P[idx] / KOHM), "train_r": M.pearson_r(Y[idx], P[idx]),
                          "test_mse": M.mse(yt / KOHM, pt / KOHM), "test_r": M.pearson_r(yt, pt),
-                         "test_hyst_full": score(te, [comp.predict(s.x) for s in te])["hyst_full_mean"]})
-            del X
+                         "test_hyst_full": score(te, pt_list)["hyst_full_mean"]})
         agg = {k: float(np.nanmedian([r_[k] for r_ in runs])) for k in runs[0]}
         out[str(nobs)] = {**agg, "runs": runs}
     return out
