@@ -10,6 +10,7 @@ from types import ModuleType
 EXPERIMENTS: dict[str, str] = {
     "cnt_pdms": "learn.experiments.cnt_pdms",
     "velostat": "learn.experiments.velostat",
+    "fabric": "learn.experiments.fabric",
 }
 
 

@@ -8,5 +8,6 @@ Built in: mean (trivial baseline), linear, cubic (learn.models.classical), mlp, 
 from learn.models.base import MODELS, Compensator, Streamer, edge_windows, make_model, register
 from learn.models import classical, neural, tcn  # noqa: F401,E402  (register)
 from learn.models import velostat  # noqa: F401,E402  (register: bp)
+from learn.models import bpnet  # noqa: F401,E402  (fabric: BP network trained by Levenberg-Marquardt)
 
 __all__ = ["MODELS", "Compensator", "Streamer", "edge_windows", "make_model", "register"]
