@@ -94,13 +94,18 @@ def n_shards(cfg: SceneConfig) -> int:
     return -(-g.episodes // g.episodes_per_shard)
 
 
-def write_shard(cfg: SceneConfig, out_dir: Path, shard: int, sensor: SensorModel, mjcf: str) -> Path:
-    """Generate and atomically write one shard (a pure function of config and shard index)."""
+def write_shard(
+    cfg: SceneConfig, out_dir: Path, shard: int, sensor: SensorModel, mjcf: str, *, threads: int | None = None
+) -> Path:
+    """Generate and atomically write one shard (a pure function of config and shard index).
+
+    threads: MuJoCo rollout threads (default generation.threads); it does not change the output.
+    """
     g = cfg.generation
     gids = episode_ids_of_shard(cfg, shard)
     seeds = [episode_seed(g.root_seed, k) for k in gids]
     ids = [f"ep-{k:06d}" for k in gids]
-    results = simulate_episodes(cfg, seeds, ids, sensor, threads=g.threads)
+    results = simulate_episodes(cfg, seeds, ids, sensor, threads=g.threads if threads is None else threads)
     ep_attrs = {
         r.ep_id: {
             "seed": r.seed,
@@ -154,6 +159,7 @@ def generate(
     """Generate the dataset into out_dir (created), resuming at missing shards; returns manifest path.
 
     on_shard(shard_index, n_episodes, skipped) is called after each shard (for progress bars).
+    This is the serial path; simulate.executors.generate spreads shards over processes or a Ray cluster.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -167,12 +173,17 @@ def generate(
             write_shard(cfg, out, s, sensor, mjcf)
         if on_shard:
             on_shard(s, len(episode_ids_of_shard(cfg, s)), s not in todo)
+    return write_dataset_manifest(cfg, out)
+
+
+def write_dataset_manifest(cfg: SceneConfig, out_dir: str | Path) -> Path:
+    """Describe the (complete) shards of cfg's dataset in out_dir and write manifest.json (the driver's job)."""
     return build_manifest(
-        out,
+        Path(out_dir),
         name=cfg.name,
-        n_shards=ns,
+        n_shards=n_shards(cfg),
         episodes_per_shard=cfg.generation.episodes_per_shard,
-        config_sha256=sha,
+        config_sha256=config_sha256(cfg),
         root_seed=cfg.generation.root_seed,
         extra={"paper": cfg.paper, "family": cfg.sensor.family, "episodes": cfg.generation.episodes},
     )
