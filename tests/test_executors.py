@@ -102,3 +102,18 @@ def test_ray_local_cluster_equals_serial_and_retries(cfg, serial, tmp_path, monk
     assert marker.is_file()
     assert sorted(seen) == [0, 1, 2, 3]
     _assert_same_dataset(serial, out, 4)
+
+
+def test_episode_channels_do_not_depend_on_shard_size_or_batching(serial, tmp_path):
+    """5 episodes in one shard (simulated in batches of 4 + 1, written while the next batch runs) equal
+    the same episodes made one per shard."""
+    cfg5 = load_scene("cnt_pdms", FAST[:-3] + ["generation.episodes=5", "generation.episodes_per_shard=5",
+                                               "generation.root_seed=11"])
+    assert run.shard_batches(5) == [slice(0, 4), slice(4, 5)]
+    run.generate(cfg5, tmp_path / "one")
+    one = _episodes(tmp_path / "one", 1)
+    ref = _episodes(serial, 4)
+    assert list(one) == [f"ep-{k:06d}" for k in range(5)]
+    for ep in ref:
+        for ch in ref[ep]:
+            assert one[ep][ch].tobytes() == ref[ep][ch].tobytes(), (ep, ch)
