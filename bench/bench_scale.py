@@ -36,6 +36,9 @@ def _cfg(batch: int, n_episodes: int):
     return load_scene(PRESET, BASE + [f"generation.episodes={n_episodes}", f"generation.episodes_per_shard={batch}"])
 
 
+DEVICE = "cpu"  # Warp device of the sensor kernels (--device); MuJoCo always runs on the CPU
+
+
 def stage_profile(batch: int, threads: int = 1) -> dict:
     """Seconds per stage for `batch` episodes in one batch in this process (after a warm-up), then the same
     shard end to end through write_shard (pipelined)."""
@@ -50,7 +53,7 @@ def stage_profile(batch: int, threads: int = 1) -> dict:
 
     init_warp()
     cfg = _cfg(batch, batch)
-    sensor = make_sensor(cfg)
+    sensor = make_sensor(cfg, "warp", DEVICE)
     seeds = [episode_seed(0, k) for k in range(batch)]
     protos = [make_episode_protocol(cfg, s) for s in seeds]
     res = {}
@@ -132,12 +135,14 @@ def _set_parts(parts: int) -> None:
     run.PIPELINE_PARTS = parts
 
 
-def _warm(cfg, out: str, parts: int) -> int:
+def _warm(cfg, out: str, parts: int, device: str) -> int:
     """Import, initialise Warp and build the sensor for `cfg` in this worker (one scratch shard, untimed)."""
     from simulate.executors import shard_task
 
+    global DEVICE
+    DEVICE = device
     _set_parts(parts)
-    shard_task(cfg, out, 0, threads=1)
+    shard_task(cfg, out, 0, device=DEVICE, threads=1)
     time.sleep(0.2)
     return os.getpid()
 
@@ -151,7 +156,7 @@ def _task(cfg, out: str, shard: int) -> tuple[int, float, float]:  # runs with t
     from simulate.executors import shard_task
 
     c0 = _cpu_s()
-    _, n, _ = shard_task(cfg, out, shard, threads=1)
+    _, n, _ = shard_task(cfg, out, shard, device=DEVICE, threads=1)
     return n, time.perf_counter(), _cpu_s() - c0
 
 
@@ -165,7 +170,8 @@ def throughput(batch: int, workers: int, shards_per_worker: int, root: Path, par
     out.mkdir(parents=True)
     t0 = time.perf_counter()
     with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
-        pids = set(pool.map(_warm, [cfg] * workers, [str(root / f"warm-{i}") for i in range(workers)], [parts] * workers))
+        pids = set(pool.map(_warm, [cfg] * workers, [str(root / f"warm-{i}") for i in range(workers)], [parts] * workers,
+                              [DEVICE] * workers))
         t_start = time.perf_counter() - t0
         t1 = time.perf_counter()
         futs = [pool.submit(_task, cfg, str(out), s) for s in range(n_shards)]
@@ -196,8 +202,12 @@ def main() -> None:
     ap.add_argument("--shards-per-worker", type=int, default=2)
     ap.add_argument("--profile-batch", type=int, default=16)
     ap.add_argument("--parts", default="4,1", help="PIPELINE_PARTS values to sweep (1 = no write overlap)")
+    ap.add_argument("--device", default="cpu", help="Warp device of the sensor kernels: cpu | cuda")
+    ap.add_argument("--tag", default="cpu", help="results file: results/scale-<tag>.json")
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     a = ap.parse_args()
+    global DEVICE
+    DEVICE = "cuda:0" if a.device == "cuda" else a.device
     batches = [int(x) for x in a.batches.split(",")]
     workers = [int(x) for x in a.workers.split(",")]
     a.parts = [int(x) for x in a.parts.split(",")]
@@ -239,12 +249,14 @@ def main() -> None:
           + ", ".join(f"PIPELINE_PARTS={k}: {v['peak_heap_MB_per_episode']:.2f} MB" for k, v in mem.items())
           + f"; recorded {prof['raw_bytes_per_episode'] / 1e6:.2f} MB raw, {prof['file_bytes_per_episode'] / 1e6:.2f} MB on disk")
     load = os.getloadavg()
-    res = {"host": platform.node(), "cpus": os.cpu_count(), "loadavg_at_end": load, "preset": PRESET,
+    cpu_model = next((ln.split(":", 1)[1].strip() for ln in Path("/proc/cpuinfo").read_text().splitlines()
+                      if ln.startswith("model name")), platform.processor())
+    res = {"host": platform.node(), "cpu_model": cpu_model, "cpus": os.cpu_count(), "sensor_device": DEVICE, "loadavg_at_end": load, "preset": PRESET,
            "overrides": BASE, "samples_per_episode": 620, "taxels": 225, "stage_profile": prof, "throughput": rows,
            "scaling_efficiency_1_to_2": eff,
            "memory_per_episode_MB": {k: v["peak_heap_MB_per_episode"] for k, v in mem.items()}}
     a.out.mkdir(parents=True, exist_ok=True)
-    path = a.out / "scale-cpu.json"
+    path = a.out / f"scale-{a.tag}.json"
     path.write_text(json.dumps(res, indent=2))
     print(f"load average at end {load[0]:.2f} on {os.cpu_count()} cores; wrote {path}")
 
