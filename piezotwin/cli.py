@@ -60,6 +60,10 @@ def generate(
     set_: SetOpt = None,
     backend: Annotated[str, typer.Option(help="Sensor kernels: warp | numpy.")] = "warp",
     device: Annotated[str, typer.Option(help="Warp device: cpu | cuda.")] = "cpu",
+    executor: Annotated[str, typer.Option(help="Where shards run: local (process pool when --workers > 1) | ray.")] = "local",
+    address: Annotated[Optional[str], typer.Option(help="Ray cluster address (ray executor; default: start a local one).")] = None,
+    shards: Annotated[Optional[int], typer.Option(help="Number of shards (sets generation.episodes_per_shard).")] = None,
+    workers: Annotated[int, typer.Option(help="Worker processes (local pool) or CPUs of a local Ray cluster.")] = 1,
 ) -> None:
     """Generate a dataset: HDF5 shards + manifest.json. Resumes at the first missing shard."""
     extra = []
@@ -67,7 +71,22 @@ def generate(
         extra.append(f"generation.episodes={episodes}")
     if seed is not None:
         extra.append(f"generation.root_seed={seed}")
+    if executor not in ("local", "ray"):
+        fail(f"--executor must be one of: local, ray (got '{executor}')")
+    if workers < 1:
+        fail(f"--workers must be >= 1 (got {workers})")
+    if address and executor != "ray":
+        fail("--address needs --executor ray")
+    if executor == "ray":
+        import importlib.util
+
+        if importlib.util.find_spec("ray") is None:
+            fail("--executor ray needs Ray: pip install 'piezotwin[ray]'")
     cfg = _load(scene, set_, extra)
+    if shards is not None:
+        if not 1 <= shards <= cfg.generation.episodes:
+            fail(f"--shards must be between 1 and the number of episodes ({cfg.generation.episodes}); got {shards}")
+        cfg = _load(scene, set_, extra + [f"generation.episodes_per_shard={-(-cfg.generation.episodes // shards)}"])
     if backend not in ("warp", "numpy"):
         fail(f"--backend must be one of: warp, numpy (got '{backend}')")
     if device not in ("cpu", "cuda", "auto") and not device.startswith("cuda:"):
@@ -83,7 +102,8 @@ def generate(
     _quiet_warp()
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-    from simulate.run import generate as run_generate
+    from simulate.executors import ShardFailedError
+    from simulate.executors import generate as run_generate
     from simulate.run import n_shards
 
     with Progress(
@@ -98,7 +118,13 @@ def generate(
                 skipped.append(i)
             bar.advance(task, n)
 
-        manifest = run_generate(cfg, out, backend=backend, device=device, on_shard=on_shard)
+        try:
+            manifest = run_generate(
+                cfg, out, executor=executor, workers=workers, address=address, backend=backend, device=device,
+                on_shard=on_shard,
+            )
+        except ShardFailedError as exc:
+            fail(str(exc))
     if skipped:
         console.print(f"resumed: {len(skipped)} complete shard(s) kept")
     console.print(f"wrote {manifest}")

@@ -51,6 +51,7 @@ _CHUNK_MAX_BYTES = 1 << 20  # cap on one chunk, for very wide frames
 _COMPRESSIONS = ("lzf", "gzip", "none")
 
 __all__ = [
+    "RecordingWriter",
     "FORMAT",
     "FORMAT_VERSION",
     "Channel",
@@ -269,6 +270,139 @@ def _fsync(path: Path) -> None:
         os.close(fd)
 
 
+def _check_episode(ep_id: str, channels: Mapping[str, Channel]) -> None:
+    _check_name(ep_id, "episode id")
+    if not channels:
+        raise ValueError(f"episode {ep_id!r} has no channels")
+    for name, ch in channels.items():
+        _check_name(name, "channel name")
+        if not isinstance(ch, Channel):
+            raise ValueError(f"episode {ep_id!r} channel {name!r}: expected a Channel")
+        ch.validate(f"episode {ep_id!r} channel {name!r}")
+
+
+class RecordingWriter:
+    """Write one recording episode by episode, atomically (what `write_recording` does in one call).
+
+    ::
+
+        with RecordingWriter(path, source="sim", config_json=..., root_seed=0, shard_index=3,
+                             sensor_attrs={...}) as w:
+            w.add_episode("ep-000000", channels, attrs)     # may be called from another thread
+        # renamed into place here; on an exception (or no episode) nothing appears at `path`
+
+    The file is built at ``<path>.tmp``; episodes must be added in the order they should be stored.
+    Lets a producer simulate the next episodes while this writes (and compresses) the previous ones.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        *,
+        source: Literal["sim", "real"],
+        config_json: str,
+        root_seed: int | None,
+        shard_index: int | None,
+        sensor_attrs: Mapping[str, Any],
+        mjcf: str | None = None,
+        extra_attrs: Mapping[str, Any] | None = None,
+        compression: Literal["lzf", "gzip", "none"] = "lzf",
+    ):
+        if source not in ("sim", "real"):
+            raise ValueError(f"source must be 'sim' or 'real', got {source!r}")
+        if compression not in _COMPRESSIONS:
+            raise ValueError(f"compression must be one of {_COMPRESSIONS}, got {compression!r}")
+        if not isinstance(config_json, str):
+            raise ValueError("config_json must be a JSON string")
+        try:
+            json.loads(config_json)
+        except json.JSONDecodeError as e:
+            raise ValueError(f"config_json is not valid JSON: {e}") from e
+        reserved = {"format", "format_version", "source", "config_json", "config_sha256"}
+        if extra_attrs and reserved & set(extra_attrs):
+            raise ValueError(f"extra_attrs may not override {sorted(reserved & set(extra_attrs))}")
+        self.path = Path(path)
+        self.compression = compression
+        gen = generator_info()
+        self._root: dict[str, Any] = {
+            "format": FORMAT,
+            "format_version": FORMAT_VERSION,
+            "source": source,
+            "created_utc": _utc_now(),
+            "generator": f"{gen['name']} {gen['version']} (git {gen['commit']})",
+            "generator_version": gen["version"],
+            "generator_commit": gen["commit"],
+            "config_json": config_json,
+            "config_sha256": hashlib.sha256(config_json.encode("utf-8")).hexdigest(),
+            "root_seed": root_seed,
+            "shard_index": shard_index,
+        }
+        self._root.update({f"version_{k}": v for k, v in _library_versions().items()})
+        self._root.update(extra_attrs or {})
+        self._sensor_attrs = dict(sensor_attrs)
+        self._mjcf = mjcf
+        self._f: h5py.File | None = None
+        self._eps: h5py.Group | None = None
+        self.n_episodes = 0
+        self.tmp = self.path.with_name(self.path.name + ".tmp")
+
+    def __enter__(self) -> "RecordingWriter":
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            self._f = h5py.File(self.tmp, "w", track_order=True)
+            _set_attrs(self._f, self._root, "root")
+            _set_attrs(self._f.create_group("sensor"), self._sensor_attrs, "sensor")
+            if self._mjcf is not None:
+                self._f.create_group("scene").create_dataset("mjcf", data=self._mjcf, dtype=h5py.string_dtype())
+            self._eps = self._f.create_group("episodes")
+        except BaseException:
+            self._abort()
+            raise
+        return self
+
+    def add_episode(self, ep_id: str, channels: Mapping[str, Channel], attrs: Mapping[str, Any] | None = None) -> None:
+        if self._eps is None:
+            raise RuntimeError("RecordingWriter: add_episode outside the with block")
+        _check_episode(ep_id, channels)
+        g = self._eps.create_group(ep_id)
+        _set_attrs(g, dict(attrs or {}), f"episode {ep_id}")
+        for name, ch in channels.items():
+            _write_channel(g, name, ch, self.compression)
+        self.n_episodes += 1
+
+    def _abort(self) -> None:
+        if self._f is not None:
+            try:
+                self._f.close()
+            except Exception:  # noqa: BLE001 - the file is being thrown away
+                pass
+            self._f = None
+        try:
+            self.tmp.unlink()
+        except FileNotFoundError:
+            pass
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None and self.n_episodes == 0:
+            self._abort()
+            raise ValueError("episodes is empty: a recording needs at least one episode")
+        if exc_type is not None:
+            self._abort()
+            return
+        try:
+            self._f.close()
+            self._f = None
+            _fsync(self.tmp)
+            os.replace(self.tmp, self.path)
+        except BaseException:
+            self._abort()
+            raise
+        try:  # make the rename durable; best effort (not every filesystem allows it)
+            _fsync(self.path.parent)
+        except OSError:
+            pass
+
+
 def write_recording(
     path: str | os.PathLike,
     episodes: Mapping[str, Mapping[str, Channel]],
@@ -286,82 +420,25 @@ def write_recording(
     """Write one recording (shard) atomically and return its final path.
 
     The file is built at ``<path>.tmp`` and renamed to ``path`` when complete; on any exception
-    the temporary file is removed and nothing appears at ``path``.
+    the temporary file is removed and nothing appears at ``path``. Episodes are stored in natural
+    order of their ids. (`RecordingWriter` does the same episode by episode.)
     """
-    path = Path(path)
-    if source not in ("sim", "real"):
-        raise ValueError(f"source must be 'sim' or 'real', got {source!r}")
-    if compression not in _COMPRESSIONS:
-        raise ValueError(f"compression must be one of {_COMPRESSIONS}, got {compression!r}")
-    if not isinstance(config_json, str):
-        raise ValueError("config_json must be a JSON string")
-    try:
-        json.loads(config_json)
-    except json.JSONDecodeError as e:
-        raise ValueError(f"config_json is not valid JSON: {e}") from e
+    writer = RecordingWriter(
+        path, source=source, config_json=config_json, root_seed=root_seed, shard_index=shard_index,
+        sensor_attrs=sensor_attrs, mjcf=mjcf, extra_attrs=extra_attrs, compression=compression,
+    )
     if not episodes:
         raise ValueError("episodes is empty: a recording needs at least one episode")
     episode_attrs = dict(episode_attrs or {})
     for ep_id, channels in episodes.items():
-        _check_name(ep_id, "episode id")
-        if not channels:
-            raise ValueError(f"episode {ep_id!r} has no channels")
-        for name, ch in channels.items():
-            _check_name(name, "channel name")
-            if not isinstance(ch, Channel):
-                raise ValueError(f"episode {ep_id!r} channel {name!r}: expected a Channel")
-            ch.validate(f"episode {ep_id!r} channel {name!r}")
+        _check_episode(ep_id, channels)
     unknown = set(episode_attrs) - set(episodes)
     if unknown:
         raise ValueError(f"episode_attrs for unknown episodes: {sorted(unknown)}")
-    reserved = {"format", "format_version", "source", "config_json", "config_sha256"}
-    if extra_attrs and reserved & set(extra_attrs):
-        raise ValueError(f"extra_attrs may not override {sorted(reserved & set(extra_attrs))}")
-
-    gen = generator_info()
-    root: dict[str, Any] = {
-        "format": FORMAT,
-        "format_version": FORMAT_VERSION,
-        "source": source,
-        "created_utc": _utc_now(),
-        "generator": f"{gen['name']} {gen['version']} (git {gen['commit']})",
-        "generator_version": gen["version"],
-        "generator_commit": gen["commit"],
-        "config_json": config_json,
-        "config_sha256": hashlib.sha256(config_json.encode("utf-8")).hexdigest(),
-        "root_seed": root_seed,
-        "shard_index": shard_index,
-    }
-    root.update({f"version_{k}": v for k, v in _library_versions().items()})
-    root.update(extra_attrs or {})
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    try:
-        with h5py.File(tmp, "w", track_order=True) as f:
-            _set_attrs(f, root, "root")
-            _set_attrs(f.create_group("sensor"), dict(sensor_attrs), "sensor")
-            if mjcf is not None:
-                f.create_group("scene").create_dataset("mjcf", data=mjcf, dtype=h5py.string_dtype())
-            eps = f.create_group("episodes")
-            for ep_id in _natural_sorted(episodes):
-                g = eps.create_group(ep_id)
-                _set_attrs(g, episode_attrs.get(ep_id, {}), f"episode {ep_id}")
-                for name, ch in episodes[ep_id].items():
-                    _write_channel(g, name, ch, compression)
-        _fsync(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            tmp.unlink()
-        except FileNotFoundError:
-            pass
-        raise
-    try:  # make the rename durable; best effort (not every filesystem allows it)
-        _fsync(path.parent)
-    except OSError:
-        pass
-    return path
+    with writer as w:
+        for ep_id in _natural_sorted(episodes):
+            w.add_episode(ep_id, episodes[ep_id], episode_attrs.get(ep_id, {}))
+    return writer.path
 
 
 # --------------------------------------------------------------------------- reading

@@ -17,7 +17,7 @@ from scenes import SceneConfig, config_json
 from sensors.base import SensorModel
 from sensors.registry import make_sensor
 from sensors.manifest import build_manifest, episode_seed, first_missing_shards, shard_path
-from sensors.recording import Channel, write_recording
+from sensors.recording import Channel, RecordingWriter
 from sensors.base import LoadBatch
 from simulate.contact import run_episodes
 from simulate.mjcf import build_mjcf
@@ -94,41 +94,83 @@ def n_shards(cfg: SceneConfig) -> int:
     return -(-g.episodes // g.episodes_per_shard)
 
 
-def write_shard(cfg: SceneConfig, out_dir: Path, shard: int, sensor: SensorModel, mjcf: str) -> Path:
-    """Generate and atomically write one shard (a pure function of config and shard index)."""
+PIPELINE_PARTS = 4  # a shard is simulated in up to this many batches; batch i is written while batch i+1 runs
+MIN_BATCH = 4  # ... of at least this many episodes
+
+
+def shard_batches(n_episodes: int) -> list[slice]:
+    """Contiguous batches of a shard's episodes: up to PIPELINE_PARTS, each >= MIN_BATCH episodes."""
+    size = max(MIN_BATCH, -(-n_episodes // PIPELINE_PARTS))
+    return [slice(a, min(n_episodes, a + size)) for a in range(0, n_episodes, size)]
+
+
+def _episode_attrs(r: EpisodeResult, k: int) -> dict:
+    return {
+        "seed": r.seed,
+        "global_index": k,
+        "frequency_hz": r.protocol.frequency_hz,
+        "amplitude": r.protocol.amplitude,
+        "amplitude_units": "N" if r.protocol.control == "force" else "m",
+        "offset_xy_m": np.asarray(r.protocol.offset_xy_m),
+        "n_samples": r.protocol.n_samples,
+        "control": r.protocol.control,
+        "kind": r.protocol.kind,
+    }
+
+
+def write_shard(
+    cfg: SceneConfig, out_dir: Path, shard: int, sensor: SensorModel, mjcf: str, *, threads: int | None = None
+) -> Path:
+    """Generate and atomically write one shard (a pure function of config and shard index).
+
+    The shard's episodes run in contiguous batches (`shard_batches`); a writer thread writes and compresses
+    batch i into the shard file while batch i+1 is simulated (MuJoCo and the Warp kernels release the GIL),
+    so on a free core the HDF5 write costs no wall time, and at most two batches are held in memory.
+    An episode's channels do not depend on the batch it runs in. threads: MuJoCo rollout threads (default
+    generation.threads); it does not change the output either.
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
     g = cfg.generation
     gids = episode_ids_of_shard(cfg, shard)
     seeds = [episode_seed(g.root_seed, k) for k in gids]
     ids = [f"ep-{k:06d}" for k in gids]
-    results = simulate_episodes(cfg, seeds, ids, sensor, threads=g.threads)
-    ep_attrs = {
-        r.ep_id: {
-            "seed": r.seed,
-            "global_index": k,
-            "frequency_hz": r.protocol.frequency_hz,
-            "amplitude": r.protocol.amplitude,
-            "amplitude_units": "N" if r.protocol.control == "force" else "m",
-            "offset_xy_m": np.asarray(r.protocol.offset_xy_m),
-            "n_samples": r.protocol.n_samples,
-            "control": r.protocol.control,
-            "kind": r.protocol.kind,
-        }
-        for r, k in zip(results, gids)
-    }
     sensor_attrs = dict(sensor.attrs())
     sensor_attrs["taxel_xy_m"] = _taxel_xy(cfg)
-    return write_recording(
+    writer = RecordingWriter(
         shard_path(out_dir, shard),
-        {r.ep_id: r.channels for r in results},
         source="sim",
         config_json=config_json(cfg),
         root_seed=g.root_seed,
         shard_index=shard,
         sensor_attrs=sensor_attrs,
         mjcf=mjcf,
-        episode_attrs=ep_attrs,
         compression=g.compression,
     )
+
+    def write(results: list[EpisodeResult], ks: list[int]) -> None:
+        for r, k in zip(results, ks):
+            w.add_episode(r.ep_id, r.channels, _episode_attrs(r, k))
+
+    with writer as w, ThreadPoolExecutor(1, thread_name_prefix="shard-writer") as pool:
+        pending = None
+        try:
+            for sl in shard_batches(len(gids)):
+                results = simulate_episodes(cfg, seeds[sl], ids[sl], sensor, threads=g.threads if threads is None else threads)
+                if pending is not None:
+                    pending.result()  # one batch in flight: bounded memory, errors surface here
+                pending = pool.submit(write, results, gids[sl])
+                del results
+            pending.result()
+        except BaseException:
+            if pending is not None:  # let the writer stop touching the file before it is discarded
+                pending.cancel()
+                try:
+                    pending.result()
+                except BaseException:  # noqa: BLE001 - the first error is the one raised
+                    pass
+            raise
+    return writer.path
 
 
 def _taxel_xy(cfg: SceneConfig) -> np.ndarray:
@@ -154,6 +196,7 @@ def generate(
     """Generate the dataset into out_dir (created), resuming at missing shards; returns manifest path.
 
     on_shard(shard_index, n_episodes, skipped) is called after each shard (for progress bars).
+    This is the serial path; simulate.executors.generate spreads shards over processes or a Ray cluster.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -167,12 +210,17 @@ def generate(
             write_shard(cfg, out, s, sensor, mjcf)
         if on_shard:
             on_shard(s, len(episode_ids_of_shard(cfg, s)), s not in todo)
+    return write_dataset_manifest(cfg, out)
+
+
+def write_dataset_manifest(cfg: SceneConfig, out_dir: str | Path) -> Path:
+    """Describe the (complete) shards of cfg's dataset in out_dir and write manifest.json (the driver's job)."""
     return build_manifest(
-        out,
+        Path(out_dir),
         name=cfg.name,
-        n_shards=ns,
+        n_shards=n_shards(cfg),
         episodes_per_shard=cfg.generation.episodes_per_shard,
-        config_sha256=sha,
+        config_sha256=config_sha256(cfg),
         root_seed=cfg.generation.root_seed,
         extra={"paper": cfg.paper, "family": cfg.sensor.family, "episodes": cfg.generation.episodes},
     )

@@ -1,0 +1,119 @@
+"""Distributed generation (simulate/executors.py): a local process pool and Ray give the serial dataset,
+a killed worker's shard is retried, exhausted retries give a clear error and a rerun resumes."""
+
+import importlib.util
+
+import numpy as np
+import pytest
+
+import simulate.run as run
+from scenes import load_scene
+from sensors.manifest import read_manifest, shard_path
+from sensors.recording import Recording
+from simulate import executors
+
+FAST = ["protocol.frequencies_hz=[2.0]", "protocol.cycles=1", "pad.taxels_x=6", "pad.taxels_y=6",
+        "generation.episodes=4", "generation.episodes_per_shard=1", "generation.root_seed=11"]
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    return load_scene("cnt_pdms", FAST)
+
+
+@pytest.fixture(scope="module")
+def serial(cfg, tmp_path_factory):
+    out = tmp_path_factory.mktemp("serial")
+    run.generate(cfg, out)
+    return out
+
+
+def _episodes(directory, n_shards):
+    eps = {}
+    for i in range(n_shards):
+        with Recording(shard_path(directory, i)) as rec:
+            for ep in rec.episode_ids:
+                eps[ep] = {ch: rec.read(ep, ch) for ch in rec.channels(ep)}
+    return eps
+
+
+def _assert_same_dataset(a, b, n_shards):
+    ea, eb = _episodes(a, n_shards), _episodes(b, n_shards)
+    assert list(ea) == list(eb) and len(ea) == 4
+    for ep in ea:
+        assert list(ea[ep]) == list(eb[ep])
+        for ch in ea[ep]:
+            assert ea[ep][ch].dtype == eb[ep][ch].dtype
+            assert ea[ep][ch].tobytes() == eb[ep][ch].tobytes(), (ep, ch)
+    ma, mb = read_manifest(a), read_manifest(b)
+    for key in ("config_sha256", "total_episodes", "splits"):
+        assert ma[key] == mb[key]
+    assert [s["episode_seeds"] for s in ma["shards"]] == [s["episode_seeds"] for s in mb["shards"]]
+
+
+def _inject(monkeypatch, tmp_path, shard, mode):
+    marker = tmp_path / f"fault-{shard}"
+    monkeypatch.setenv("PIEZOTWIN_FAULT_SHARD", str(shard))
+    monkeypatch.setenv("PIEZOTWIN_FAULT_MARKER", str(marker))
+    monkeypatch.setenv("PIEZOTWIN_FAULT_MODE", mode)
+    return marker
+
+
+def test_local_pool_equals_serial_and_retries_a_killed_worker(cfg, serial, tmp_path, monkeypatch):
+    marker = _inject(monkeypatch, tmp_path, 2, "exit")  # the worker running shard 2 dies once
+    seen = []
+    out = tmp_path / "pool"
+    executors.generate(cfg, out, executor="local", workers=2, on_shard=lambda s, n, skip: seen.append((s, n, skip)))
+    assert marker.is_file()  # the fault did happen
+    assert sorted(seen) == [(s, 1, False) for s in range(4)]  # progress: each shard once, as it finished
+    assert not list(out.glob("*.tmp"))
+    _assert_same_dataset(serial, out, 4)
+
+
+@pytest.mark.slow  # two more pool start-ups (~11 s on 2 cores)
+def test_exhausted_retries_fail_clearly_then_resume(cfg, serial, tmp_path, monkeypatch):
+    marker = _inject(monkeypatch, tmp_path, 1, "raise")
+    out = tmp_path / "pool"
+    with pytest.raises(executors.ShardFailedError, match=r"shard 1: failed 1 time.*injected fault"):
+        executors.generate(cfg, out, workers=2, max_retries=0)
+    assert marker.is_file() and not (out / "manifest.json").exists()
+    assert not shard_path(out, 1).exists()
+    done_before = {i: shard_path(out, i).stat().st_mtime_ns for i in (0, 2, 3) if shard_path(out, i).exists()}
+    seen = []
+    executors.generate(cfg, out, workers=2, on_shard=lambda s, n, skip: seen.append((s, skip)))
+    assert (1, False) in seen and all((i, True) in seen for i in done_before)  # kept shards are skipped
+    assert {i: shard_path(out, i).stat().st_mtime_ns for i in done_before} == done_before
+    _assert_same_dataset(serial, out, 4)
+
+
+def test_arguments_are_checked(cfg, tmp_path):
+    with pytest.raises(ValueError, match="executor must be one of"):
+        executors.generate(cfg, tmp_path, executor="dask")
+    with pytest.raises(ValueError, match="workers must be >= 1"):
+        executors.generate(cfg, tmp_path, workers=0)
+
+
+@pytest.mark.skipif(importlib.util.find_spec("ray") is None, reason="ray not installed (optional extra)")
+def test_ray_local_cluster_equals_serial_and_retries(cfg, serial, tmp_path, monkeypatch):
+    marker = _inject(monkeypatch, tmp_path, 3, "exit")  # a Ray worker dies once; Ray's max_retries reruns it
+    out = tmp_path / "ray"
+    seen = []
+    executors.generate(cfg, out, executor="ray", workers=2, on_shard=lambda s, n, skip: seen.append(s))
+    assert marker.is_file()
+    assert sorted(seen) == [0, 1, 2, 3]
+    _assert_same_dataset(serial, out, 4)
+
+
+def test_episode_channels_do_not_depend_on_shard_size_or_batching(serial, tmp_path):
+    """5 episodes in one shard (simulated in batches of 4 + 1, written while the next batch runs) equal
+    the same episodes made one per shard."""
+    cfg5 = load_scene("cnt_pdms", FAST[:-3] + ["generation.episodes=5", "generation.episodes_per_shard=5",
+                                               "generation.root_seed=11"])
+    assert run.shard_batches(5) == [slice(0, 4), slice(4, 5)]
+    run.generate(cfg5, tmp_path / "one")
+    one = _episodes(tmp_path / "one", 1)
+    ref = _episodes(serial, 4)
+    assert list(one) == [f"ep-{k:06d}" for k in range(5)]
+    for ep in ref:
+        for ch in ref[ep]:
+            assert one[ep][ch].tobytes() == ref[ep][ch].tobytes(), (ep, ch)
