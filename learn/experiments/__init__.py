@@ -9,6 +9,7 @@ from types import ModuleType
 
 EXPERIMENTS: dict[str, str] = {
     "cnt_pdms": "learn.experiments.cnt_pdms",
+    "ntype": "learn.experiments.ntype",
 }
 
 

@@ -7,5 +7,6 @@ Built in: mean (trivial baseline), linear, cubic (learn.models.classical), mlp, 
 
 from learn.models.base import MODELS, Compensator, Streamer, edge_windows, make_model, register
 from learn.models import classical, neural, tcn  # noqa: F401,E402  (register)
+from learn.models import map_cnn, rbf  # noqa: F401,E402  (ntype: rbf = the paper's RBFNN, map_cnn = ours)
 
 __all__ = ["MODELS", "Compensator", "Streamer", "edge_windows", "make_model", "register"]
