@@ -67,14 +67,16 @@ class Mode:
     centres_win: int = 400  # sliding-window networks (shared over the 36 elements)
     rest_keep: float = 0.1  # share of unloaded element rows kept for the window networks' training
     min_abs_ref: float = 0.5  # N, eq. 14 over components with |F| >= this
-    cnn: dict[str, Any] = field(default_factory=lambda: {"max_epochs": 150, "patience": 15})
+    kmeans_iter: int = 100
+    cnn: dict[str, Any] = field(default_factory=lambda: {"max_epochs": 200, "patience": 20, "batch_size": 64, "lr": 2e-3})
     cnn_valid_share: float = 0.1
 
 
 def _modes() -> dict[str, Mode]:
     full = Mode("full", [])
     quick = Mode("quick", ["generation.episodes=60", "generation.episodes_per_shard=30", "generation.threads=1"],
-                 centres_col=150, centres_win=250, cnn={"max_epochs": 60, "patience": 10})
+                 centres_col=150, centres_win=200, kmeans_iter=30,
+                 cnn={"max_epochs": 60, "patience": 10, "batch_size": 128, "lr": 3e-3})
     tiny = Mode("tiny", ["generation.episodes=12", "generation.episodes_per_shard=12", "generation.threads=1",
                          "protocol.duration_s=1.0"],
                 folds=3, spreads=(1.0, 4.0, 7.0, 10.0), windows=(1, 5), centres_col=20, centres_win=40,
@@ -198,10 +200,6 @@ def run(
     log: Callable[[str], None] = print,
 ) -> dict[str, Any]:
     """Generate (or reuse) the data, run the k-fold cross-validation of every model, write the report."""
-    from learn.checkpoint import save_checkpoint
-    from learn.models import make_model
-    from learn.models.rbf import KMeans, RBFNetwork
-
     if mode not in MODES:
         raise ValueError(f"mode must be one of {sorted(MODES)}, got {mode!r}")
     md = MODES[mode]
@@ -215,12 +213,28 @@ def run(
     data = make_data(Path(data_dir) if data_dir else out / "data", cfg, log)
     seqs = load_sequences(data, INPUTS, TARGETS)
     fp = dataset_fingerprint(data)
+    folds = kfold_episodes(len(seqs), md.folds, seed)
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # small convs: one thread is faster than two contended ones
+    try:
+        return _run(md, mode, out, data, seqs, fp, folds, want, seed, progress, log)
+    finally:
+        torch.set_num_threads(threads)
+
+
+def _run(md: Mode, mode: str, out: Path, data: Path, seqs: list, fp: dict, folds: list[np.ndarray], want: set[str],
+         seed: int, progress: bool, log: Callable[[str], None]) -> dict[str, Any]:
+    from learn.checkpoint import save_checkpoint
+    from learn.models import make_model
+    from learn.models.rbf import KMeans, RBFNetwork
+
     units = seqs[0].units
     n_el = GRID[0] * GRID[1]
     X = [s.x.reshape(len(s), n_el, 3) for s in seqs]
     Y = [s.y.reshape(len(s), n_el, 3) for s in seqs]
     rest_ohm = sensor_rest_ohm(data)
-    folds = kfold_episodes(len(seqs), md.folds, seed)
     spreads = list(md.spreads)
     res_col = {s: [] for s in spreads}  # per spread: per-fold error dicts
     res_win = {w: {s: [] for s in spreads} for w in md.windows}
@@ -243,7 +257,7 @@ def run(
             t0 = time.perf_counter()
             preds = {s: np.zeros_like(Yte) for s in spreads}
             for c in range(3):
-                C = KMeans(md.centres_col, seed=seed + fi).fit(Ntr[..., c]).cluster_centers_
+                C = KMeans(md.centres_col, md.kmeans_iter, seed=seed + fi).fit(Ntr[..., c]).cluster_centers_
                 for s in spreads:
                     net = RBFNetwork(md.centres_col, s, seed=seed + fi).fit(Ntr[..., c], Ytr[..., c], centres=C)
                     preds[s][..., c] = net.predict(Nte[..., c])
@@ -259,7 +273,7 @@ def run(
             for w in md.windows:
                 A = window_inputs(Ntr, w, pad)[rows]
                 At = window_inputs(Nte, w, pad)
-                C = KMeans(md.centres_win, seed=seed + fi).fit(A).cluster_centers_
+                C = KMeans(md.centres_win, md.kmeans_iter, seed=seed + fi).fit(A).cluster_centers_
                 wp = {}
                 for s in spreads:
                     net = RBFNetwork(md.centres_win, s, seed=seed + fi).fit(A, Ytr_rows[rows], centres=C)
