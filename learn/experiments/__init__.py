@@ -11,6 +11,7 @@ EXPERIMENTS: dict[str, str] = {
     "cnt_pdms": "learn.experiments.cnt_pdms",
     "velostat": "learn.experiments.velostat",
     "fabric": "learn.experiments.fabric",
+    "ntype": "learn.experiments.ntype",
 }
 
 

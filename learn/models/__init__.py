@@ -9,5 +9,6 @@ from learn.models.base import MODELS, Compensator, Streamer, edge_windows, make_
 from learn.models import classical, neural, tcn  # noqa: F401,E402  (register)
 from learn.models import velostat  # noqa: F401,E402  (register: bp)
 from learn.models import bpnet  # noqa: F401,E402  (fabric: BP network trained by Levenberg-Marquardt)
+from learn.models import map_cnn, rbf  # noqa: F401,E402  (ntype: rbf = the paper's RBFNN, map_cnn = ours)
 
 __all__ = ["MODELS", "Compensator", "Streamer", "edge_windows", "make_model", "register"]

@@ -1,0 +1,173 @@
+"""ntype learning: RLS against the closed-form least squares, k-means on hand-made clusters, the RBF network
+against a trivial baseline on held-out data, sliding-window inputs at the borders, and a tiny experiment."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from learn.experiments import EXPERIMENTS
+from learn.experiments.ntype import (NEIGHBOURS, component_errors, kfold_episodes, minmax_fit, to_paper_scale,
+                                     window_inputs)
+from learn.models import MODELS, make_model
+from learn.models.rbf import KMeans, RBFNetwork, RecursiveLeastSquares
+
+torch.set_num_threads(1)
+
+
+def _ridge(H, Y, delta):
+    return np.linalg.solve(H.T @ H + delta * np.eye(H.shape[1]), H.T @ Y)
+
+
+@pytest.mark.parametrize("block", [1, 3, 50])
+def test_rls_equals_batch_least_squares(block):
+    rng = np.random.default_rng(0)
+    H, Y = rng.normal(size=(40, 6)), rng.normal(size=(40, 2))
+    delta = 1e-2
+    rls = RecursiveLeastSquares(delta=delta, block=block)
+    for i in range(0, 40, 7):  # uneven partial_fit calls
+        rls.partial_fit(H[i : i + 7], Y[i : i + 7])
+    np.testing.assert_allclose(rls.W, _ridge(H, Y, delta), rtol=1e-9, atol=1e-10)
+    np.testing.assert_allclose(rls.P, np.linalg.inv(H.T @ H + delta * np.eye(6)), rtol=1e-8, atol=1e-12)
+    assert rls.n_samples_seen_ == 40
+    # one call with more rows than a block takes the information form: the same solution
+    big = RecursiveLeastSquares(delta=delta, block=4).fit(H, Y)
+    np.testing.assert_allclose(big.W, _ridge(H, Y, delta), rtol=1e-9, atol=1e-10)
+
+
+def test_rls_single_update_by_hand():
+    # one scalar weight, P0 = 1/delta: after h=2, y=4: P = 1/(delta + 4), w = 2*4/(delta + 4)
+    rls = RecursiveLeastSquares(delta=1.0, block=1).partial_fit(np.array([[2.0]]), np.array([[4.0]]))
+    assert rls.P[0, 0] == pytest.approx(1 / 5) and rls.W[0, 0] == pytest.approx(8 / 5)
+
+
+def test_rbf_partial_fit_is_rls_continuation():
+    rng = np.random.default_rng(1)
+    X = rng.uniform(0, 5, size=(120, 2))
+    Y = np.sin(X[:, :1]) + X[:, 1:] ** 2 / 10
+    full = RBFNetwork(n_centres=15, spread=2.0, seed=0).fit(X, Y)
+    part = RBFNetwork(n_centres=15, spread=2.0, seed=0).fit(X[:50], Y[:50], centres=full.centres_)
+    part.partial_fit(X[50:90], Y[50:90]).partial_fit(X[90:], Y[90:])
+    np.testing.assert_allclose(part.predict(X), full.predict(X), rtol=1e-7, atol=1e-8)
+    Hh = full.hidden(X)
+    np.testing.assert_allclose(full.coef_, _ridge(Hh, Y, full.delta), rtol=1e-7, atol=1e-9)
+
+
+def test_kmeans_finds_hand_made_clusters():
+    rng = np.random.default_rng(2)
+    true = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0], [10.0, 10.0]])
+    X = np.concatenate([c + 0.3 * rng.normal(size=(30, 2)) for c in true])
+    km = KMeans(4, seed=0).fit(X)
+    C = km.cluster_centers_[np.argsort(km.cluster_centers_ @ [1.0, 100.0])]
+    np.testing.assert_allclose(C, true, atol=0.2)
+    # every hand-made cluster gets one label of its own
+    labels = km.labels_.reshape(4, 30)
+    assert all(len(set(r)) == 1 for r in labels) and len({r[0] for r in labels}) == 4
+    np.testing.assert_array_equal(km.predict(true), km.predict(true + 0.1))
+    # more clusters than distinct points: duplicates do not crash it
+    assert KMeans(3, seed=0).fit(np.ones((5, 2))).cluster_centers_.shape == (3, 2)
+
+
+def test_rbf_beats_trivial_baseline_on_held_out():
+    rng = np.random.default_rng(3)
+    X = rng.uniform(16, 25, size=(400, 3))
+    Y = np.stack([np.exp(-(X[:, 0] - 20) ** 2 / 8), np.cos(X[:, 1] / 2) * X[:, 2] / 25], 1)
+    tr, te = slice(0, 300), slice(300, None)
+    net = RBFNetwork(n_centres=60, spread=3.0, seed=0).fit(X[tr], Y[tr])
+    err = np.sqrt(np.mean((net.predict(X[te]) - Y[te]) ** 2))
+    base = np.sqrt(np.mean((Y[tr].mean(0) - Y[te]) ** 2))
+    assert err < 0.3 * base
+    # the registered compensator (min-max scaling + z-scored targets) too, and its online update
+    comp = make_model("rbf", n_centres=60, spread=3.0).fit([X[tr]], [Y[tr]], seed=0)
+    assert np.sqrt(np.mean((comp.predict(X[te]) - Y[te]) ** 2)) < 0.3 * base
+    comp.partial_fit(X[te][:50], Y[te][:50])
+    np.testing.assert_allclose(comp.stream().run(X[te][:5]), comp.predict(X[te][:5]), rtol=1e-10)
+
+
+def test_models_and_experiment_registered():
+    assert {"rbf", "map_cnn"} <= set(MODELS) and "ntype" in EXPERIMENTS
+    with pytest.raises(ValueError, match="kernel"):
+        RBFNetwork(kernel="gauss")
+
+
+def test_window_inputs_at_borders():
+    # 2 frames, 6 x 6 elements, 3 columns: value = 100 * frame + 10 * element + column (unique)
+    R = np.array([[[100 * n + 10 * m + c for c in range(3)] for m in range(36)] for n in range(2)], float)
+    pad = np.array([-1.0, -2.0, -3.0])
+    W1 = window_inputs(R, 1, pad)
+    np.testing.assert_array_equal(W1, R.reshape(72, 3))
+    W7 = window_inputs(R, 7, pad)
+    assert W7.shape == (72, 21) and NEIGHBOURS[:5] == ((0, 0), (-1, 0), (1, 0), (0, -1), (0, 1))
+
+    def elem(n, m):
+        return W7[n * 36 + m].reshape(7, 3)
+
+    # corner element 0 (ix = iy = 0): left, up (dy = -1) and the (-1,-1) diagonal are outside
+    e = elem(1, 0)
+    np.testing.assert_array_equal(e[0], R[1, 0])
+    for k in (1, 3, 5):
+        np.testing.assert_array_equal(e[k], pad)
+    np.testing.assert_array_equal(e[2], R[1, 1])   # right neighbour (ix + 1)
+    np.testing.assert_array_equal(e[4], R[1, 6])   # next row (iy + 1)
+    np.testing.assert_array_equal(e[6], R[1, 7])   # (+1, +1) diagonal
+    # right edge element 11 (ix = 5, iy = 1)
+    e = elem(0, 11)
+    np.testing.assert_array_equal(e[1], R[0, 10])
+    np.testing.assert_array_equal(e[2], pad)
+    np.testing.assert_array_equal(e[3], R[0, 5])
+    np.testing.assert_array_equal(e[4], R[0, 17])
+    np.testing.assert_array_equal(e[5], R[0, 4])
+    np.testing.assert_array_equal(e[6], pad)
+    # last corner element 35: right, down and (+1,+1) outside
+    e = elem(0, 35)
+    for k in (2, 4, 6):
+        np.testing.assert_array_equal(e[k], pad)
+    np.testing.assert_array_equal(e[5], R[0, 28])
+    # window 5 is the first 5 of window 7; an interior element has no padding
+    np.testing.assert_array_equal(window_inputs(R, 5, pad), W7[:, :15])
+    assert not np.isin(pad, elem(0, 14)).any()
+    with pytest.raises(ValueError):
+        window_inputs(R, 8, pad)
+
+
+def test_paper_scaling_folds_and_errors():
+    R = np.stack([np.linspace(40e3, 60e3, 5), np.linspace(30e3, 50e3, 5), np.linspace(13e3, 25e3, 5)], -1)[:, None]
+    lo, hi = minmax_fit(R)
+    N = to_paper_scale(R, lo, hi)
+    np.testing.assert_allclose(N.min(0)[0], [32, 32, 16]) and np.testing.assert_allclose(N.max(0)[0], [50, 50, 25])
+    folds = kfold_episodes(23, 10, 0)
+    assert sorted(np.concatenate(folds).tolist()) == list(range(23)) and {len(f) for f in folds} == {2, 3}
+    ref = np.array([[[1.0, 0.0, 2.0], [0.1, -2.0, 0.0]]])
+    est = np.array([[[1.1, 5.0, 1.0], [9.0, -1.0, 0.0]]])
+    e = component_errors(ref, est, 0.5)
+    assert e["E_Fx"] == pytest.approx(10.0) and e["E_Fy"] == pytest.approx(50.0) and e["E_Fz"] == pytest.approx(50.0)
+    assert e["n_Fx"] == 1 and e["MAE_Fx"] == pytest.approx((0.1 + 8.9) / 2)
+
+
+def test_experiment_ntype_tiny(tmp_path):
+    from piezotwin.cli import app
+
+    out = tmp_path / "exp"
+    res = CliRunner().invoke(app, ["experiment", "ntype", "--mode", "tiny", "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    m = json.loads((out / "metrics.json").read_text())
+    assert {"experiment", "mode", "dataset", "protocol", "models", "paper", "findings", "timing_s"} <= set(m)
+    assert set(m["models"]) == {"mean", "rbf_col", "rbf_win", "map_cnn"}
+    assert set(m["models"]["rbf_col"]) == {"1.0", "4.0", "7.0", "10.0"}
+    assert set(m["models"]["rbf_win"]) == {"1", "5"}
+    for k in ("E_Fx", "E_Fy", "E_Fz", "MAE_Fx", "n_Fz"):
+        assert k in m["models"]["rbf_win"]["5"]["7.0"] and k in m["models"]["map_cnn"]
+    assert m["paper"]["table1"]["7"] == [2.62, 3.44, 1.82] and m["paper"]["table3"]["5"] == [2.13, 2.71, 1.36]
+    f = m["findings"]
+    assert {"table1_best_spread", "table1_interior_optimum", "window5_beats_no_window", "best_paper_model",
+            "map_cnn_beats_best_paper_model"} <= set(f)
+    folds = m["protocol"]["fold_episodes"]
+    assert len(folds) == 3 and len({k for g in folds for k in g}) == m["protocol"]["episodes"]
+    # the window models beat the trivial mean in MAE on the held-out folds
+    mean_mae = m["models"]["mean"]["MAE_Fz"]
+    assert m["models"]["rbf_win"]["1"]["7.0"]["MAE_Fz"] < mean_mae
+    text = (out / "report.md").read_text()
+    assert "Table 1" in text and "Table 3" in text and "Table 4" in text and "2.62" in text and "Where we differ" in text
+    assert (out / "spread.png").stat().st_size > 1000 and (out / "checkpoints" / "map_cnn" / "config.json").is_file()
