@@ -39,9 +39,15 @@ PAPER = {
     "hidden_range": [3, 12],  # eq. 16
     "bp_rmse_train_test_n": [1.0, 2.0],  # sect. 4.2: train < 1, test < 2
 }
-LABELS = {"mean": "Mean (trivial)", "raw_bp": "BP (unit + R), no creep compensation",
-          "paper_unit": "Creep comp. + BP (unit + R)", "paper_cluster": "Creep comp. + BP (cluster + R)",
+LABELS = {"mean": "Mean (trivial)", "raw_bp": "BP (unit one-hot + ln R), no creep compensation",
+          "paper_unit": "Creep comp. + BP (unit one-hot + ln R)",
+          "paper_cluster": "Creep comp. + BP (cluster one-hot + ln R)",
+          "literal_unit": "Creep comp. + BP, paper's literal inputs (unit index + R ohm)",
+          "literal_cluster": "Creep comp. + BP, paper's literal inputs (cluster index + R ohm)",
           "tcn": "TCN (ours)"}
+MODEL_KEYS = ("mean", "raw_bp", "paper_unit", "paper_cluster", "literal_unit", "literal_cluster", "tcn")
+BP_LITERAL = {"r_input": "ohm", "encoding": "index"}  # eq. 24 on (unit, R): the paper as printed
+BP_OURS = {"r_input": "log", "encoding": "onehot"}  # our default: ln R, ids one-hot (see the report)
 
 
 @dataclass
@@ -54,6 +60,8 @@ class Mode:
     hidden: list[int]
     tcn: dict[str, Any]
     tracker: dict[str, Any] = field(default_factory=lambda: {"smooth": 5, "lag": 5, "domain": "conductance"})
+    bp_input: dict[str, Any] = field(default_factory=lambda: dict(BP_OURS))
+    bp_all_holds: bool = True  # BP on every training hold (mix + calibrations), not only the calibrations
 
     @property
     def models(self) -> list[str]:
@@ -66,17 +74,18 @@ def _gen(n: int, per: int, dur: float) -> list[str]:
 
 
 CAL = ["protocol.kind=velostat_calibration"]
+CURVE_KINDS = ("velostat_calibration", "velostat_staircase")  # holds at whole-newton levels
 AE = ["protocol.kind=velostat_staircase", "protocol.staircase_max_n=15", "protocol.step_hold_s=5"]
 TCN_BASE = {"channels": 32, "dilations": [1, 2, 4, 8, 16, 32, 64], "chunk": 128}
 MODES = {
     "full": Mode("full", _gen(144, 24, 150), CAL + _gen(216, 24, 150), AE + _gen(30, 15, 120),
                  {"max_epochs": 500, "patience": 60}, list(range(3, 13)),
                  {**TCN_BASE, "max_epochs": 200, "patience": 15}),
-    "quick": Mode("quick", _gen(36, 18, 120), CAL + _gen(72, 24, 100), AE + _gen(10, 10, 110),
-                  {"max_epochs": 300, "patience": 40}, list(range(3, 13)),
+    "quick": Mode("quick", _gen(36, 18, 120), CAL + _gen(36, 18, 100), AE + _gen(10, 10, 110),
+                  {"max_epochs": 150, "patience": 25, "batch_size": 64}, list(range(3, 13)),
                   {**TCN_BASE, "max_epochs": 40, "patience": 10, "max_batches_per_epoch": 40}),
-    "tiny": Mode("tiny", _gen(6, 6, 60), CAL + _gen(12, 12, 60), AE + _gen(2, 2, 60),
-                 {"max_epochs": 60, "patience": 20}, [4],
+    "tiny": Mode("tiny", _gen(4, 4, 40), CAL + _gen(4, 4, 50), AE + _gen(2, 2, 40),
+                 {"max_epochs": 30, "patience": 10}, [4],
                  {"channels": 8, "dilations": [1, 2, 4, 8], "chunk": 64, "max_epochs": 4, "patience": 3,
                   "max_batches_per_epoch": 10}),
 }
@@ -85,7 +94,10 @@ MODES = {
 def scenes_of(mode: Mode, overrides: list[str], seed: int) -> dict[str, Any]:
     from scenes import load_scene
 
-    return {name: load_scene("velostat", [*ov, f"generation.root_seed={seed + i}", *overrides])
+    # one physical sensor for the three folders: the film's random fields follow sensor.film.field_seed,
+    # which defaults to the root seed, so without the pin each folder would be a different part
+    return {name: load_scene("velostat", [*ov, f"generation.root_seed={seed + i}", f"sensor.film.field_seed={seed}",
+                                          *overrides])
             for i, (name, ov) in enumerate((("mix", mode.mix), ("cal", mode.cal), ("ae", mode.ae)))}
 
 
@@ -140,10 +152,11 @@ class PaperChain:
 
 
 def hold_points(seqs: list[Sequence], tracker, cfg, rate: float) -> np.ndarray:
-    """(unit, compensated R, force) per calibration hold: R averaged over the hold's last second."""
+    """(unit, compensated R, force) per calibration hold: R averaged over the hold's last second
+    (tracker None: the measured R)."""
     pts = []
     for s in seqs:
-        rc = tracker.predict(s.x[:, 0])
+        rc = tracker.predict(s.x[:, 0]) if tracker is not None else s.x[:, 0]
         u = unit_of(s.x[:, 1:3], cfg)
         for h in holds(s.extra["target"], max(3, int(0.5 * rate))):
             last = slice(max(h.start, h.stop - int(rate)), h.stop)
@@ -190,6 +203,12 @@ def cluster_units(units: np.ndarray, curves: np.ndarray, n_units: int, centres: 
             near = units[np.argmin(np.linalg.norm(centres[units] - centres[u], axis=1))]
             ids[u] = lab[list(units).index(near)]
     return {"Z": Z, "k": int(k), "labels": lab, "ids": ids, "merge_heights": sorted(Z[:, 2].tolist(), reverse=True)[:15]}
+
+
+def nearest_with_data(units: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    """Unit -> itself when it has training data, else the nearest unit (by centre) that has."""
+    d = np.linalg.norm(centres[:, None] - centres[units][None], axis=-1)
+    return units[np.argmin(d, axis=1)]
 
 
 def _bp_xy(pts: np.ndarray, ids: np.ndarray | None):
@@ -298,34 +317,47 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
             dr_comp.append(abs(rc[b] - rc[a]) / rc[a])
     creep["r_drift_raw_mean"], creep["r_drift_comp_mean"] = float(np.mean(dr_raw)), float(np.mean(dr_comp))
 
-    # --- units: Ward clustering of R(F) curves from the calibration holds
-    pts_tr = hold_points(sp_cal["train"], tracker, cfg, rate)
-    pts_va = hold_points(sp_cal["valid"], tracker, cfg, rate)
+    # --- units: Ward clustering of R(F) curves from the holds at whole-newton levels (calibrations and
+    # staircases, wherever the decoded position puts them); the BP nets train on every training hold
+    curve_rec = lambda ss: [s for s in ss if s.meta.get("inner_kind") in CURVE_KINDS]  # noqa: E731
+    pts_tr = hold_points(tr if md.bp_all_holds else curve_rec(tr), tracker, cfg, rate)
+    pts_va = hold_points(va if md.bp_all_holds else curve_rec(va), tracker, cfg, rate)
+    raw_tr = hold_points(tr if md.bp_all_holds else curve_rec(tr), None, cfg, rate)
+    raw_va = hold_points(va if md.bp_all_holds else curve_rec(va), None, cfg, rate)
     levels = np.arange(1.0, 16.0)
-    units, curves = unit_curves(pts_tr, n_units, levels)
+    units, curves = unit_curves(hold_points(curve_rec(tr), tracker, cfg, rate), n_units, levels)
     cl = cluster_units(units, curves, n_units, centres)
+    near = nearest_with_data(units, centres)
     clustering = {"units_with_data": units.tolist(), "k_elbow": cl["k"], "ids": cl["ids"].tolist(),
                   "merge_heights": cl["merge_heights"], "n_points_train": len(pts_tr), "n_points_valid": len(pts_va)}
-    log(f"Ward: {len(units)} units with curves, elbow {cl['k']} clusters")
+    log(f"Ward: {len(units)} units with curves, elbow {cl['k']} clusters; BP on {len(pts_tr)} / {len(pts_va)} holds")
 
     # --- BP nets (hidden search 3..12) and the chains
     results: dict[str, Any] = {}
     preds: dict[str, list[np.ndarray]] = {}
     bp_search = {}
     chains = {}
-    for kind, ids in (("paper_unit", None), ("paper_cluster", cl["ids"])):
-        if not (want(kind) or (kind == "paper_unit" and want("raw_bp"))):
+    specs = {"raw_bp": ("unit", md.bp_input), "paper_unit": ("unit", md.bp_input),
+             "paper_cluster": ("cluster", md.bp_input), "literal_unit": ("unit", BP_LITERAL),
+             "literal_cluster": ("cluster", BP_LITERAL)}
+    for kind, (by, enc) in specs.items():
+        if not want(kind):
             continue
+        comp = kind != "raw_bp"  # raw_bp: its own net, trained and used on uncompensated R
+        p_tr, p_va = (pts_tr, pts_va) if comp else (raw_tr, raw_va)
         t0 = time.perf_counter()
-        xs, ys = _bp_xy(pts_tr, ids)
-        vx, vy = _bp_xy(pts_va, ids) if len(pts_va) else (xs, ys)
-        bp, scores = search_hidden(xs, ys, (vx, vy), hidden=md.hidden, seed=seed, **md.bp)
-        bp_search[kind] = {"valid_rmse_by_hidden": scores, "best_hidden": bp.hparams["hidden"],
+        onehot = enc.get("encoding") == "onehot"
+        # one-hot ids: a unit with no training hold takes the nearest unit that has some (its column would
+        # be untrained); the literal index keeps the unit's own number, as the paper does
+        ids = cl["ids"] if by == "cluster" else (near if onehot else None)
+        hp = {**md.bp, **enc, **({"n_ids": cl["k"] if by == "cluster" else n_units} if onehot else {})}
+        xs, ys = _bp_xy(p_tr, ids)
+        vx, vy = _bp_xy(p_va, ids) if len(p_va) else (xs, ys)
+        bp, scores = search_hidden(xs, ys, (vx, vy), hidden=md.hidden, seed=seed, **hp)
+        bp_search[kind] = {"valid_rmse_by_hidden": scores, "best_hidden": bp.hparams["hidden"], "inputs": enc,
                            "train_rmse": M.rmse(ys[0], bp.predict(xs[0])), "fit_seconds": time.perf_counter() - t0}
         save_checkpoint(bp, ckd / kind, dataset=fps["cal"], extra={"experiment": KEY, "mode": mode})
-        chains[kind] = PaperChain(tracker, bp, ids, cfg)
-        if kind == "paper_unit":
-            chains["raw_bp"] = PaperChain(tracker, bp, ids, cfg, compensate=False)
+        chains[kind] = PaperChain(tracker, bp, ids, cfg, compensate=comp)
         log(f"BP {kind}: hidden {bp.hparams['hidden']} (valid RMSE {scores[bp.hparams['hidden']]:.3f} N)")
 
     comps: dict[str, Any] = {}
@@ -346,8 +378,7 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
             return lambda s: comps["tcn"][0].predict(tcn_features(s))[:, 0]
         return chains[kind].predict
 
-    kinds = [k for k in ("mean", "raw_bp", "paper_unit", "paper_cluster", "tcn")
-             if k == "mean" or k in chains or k in comps]
+    kinds = [k for k in MODEL_KEYS if k == "mean" or k in chains or k in comps]
     for kind in kinds:
         f = predictor(kind)
         with torch.inference_mode():
@@ -382,7 +413,7 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
 
 
 def md_models(md: Mode) -> list[str]:
-    return ["mean", "raw_bp", "paper_unit", "paper_cluster", "tcn"]
+    return list(MODEL_KEYS)
 
 
 def findings(R: dict, creep: dict, cl: dict) -> dict[str, Any]:
@@ -392,7 +423,7 @@ def findings(R: dict, creep: dict, cl: dict) -> dict[str, Any]:
         out["creep_drift_removed_frac"] = 1 - a["drift_mean"] / b["drift_mean"] if b["drift_mean"] > 0 else float("nan")
         out["creep_comp_reduces_hold_error"] = bool(a["max_err_mean"] < b["max_err_mean"])
     out["r_drift_removed_frac"] = 1 - creep["r_drift_comp_mean"] / creep["r_drift_raw_mean"]
-    paper = [k for k in ("paper_unit", "paper_cluster") if k in R]
+    paper = [k for k in ("paper_unit", "paper_cluster", "literal_unit", "literal_cluster") if k in R]
     if paper and "tcn" in R:
         best = min(paper, key=lambda k: R[k]["test"]["rmse"])
         out["best_paper_model"] = best
@@ -472,7 +503,7 @@ def plots(out: Path, tracker, tr, cl, units, curves, levels, te, preds, results)
     plt.close(fig)
 
     fig, ax = plt.subplots(figsize=(7, 4))
-    for k, st in (("raw_bp", "x"), ("paper_unit", "o"), ("paper_cluster", "s"), ("tcn", "^")):
+    for k, st in (("raw_bp", "x"), ("paper_unit", "o"), ("paper_cluster", "s"), ("literal_unit", "v"), ("tcn", "^")):
         pts = results.get(k, {}).get("ae", {}).get("points", [])
         if pts:
             ax.plot([p[1] for p in pts], [p[2] for p in pts], st, ms=4, alpha=0.7, label=LABELS[k])
@@ -505,7 +536,7 @@ def report(m: dict[str, Any]) -> str:
     L.append(md_table(["quantity", "ours", "paper"], rows))
     L += ["", "## Models on the held-out recordings", ""]
     rows = []
-    for k in ("mean", "raw_bp", "paper_unit", "paper_cluster", "tcn"):
+    for k in MODEL_KEYS:
         if k not in R:
             continue
         t, h, a = R[k]["test"], R[k]["holds"], R[k]["ae"]
