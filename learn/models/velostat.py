@@ -254,7 +254,8 @@ class CreepTracker:
     and A += v_end - v_c when a creep stage ends. R >= r_open (no contact, the source at compliance) resets A.
 
     fit(R sequences): K-means (3 clusters, G_J) on delta of the in-contact samples; the memberships' lo/hi are
-    the decision boundaries between the creep/transitional and transitional/loading clusters.
+    the decision boundaries between the creep/transitional and transitional/loading clusters (kmeans_bounds_),
+    unless `bounds` were given (e.g. the paper's PAPER_BOUNDS): then those stay in use.
     """
 
     def __init__(self, n_clusters: int = 3, smooth: int = 5, lag: int = 1, domain: str = "conductance",
@@ -265,6 +266,8 @@ class CreepTracker:
         self.n_clusters, self.smooth, self.lag, self.domain = int(n_clusters), int(smooth), int(lag), domain
         self.r_open, self.open_frac, self.init, self.seed = r_open, float(open_frac), init, int(seed)
         self.bounds = None if bounds is None else (float(bounds[0]), float(bounds[1]))
+        self.fixed_bounds = bounds is not None  # given: fit() still clusters (kmeans_bounds_) but keeps these
+        self.kmeans_bounds_: tuple[float, float] | None = None
         self.kmeans: KMeans | None = None
         self.silhouette_: float | None = None
 
@@ -316,7 +319,9 @@ class CreepTracker:
     def _set_bounds(self) -> None:
         c = np.sort(self.kmeans.cluster_centers_[:, 0])
         mids = 0.5 * (c[1:] + c[:-1])
-        self.bounds = (float(mids[0]), float(mids[-1]))
+        self.kmeans_bounds_ = (float(mids[0]), float(mids[-1]))
+        if not self.fixed_bounds:
+            self.bounds = self.kmeans_bounds_
 
     def memberships(self, delta) -> tuple[np.ndarray, np.ndarray]:
         return semi_trapezoid(delta, *self._b())
