@@ -102,6 +102,9 @@ def test_creep_compensation_removes_most_hold_error():
     assert tr.bounds[0] < tr.bounds[1]
     # state round trip
     assert np.allclose(CreepTracker.from_state(tr.state()).predict(R), tr.predict(R))
+    # given bounds (the paper's band) stay in use; the K-means band is still fitted
+    fixed = CreepTracker(smooth=1, lag=1, bounds=(0.00612, 0.02374)).fit(train, score=False)
+    assert fixed.bounds == (0.00612, 0.02374) and 0 < fixed.kmeans_bounds_[0] < fixed.kmeans_bounds_[1]
 
 
 def test_bp_beats_trivial_baseline_on_held_out():
