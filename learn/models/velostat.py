@@ -254,7 +254,8 @@ class CreepTracker:
     and A += v_end - v_c when a creep stage ends. R >= r_open (no contact, the source at compliance) resets A.
 
     fit(R sequences): K-means (3 clusters, G_J) on delta of the in-contact samples; the memberships' lo/hi are
-    the decision boundaries between the creep/transitional and transitional/loading clusters.
+    the decision boundaries between the creep/transitional and transitional/loading clusters (kmeans_bounds_),
+    unless `bounds` were given (e.g. the paper's PAPER_BOUNDS): then those stay in use.
     """
 
     def __init__(self, n_clusters: int = 3, smooth: int = 5, lag: int = 1, domain: str = "conductance",
@@ -265,6 +266,8 @@ class CreepTracker:
         self.n_clusters, self.smooth, self.lag, self.domain = int(n_clusters), int(smooth), int(lag), domain
         self.r_open, self.open_frac, self.init, self.seed = r_open, float(open_frac), init, int(seed)
         self.bounds = None if bounds is None else (float(bounds[0]), float(bounds[1]))
+        self.fixed_bounds = bounds is not None  # given: fit() still clusters (kmeans_bounds_) but keeps these
+        self.kmeans_bounds_: tuple[float, float] | None = None
         self.kmeans: KMeans | None = None
         self.silhouette_: float | None = None
 
@@ -316,7 +319,9 @@ class CreepTracker:
     def _set_bounds(self) -> None:
         c = np.sort(self.kmeans.cluster_centers_[:, 0])
         mids = 0.5 * (c[1:] + c[:-1])
-        self.bounds = (float(mids[0]), float(mids[-1]))
+        self.kmeans_bounds_ = (float(mids[0]), float(mids[-1]))
+        if not self.fixed_bounds:
+            self.bounds = self.kmeans_bounds_
 
     def memberships(self, delta) -> tuple[np.ndarray, np.ndarray]:
         return semi_trapezoid(delta, *self._b())
@@ -432,21 +437,82 @@ class BPNet(nn.Module):
         return self.out(torch.sigmoid(self.hidden(x)))
 
 
+BP_R_INPUTS = ("ohm", "log", "conductance")
+BP_ENCODINGS = ("index", "onehot")
+
+
+class _EncodedStreamer(Streamer):
+    """Streams (id, R) samples through the BP net: the input transform, then the net's own streamer."""
+
+    def __init__(self, comp: "BPCompensator", inner: Streamer):
+        self.comp, self.inner = comp, inner
+
+    def reset(self) -> None:
+        self.inner.reset()
+
+    def step(self, x) -> np.ndarray:
+        return self.inner.step(self.comp.encode(np.asarray(x, np.float64).reshape(1, -1))[0])
+
+
 @register("bp")
 class BPCompensator(TorchCompensator):
-    """The paper's force model F = f^-1(Unit, R_F) (eq. 15): inputs (unit or cluster index, resistance),
+    """The paper's force model F = f^-1(Unit, R_F) (eq. 15): inputs (unit or cluster id, resistance),
     `hidden` sigmoid nodes (3-12, eq. 16), purelin output; inputs min-max scaled to [0, 1] on the training set
-    (eq. 24); Adam, learning rate 0.01, mini-batches (sect. 4.2). Static: the current sample only."""
+    (eq. 24); Adam, learning rate 0.01, mini-batches (sect. 4.2). Static: the current sample only.
+
+    Input transform (applied to the raw (id, R in ohm) columns before the min-max scaling):
+      r_input   "ohm" (the paper's literal R), "log" (ln R) or "conductance" (1/R in mS)
+      encoding  "index" (the paper's scalar unit/cluster number) or "onehot" (n_ids columns; ids outside
+                [0, n_ids) are clipped; n_ids = 0 takes max id + 1 of the training data)
+    The defaults are the paper's literal inputs; `predict`/`stream` always take the raw (id, R) columns."""
 
     DEFAULTS = {**TRAIN_DEFAULTS, "hidden": 8, "lr": 0.01, "batch_size": 32, "max_epochs": 500, "patience": 60,
-                "grad_clip": None}
+                "grad_clip": None, "r_input": "ohm", "encoding": "index", "n_ids": 0}
+
+    def __init__(self, **hparams: Any):
+        super().__init__(**hparams)
+        if self.hparams["r_input"] not in BP_R_INPUTS:
+            raise ValueError(f"bp: r_input must be one of {BP_R_INPUTS}, got {self.hparams['r_input']!r}")
+        if self.hparams["encoding"] not in BP_ENCODINGS:
+            raise ValueError(f"bp: encoding must be one of {BP_ENCODINGS}, got {self.hparams['encoding']!r}")
+
+    def encode(self, x: np.ndarray) -> np.ndarray:
+        """Raw [T, 2] (id, R ohm) -> the net's input columns (before min-max)."""
+        x = np.asarray(x, np.float64).reshape(len(x), -1)
+        ident, r = x[:, 0], np.maximum(x[:, 1], 1e-9)
+        h = self.hparams
+        rr = {"ohm": r, "log": np.log(np.maximum(r, 1e-9)), "conductance": 1e3 / r}[h["r_input"]]
+        if h["encoding"] == "index":
+            return np.column_stack([ident, rr])
+        n = int(h["n_ids"])
+        oh = np.zeros((len(x), n))
+        oh[np.arange(len(x)), np.clip(np.rint(ident).astype(int), 0, n - 1)] = 1.0
+        return np.column_stack([oh, rr])
+
+    def fit(self, xs, ys, valid=None, **kw) -> "BPCompensator":
+        if self.hparams["encoding"] == "onehot" and int(self.hparams["n_ids"]) <= 0:
+            self.hparams["n_ids"] = int(max(np.rint(np.asarray(x)[:, 0]).max() for x in xs)) + 1
+        xs = [self.encode(x) for x in xs]
+        if valid is not None:
+            valid = ([self.encode(x) for x in valid[0]], valid[1])
+        return super().fit(xs, ys, valid, **kw)
+
+    def predict(self, x):
+        if isinstance(x, (list, tuple)):
+            return [self.predict(v) for v in x]
+        return super().predict(self.encode(x))
+
+    def stream(self) -> Streamer:
+        return _EncodedStreamer(self, super().stream())
 
     def _build(self):
         return BPNet(self.n_in, int(self.hparams["hidden"]), self.n_out)
 
     def _fit(self, zx, zy, zv, *, seed, progress):
         a = np.concatenate(zx)
-        self._lo, self._span = a.min(0), np.maximum(a.max(0) - a.min(0), 1e-12)
+        span = a.max(0) - a.min(0)
+        # a constant column (e.g. an id absent from the training data) maps to 0 rather than blowing up
+        self._lo, self._span = a.min(0), np.where(span > 1e-12, span, 1.0)
         return super()._fit(zx, zy, zv, seed=seed, progress=progress)
 
     def _mm(self, z: np.ndarray) -> np.ndarray:
