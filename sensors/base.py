@@ -64,3 +64,14 @@ class SensorModel(Protocol):
     def attrs(self) -> dict:
         """/sensor attrs for recordings (family, geometry in m, sample rate, ADC...)."""
         ...
+
+
+def resolve_backend(backend: str, device: str) -> str:
+    """Check a sensor's backend ("warp" | "numpy") and return the Warp device it runs on."""
+    if backend not in ("warp", "numpy"):
+        raise ValueError(f"backend must be 'warp' or 'numpy'; got {backend!r}")
+    if backend == "numpy":
+        return device
+    from sensors.warp_setup import resolve_device
+
+    return resolve_device(device)

@@ -13,7 +13,7 @@ import numpy as np
 
 from scenes.config import SceneConfig
 from sensors import electronics as el
-from sensors.base import ChannelSpec, LoadBatch
+from sensors.base import ChannelSpec, LoadBatch, resolve_backend
 from sensors.params import MODE_DISPLACEMENT, MODE_FORCE, electronics_params, taxel_params
 from sensors.taxel_ref import TaxelState, taxel_chain_numpy
 
@@ -37,12 +37,7 @@ class CntPdmsSensor:
     outputs = OUTPUTS
 
     def __init__(self, cfg: SceneConfig, backend: str = "warp", device: str = "cpu"):
-        if backend not in ("warp", "numpy"):
-            raise ValueError(f"backend must be 'warp' or 'numpy'; got {backend!r}")
-        if backend == "warp":
-            from sensors.warp_setup import resolve_device
-
-            device = resolve_device(device)
+        device = resolve_backend(backend, device)
         self.cfg, self.backend, self.device = cfg, backend, device
         self.tp = taxel_params(cfg)
         self.ep = electronics_params(cfg)

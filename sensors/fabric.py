@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sensors.base import ChannelSpec, LoadBatch
+from sensors.base import ChannelSpec, LoadBatch, resolve_backend
 from sensors.fabric_ref import FabricState, fabric_chain_numpy, fabric_params
 
 OUTPUTS: dict[str, ChannelSpec] = {
@@ -57,14 +57,9 @@ class FabricSensor:
     outputs = OUTPUTS
 
     def __init__(self, cfg, backend: str = "warp", device: str = "cpu"):
-        if backend not in ("warp", "numpy"):
-            raise ValueError(f"backend must be 'warp' or 'numpy'; got {backend!r}")
         if cfg.sensor.family != "fabric":
             raise ValueError(f"FabricSensor needs sensor.family=fabric; got {cfg.sensor.family!r}")
-        if backend == "warp":
-            from sensors.warp_setup import resolve_device
-
-            device = resolve_device(device)
+        device = resolve_backend(backend, device)
         self.cfg, self.backend, self.device = cfg, backend, device
         self.p = fabric_params(cfg)
         self.n_taxels = cfg.pad.n_taxels

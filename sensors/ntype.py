@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from scenes.config import SceneConfig
-from sensors.base import ChannelSpec, LoadBatch
+from sensors.base import ChannelSpec, LoadBatch, resolve_backend
 from sensors.ntype_ref import NtypeParams, ntype_chain_numpy
 
 COLUMNS = ("3: R_x (+45 deg)", "1: R_y (-45 deg)", "2: R_z (normal)")
@@ -108,12 +108,7 @@ class NtypeSensor:
     outputs = OUTPUTS
 
     def __init__(self, cfg: SceneConfig, backend: str = "warp", device: str = "cpu"):
-        if backend not in ("warp", "numpy"):
-            raise ValueError(f"backend must be 'warp' or 'numpy'; got {backend!r}")
-        if backend == "warp":
-            from sensors.warp_setup import resolve_device
-
-            device = resolve_device(device)
+        device = resolve_backend(backend, device)
         self.cfg, self.backend, self.device = cfg, backend, device
         self.p = ntype_params(cfg)
         el = cfg.sensor.element

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from scenes.config import SceneConfig
-from sensors.base import ChannelSpec, LoadBatch
+from sensors.base import ChannelSpec, LoadBatch, resolve_backend
 from sensors.velostat_ref import FilmParams, ReadoutParams, film_chain_numpy, readout_numpy
 
 OUTPUTS: dict[str, ChannelSpec] = {
@@ -124,12 +124,7 @@ class VelostatSensor:
     outputs = OUTPUTS
 
     def __init__(self, cfg: SceneConfig, backend: str = "warp", device: str = "cpu"):
-        if backend not in ("warp", "numpy"):
-            raise ValueError(f"backend must be 'warp' or 'numpy'; got {backend!r}")
-        if backend == "warp":
-            from sensors.warp_setup import resolve_device
-
-            device = resolve_device(device)
+        device = resolve_backend(backend, device)
         self.cfg, self.backend, self.device = cfg, backend, device
         f = cfg.sensor.film
         self.film_seed = int(cfg.generation.root_seed if f.field_seed is None else f.field_seed)
