@@ -12,6 +12,7 @@ from learn.experiments import EXPERIMENTS
 from learn.experiments.ntype import (NEIGHBOURS, component_errors, kfold_episodes, minmax_fit, to_paper_scale,
                                      window_inputs)
 from learn.models import MODELS, make_model
+from learn.models.element_mlp import invert_strain, mirror_x
 from learn.models.rbf import KMeans, RBFNetwork, RecursiveLeastSquares
 
 torch.set_num_threads(1)
@@ -154,7 +155,7 @@ def test_experiment_ntype_tiny(tmp_path):
     assert res.exit_code == 0, res.output
     m = json.loads((out / "metrics.json").read_text())
     assert {"experiment", "mode", "dataset", "protocol", "models", "paper", "findings", "timing_s"} <= set(m)
-    assert set(m["models"]) == {"mean", "rbf_col", "rbf_win", "map_cnn"}
+    assert set(m["models"]) == {"mean", "rbf_col", "rbf_win", "elem_mlp", "map_cnn"}
     assert set(m["models"]["rbf_col"]) == {"1.0", "4.0", "7.0", "10.0"}
     assert set(m["models"]["rbf_win"]) == {"1", "5"}
     for k in ("E_Fx", "E_Fy", "E_Fz", "MAE_Fx", "n_Fz"):
@@ -162,12 +163,29 @@ def test_experiment_ntype_tiny(tmp_path):
     assert m["paper"]["table1"]["7"] == [2.62, 3.44, 1.82] and m["paper"]["table3"]["5"] == [2.13, 2.71, 1.36]
     f = m["findings"]
     assert {"table1_best_spread", "table1_interior_optimum", "window5_beats_no_window", "best_paper_model",
-            "map_cnn_beats_best_paper_model"} <= set(f)
+            "map_cnn_beats_best_paper_model", "elem_mlp_beats_best_paper_model"} <= set(f)
     folds = m["protocol"]["fold_episodes"]
     assert len(folds) == 3 and len({k for g in folds for k in g}) == m["protocol"]["episodes"]
     # the window models beat the trivial mean in MAE on the held-out folds
     mean_mae = m["models"]["mean"]["MAE_Fz"]
     assert m["models"]["rbf_win"]["1"]["7.0"]["MAE_Fz"] < mean_mae
+    # ours (element MLP) beats the best paper model (RBF, best window and spread) on the held-out folds
+    best = min(m["models"]["rbf_win"][w][s]["MAE_Fz"] for w in m["models"]["rbf_win"] for s in m["models"]["rbf_win"][w])
+    assert m["models"]["elem_mlp"]["MAE_Fz"] < best
+    bp = f["best_paper_errors"]
+    assert np.mean([m["models"]["elem_mlp"][f"E_{c}"] for c in ("Fx", "Fy", "Fz")]) < np.mean(list(bp.values()))
     text = (out / "report.md").read_text()
     assert "Table 1" in text and "Table 3" in text and "Table 4" in text and "2.62" in text and "Where we differ" in text
     assert (out / "spread.png").stat().st_size > 1000 and (out / "checkpoints" / "map_cnn" / "config.json").is_file()
+
+
+def test_element_mlp_strain_inversion_and_mirror():
+    rest, beta = np.array([50e3, 50e3, 25e3]), 0.7
+    e = np.array([[-0.3, 0.05, -0.19], [0.0, 0.2, -0.5]])
+    R = rest * (1 + e) ** 2 * np.exp(beta * e)
+    np.testing.assert_allclose(invert_strain(R, rest, beta), e, atol=1e-10)
+    E = np.arange(2 * 36 * 3, dtype=float).reshape(2, 36, 3)
+    Em, Fm = mirror_x(E, E)
+    np.testing.assert_array_equal(Em[0, 0], E[0, 5][[1, 0, 2]])  # element (0, 0) <- (5, 0), R_x <-> R_y
+    np.testing.assert_array_equal(Fm[1, 6], E[1, 11] * [-1, 1, 1])  # element (0, 1) <- (5, 1), F_x -> -F_x
+    np.testing.assert_array_equal(mirror_x(*mirror_x(E, E))[1], E)
