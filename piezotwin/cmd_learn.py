@@ -17,7 +17,7 @@ from piezotwin.cli import SetOpt, _check_writable, app, console, err, fail  # no
 
 @app.command()
 def experiment(
-    key: Annotated[str, typer.Argument(help="Paper key (cnt_pdms, fabric) or 'all'.")],
+    key: Annotated[str, typer.Argument(help="Paper key (cnt_pdms, fabric, velostat, ntype) or 'all'.")],
     quick: Annotated[bool, typer.Option("--quick", help="Small data and capped epochs: a few minutes on 2 cores.")] = False,
     out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Report folder (default runs/experiment-<key>[-quick]).")] = None,
     data: Annotated[Optional[Path], typer.Option("--data", help="Dataset folder to make or reuse (default <out>/data).")] = None,
