@@ -11,12 +11,11 @@ per-feature z-score) beyond the border. Static (current frame only).
 
 from __future__ import annotations
 
-import numpy as np
 import torch
 from torch import nn
 
-from learn.models.base import FnStreamer, Streamer, register
-from learn.models.neural import TRAIN_DEFAULTS, TorchCompensator, _f32
+from learn.models.base import register
+from learn.models.neural import TRAIN_DEFAULTS, FramewiseCompensator
 
 __all__ = ["MapCNN", "MapCNNCompensator"]
 
@@ -42,7 +41,7 @@ class MapCNN(nn.Module):
 
 
 @register("map_cnn")
-class MapCNNCompensator(TorchCompensator):
+class MapCNNCompensator(FramewiseCompensator):
     """Hyper-parameters: grid [ny, nx] (6 x 6 for ntype), channels/layers/kernel of the conv stack."""
 
     DEFAULTS = {**TRAIN_DEFAULTS, "grid": [6, 6], "channels": 32, "layers": 3, "kernel": 3, "lr": 2e-3,
@@ -59,18 +58,3 @@ class MapCNNCompensator(TorchCompensator):
         cfg = super().train_config(seed)
         cfg.weight_decay = float(self.hparams["weight_decay"])
         return cfg
-
-    def _examples(self, zx, zy, train):
-        return _f32(np.concatenate(zx)), _f32(np.concatenate(zy))
-
-    def _forward_seq(self, z):
-        return self.net(_f32(z)).double().numpy()
-
-    def _streamer(self) -> Streamer:
-        net = self.net
-
-        def f(z: np.ndarray) -> np.ndarray:
-            with torch.inference_mode():
-                return net(_f32(z[None]))[0].double().numpy()
-
-        return FnStreamer(self, f)

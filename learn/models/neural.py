@@ -88,14 +88,8 @@ class MLP(nn.Module):
         return self.net(x)
 
 
-@register("mlp")
-class MLPCompensator(TorchCompensator):
-    """cnt_pdms Table 3 "MLP": the current sample only; two ReLU layers of 64 (# estimate: the paper gives no size)."""
-
-    DEFAULTS = {**TRAIN_DEFAULTS, "hidden": [64, 64]}
-
-    def _build(self):
-        return MLP(self.n_in, list(self.hparams["hidden"]), self.n_out)
+class FramewiseCompensator(TorchCompensator):
+    """A network that maps each sample on its own (no history): examples are the frames themselves."""
 
     def _examples(self, zx, zy, train):
         return _f32(np.concatenate(zx)), _f32(np.concatenate(zy))
@@ -111,6 +105,17 @@ class MLPCompensator(TorchCompensator):
                 return net(_f32(z[None]))[0].double().numpy()
 
         return FnStreamer(self, f)
+
+
+@register("mlp")
+class MLPCompensator(FramewiseCompensator):
+    """cnt_pdms Table 3 "MLP": the current sample only; two ReLU layers of 64 (# estimate: the paper gives no size)."""
+
+    DEFAULTS = {**TRAIN_DEFAULTS, "hidden": [64, 64]}
+
+    def _build(self):
+        return MLP(self.n_in, list(self.hparams["hidden"]), self.n_out)
+
 
 
 class StackedRNN(nn.Module):
