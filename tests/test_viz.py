@@ -40,34 +40,6 @@ def recs(tmp_path_factory):
     return {"light": _make(d / "light", 4e-5), "hard": _make(d / "hard", 1.5e-4)}
 
 
-@pytest.fixture(scope="module")
-def views(recs):
-    out = {}
-    for k, p in recs.items():
-        with Recording(p) as rec:
-            out[k] = load_episode(rec, 0)
-    return out
-
-
-@pytest.fixture(scope="module")
-def offscreen():
-    """Skip (with the reason) where rendering cannot work; else return the render module."""
-    try:
-        from simulate import render
-        pv = render.import_pyvista()
-    except Exception as exc:  # noqa: BLE001
-        pytest.skip(f"pyvista unavailable: {exc}")
-    try:
-        pl = pv.Plotter(off_screen=True, window_size=[32, 32])
-        pl.add_mesh(pv.Sphere())
-        img = pl.screenshot(return_img=True)
-        pl.close()
-        assert img is not None and img.size
-    except Exception as exc:  # noqa: BLE001
-        pytest.skip(f"no offscreen OpenGL here (install libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1): {exc}")
-    return render
-
-
 def _decode(img: np.ndarray, cmap: str, clim: tuple[float, float], tol: float = 12.0) -> np.ndarray:
     """Pixel colours -> field values through the colour map (NaN where the pixel is not a map colour)."""
     import matplotlib

@@ -16,7 +16,7 @@ from typer.testing import CliRunner
 
 from scenes import load_scene
 from sensors.recording import Recording
-from simulate.fields import load_episode
+
 
 SMALL = (240, 176)
 SPECS = {
@@ -40,29 +40,6 @@ def recs(tmp_path_factory):
         generate(cfg, d / fam, backend="numpy")
         out[fam] = d / fam / "shard-00000.h5"
     return out
-
-
-@pytest.fixture(scope="module")
-def views(recs):
-    out = {}
-    for fam, p in recs.items():
-        with Recording(p) as rec:
-            out[fam] = load_episode(rec, 0)
-    return out
-
-
-@pytest.fixture(scope="module")
-def offscreen():
-    try:
-        from simulate import render
-        pv = render.import_pyvista()
-        pl = pv.Plotter(off_screen=True, window_size=[32, 32])
-        pl.add_mesh(pv.Sphere())
-        assert pl.screenshot(return_img=True).size
-        pl.close()
-    except Exception as exc:  # noqa: BLE001
-        pytest.skip(f"no offscreen rendering here: {exc}")
-    return render
 
 
 def _decode(img, cmap, clim, tol=12.0):
