@@ -1,6 +1,33 @@
-"""Fixtures shared by the rendering tests (tests/test_viz*.py)."""
+"""Fixtures shared by several test files: the rendering tests (tests/test_viz*.py) and the device under test
+of the gpu-marked tests (tests/test_gpu*.py)."""
+
+import os
 
 import pytest
+
+GPU_DEVICE_ENV = "PIEZOTWIN_TEST_GPU_DEVICE"
+
+
+@pytest.fixture(scope="session")
+def gpu_device() -> str:
+    """The Warp device the gpu-marked tests compare against "cpu": $PIEZOTWIN_TEST_GPU_DEVICE, default "cuda:0".
+
+    A CUDA device is skipped (with the reason) where Warp sees none. "cpu" is never skipped: the same
+    comparisons then run cpu against cpu, which checks the test logic on a machine without a GPU
+    (PIEZOTWIN_TEST_GPU_DEVICE=cpu pytest -m gpu)."""
+    from sensors.warp_setup import init_warp, resolve_device
+
+    dev = os.environ.get(GPU_DEVICE_ENV, "cuda:0").strip() or "cuda:0"
+    if dev == "cpu":
+        return dev
+    init_warp()
+    import warp as wp
+
+    if not dev.startswith("cuda"):
+        pytest.fail(f"{GPU_DEVICE_ENV}={dev!r}: use cpu, cuda or cuda:N")
+    if wp.get_cuda_device_count() == 0:
+        pytest.skip(f"no CUDA device ({GPU_DEVICE_ENV}={dev}; set it to cpu to check the test logic here)")
+    return resolve_device(dev)
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,6 @@
-"""CUDA vs CPU equivalence of the Warp chain (run on a GPU machine: pytest -m gpu). Skipped without CUDA."""
+"""CUDA vs CPU equivalence of the cnt_pdms Warp chain (run on a GPU machine: pytest -m gpu). Skipped without
+CUDA; the device under test is the `gpu_device` fixture (tests/conftest.py: $PIEZOTWIN_TEST_GPU_DEVICE,
+default cuda:0; "cpu" checks the test logic cpu vs cpu). The other families: tests/test_gpu_families.py."""
 
 import numpy as np
 import pytest
@@ -11,44 +13,33 @@ from sensors.taxel_warp import TaxelChainWarp
 pytestmark = pytest.mark.gpu
 
 
-def _cuda():
-    from sensors.warp_setup import init_warp
-
-    init_warp()
-    import warp as wp
-
-    if wp.get_cuda_device_count() == 0:
-        pytest.skip("no CUDA device")
-
-
-def test_taxel_kernel_cuda_equals_cpu():
-    _cuda()
+def test_taxel_kernel_cuda_equals_cpu(gpu_device):
     cfg = load_scene("cnt_pdms")
     tp = taxel_params(cfg)
     rng = np.random.default_rng(0)
     drive = rng.uniform(0, 0.04, (8, 500, 300)).astype(np.float32)
     for mode, scale in ((MODE_DISPLACEMENT, 1.0), (MODE_FORCE, 2e6)):
         a = TaxelChainWarp(tp, 8, 300, "cpu").run(drive * scale, mode)
-        b = TaxelChainWarp(tp, 8, 300, "cuda:0").run(drive * scale, mode)
+        b = TaxelChainWarp(tp, 8, 300, gpu_device).run(drive * scale, mode)
         for x, y in zip(a, b):
-            # same float32 arithmetic; CUDA's exp/div may differ by an ulp or two (fast-math)
+            # same float32 arithmetic; CUDA's exp/div and FMA contraction may differ by an ulp or two (Warp's
+            # fast_math is off by default, so no approximate intrinsics)
             np.testing.assert_allclose(y, x, rtol=1e-5, atol=1e-7 * float(np.abs(x).max()))
 
 
-def test_full_chain_cuda_equals_cpu():
-    _cuda()
+def test_full_chain_cuda_equals_cpu(gpu_device):
     cfg = load_scene("cnt_pdms")
     t = np.arange(600) / 100.0
     d = (0.03 * (1 - np.cos(2 * np.pi * 1.0 * t)) / 2).astype(np.float32)
     mask = (np.random.default_rng(1).uniform(size=cfg.pad.n_taxels) < 0.1).astype(np.float32)
     drive = np.stack([d[:, None] * mask, 0.5 * d[:, None] * mask])
     a = CntPdmsSensor(cfg, device="cpu").run(drive, [1, 2])
-    b = CntPdmsSensor(cfg, device="cuda:0").run(drive, [1, 2])
+    b = CntPdmsSensor(cfg, device=gpu_device).run(drive, [1, 2])
     for k in ("strain", "force", "resistance", "voltage", "resistance_measured"):
         np.testing.assert_allclose(b[k], a[k], rtol=1e-5, atol=1e-6 * float(np.abs(a[k]).max()), err_msg=k)
     assert np.abs(b["adc"].astype(int) - a["adc"].astype(int)).max() <= 1
     # deterministic on the GPU: no atomics, the block reduction sums in a fixed order
-    c1 = CntPdmsSensor(cfg, device="cuda:0").run(drive, [1, 2])
-    c2 = CntPdmsSensor(cfg, device="cuda:0").run(drive, [1, 2])
+    c1 = CntPdmsSensor(cfg, device=gpu_device).run(drive, [1, 2])
+    c2 = CntPdmsSensor(cfg, device=gpu_device).run(drive, [1, 2])
     for k in c1:
         np.testing.assert_array_equal(c1[k], c2[k])
