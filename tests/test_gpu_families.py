@@ -293,8 +293,9 @@ def _family_run(family, device):
 
 @pytest.mark.parametrize("family", ["cnt_pdms", "fabric", "velostat", "ntype"])
 def test_every_launch_runs_on_the_requested_device(gpu_device, family, monkeypatch):
-    """A family that dropped `device` somewhere (a default "cpu", a missing device= on an array) would still
-    pass the comparisons above (cpu == cpu); here every wp.launch and each array it gets must be on it."""
+    """A family that dropped `device` somewhere (a hard-coded "cpu", a missing device= on an array) would pass
+    the comparisons above trivially (cpu == cpu); here every launch must name the requested device (None,
+    Warp's default device, counts as a miss) and every array it gets must live there."""
     import warp as wp
 
     from sensors.warp_setup import init_warp
@@ -306,7 +307,8 @@ def test_every_launch_runs_on_the_requested_device(gpu_device, family, monkeypat
     def spy(real):
         def launch(kernel, *args, **kw):
             dev = kw.get("device")
-            lists = [a for a in args if isinstance(a, (list, tuple))] + [kw.get("inputs") or [], kw.get("outputs") or []]
+            lists = [a for a in args if isinstance(a, (list, tuple))]
+            lists += [kw.get("inputs") or [], kw.get("outputs") or []]
             arrays = [x for lst in lists for x in lst if isinstance(x, wp.array)]
             seen.append((getattr(kernel, "key", str(kernel)), None if dev is None else str(wp.get_device(dev)),
                          sorted({str(x.device) for x in arrays})))
