@@ -64,9 +64,14 @@ def generate(
     address: Annotated[Optional[str], typer.Option(help="Ray cluster address (ray executor; default: start a local one).")] = None,
     shards: Annotated[Optional[int], typer.Option(help="Number of shards (sets generation.episodes_per_shard).")] = None,
     workers: Annotated[int, typer.Option(help="Worker processes (local pool) or CPUs of a local Ray cluster.")] = 1,
+    physics: Annotated[Optional[str], typer.Option(help="Contact stage: mujoco (C, CPU) | mujoco_warp (batched worlds on --device) | auto.")] = None,
 ) -> None:
     """Generate a dataset: HDF5 shards + manifest.json. Resumes at the first missing shard."""
     extra = []
+    if physics is not None:
+        if physics not in ("mujoco", "mujoco_warp", "auto"):
+            fail(f"--physics must be one of: mujoco, mujoco_warp, auto (got '{physics}')")
+        extra += [f"generation.physics={physics}", f"generation.device={'cuda' if device.startswith('cuda') else device}"]
     if episodes is not None:
         extra.append(f"generation.episodes={episodes}")
     if seed is not None:
@@ -100,6 +105,12 @@ def generate(
             fail(str(exc))
     _check_writable(out)
     _quiet_warp()
+    from simulate.run import check_record
+
+    try:
+        check_record(cfg)
+    except ValueError as exc:
+        fail(str(exc))
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
     from simulate.executors import ShardFailedError

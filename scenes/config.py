@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-from typing import Annotated, Literal, Union
+from typing import Annotated, Literal, Optional, Union
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
@@ -217,6 +217,9 @@ class CntPdmsSensorConfig(Strict):
     hysteresis: HysteresisConfig = Field(default_factory=HysteresisConfig)
     tunneling: TunnelingConfig = Field(default_factory=TunnelingConfig)
     electronics: ElectronicsConfig = Field(default_factory=ElectronicsConfig)
+    # "pad": one bridge over the whole pad, all taxel columns in parallel (cnt_pdms sect. 2);
+    # "taxel": a tactile array, one bridge + ADC channel per taxel (isolated rows/columns)  # estimate
+    readout: Literal["pad", "taxel"] = "pad"
 
 
 from scenes.fabric_config import FabricSensorConfig  # noqa: E402  (needs Strict above)
@@ -237,6 +240,12 @@ class GenerationConfig(Strict):
     compression: Literal["lzf", "gzip", "none"] = "lzf"
     threads: Annotated[int, Field(ge=1, le=256)] = 2
     device: Literal["cpu", "cuda", "auto"] = "cpu"
+    # contact stage: C MuJoCo rollout on CPU threads, or MuJoCo Warp batched worlds on `device`;
+    # auto = MuJoCo Warp when a CUDA device and the mujoco_warp package are present
+    physics: Literal["mujoco", "mujoco_warp", "auto"] = "mujoco"
+    # channels written per episode (None = all): e.g. [time, adc, force_taxel, contact_force, position]
+    # for compact datasets; names are checked against the load channels and the sensor's outputs
+    record: Optional[list[str]] = None
 
 
 class SceneConfig(Strict):

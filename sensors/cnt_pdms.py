@@ -31,7 +31,8 @@ OUTPUTS: dict[str, ChannelSpec] = {
 
 
 class CntPdmsSensor:
-    """Batched CNT-PDMS sensor. Shapes: E episodes, T samples, N taxels, C = 1 channel (whole pad)."""
+    """Batched CNT-PDMS sensor. Shapes: E episodes, T samples, N taxels, C channels: 1 (whole pad,
+    sensor.readout = "pad") or N (one per taxel, "taxel")."""
 
     family = "cnt_pdms"
     outputs = OUTPUTS
@@ -42,8 +43,9 @@ class CntPdmsSensor:
         self.tp = taxel_params(cfg)
         self.ep = electronics_params(cfg)
         self.n_taxels = cfg.pad.n_taxels
-        self.n_channels = 1
-        self.taxel_channel = np.zeros(self.n_taxels, np.int32)
+        per_taxel = cfg.sensor.readout == "taxel"
+        self.n_channels = self.n_taxels if per_taxel else 1
+        self.taxel_channel = np.arange(self.n_taxels, dtype=np.int32) if per_taxel else np.zeros(self.n_taxels, np.int32)
         self.mode = MODE_FORCE if cfg.protocol.control == "force" else MODE_DISPLACEMENT
 
     def drive_from_load(self, deformation_m: np.ndarray, pressure_pa: np.ndarray) -> np.ndarray:
@@ -110,6 +112,6 @@ class CntPdmsSensor:
             "taxel_channel": self.taxel_channel,
             "taxel_area_m2": self.tp.taxel_area_m2,
             "bridge_resistance_ohm": self.ep.bridge_resistance_ohm,
-            "rest_resistance_ohm": 1.0 / (self.n_taxels / self.tp.rest_resistance_ohm),
+            "rest_resistance_ohm": 1.0 / ((self.n_taxels // self.n_channels) / self.tp.rest_resistance_ohm),
             "control": self.cfg.protocol.control,
         }

@@ -102,8 +102,11 @@ def taxel_params(cfg: SceneConfig) -> TaxelParams:
 
 
 def rest_sensor_resistance_ohm(cfg: SceneConfig) -> float:
-    """Whole-pad resistance at rest: all taxel columns in parallel, h / (sigma0 A_pad)."""
+    """Resistance of one readout channel at rest, h / (sigma0 A): the whole pad (all taxel columns in
+    parallel) or, with sensor.readout = "taxel", one taxel's column."""
     area = cfg.pad.size_x_m * cfg.pad.size_y_m
+    if getattr(cfg.sensor, "readout", "pad") == "taxel":
+        area /= cfg.pad.n_taxels
     return cfg.pad.thickness_m / (cfg.sensor.tunneling.conductivity_s_per_m * area)
 
 

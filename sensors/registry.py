@@ -15,9 +15,13 @@ FAMILIES: dict[str, str] = {
 }
 
 
-def make_sensor(cfg: SceneConfig, backend: str = "warp", device: str = "cpu") -> SensorModel:
-    family = cfg.sensor.family
+def sensor_class(family: str) -> type:
+    """The model class of a family (its class attribute `outputs` names the channels it produces)."""
     if family not in FAMILIES:
         raise ValueError(f"sensor.family {family!r} has no model (allowed: {', '.join(sorted(FAMILIES))})")
     module, cls = FAMILIES[family].split(":")
-    return getattr(importlib.import_module(module), cls)(cfg, backend=backend, device=device)
+    return getattr(importlib.import_module(module), cls)
+
+
+def make_sensor(cfg: SceneConfig, backend: str = "warp", device: str = "cpu") -> SensorModel:
+    return sensor_class(cfg.sensor.family)(cfg, backend=backend, device=device)

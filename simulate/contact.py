@@ -88,16 +88,45 @@ def _initial_states(m: mujoco.MjModel, cfg: SceneConfig, protocols: list[Episode
     return states, sens
 
 
-def simulate_sensors(
-    cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1
-) -> tuple[np.ndarray, np.ndarray]:
-    """Run the episodes; returns sensordata (E, T, nsensordata) at the sample times and target (E, T)."""
+def episode_length(protocols: list[EpisodeProtocol]) -> int:
+    """The common n_samples of a batch of episodes (>= 2)."""
     ns = {p.n_samples for p in protocols}
     if len(ns) != 1:
         raise ValueError(f"run_episodes: all protocols must have the same n_samples (got {sorted(ns)})")
     n = ns.pop()
     if n < 2:
         raise ValueError(f"run_episodes: n_samples must be >= 2 (got {n})")
+    return n
+
+
+def physics_engine(cfg: SceneConfig) -> tuple[str, str]:
+    """(engine, warp device) for generation.physics: "mujoco" (C, CPU threads) or "mujoco_warp" (batched
+    worlds on generation.device); "auto" = MuJoCo Warp when a CUDA device and mujoco_warp are present."""
+    g = cfg.generation
+    if g.physics == "mujoco":
+        return "mujoco", "cpu"
+    from sensors.warp_setup import resolve_device
+    from simulate import contact_mjw
+
+    if g.physics == "auto":
+        dev = resolve_device("auto")
+        return ("mujoco_warp", dev) if dev != "cpu" and contact_mjw.available() else ("mujoco", "cpu")
+    if not contact_mjw.available():
+        raise ValueError("generation.physics: 'mujoco_warp' needs the mujoco_warp package "
+                         "(pip install 'piezotwin[gpu]'); allowed without it: mujoco, auto")
+    return "mujoco_warp", resolve_device("auto" if g.device == "auto" else g.device)
+
+
+def simulate_sensors(
+    cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1
+) -> tuple[np.ndarray, np.ndarray]:
+    """Run the episodes; returns sensordata (E, T, nsensordata) at the sample times and target (E, T)."""
+    engine, device = physics_engine(cfg)
+    if engine == "mujoco_warp":
+        from simulate.contact_mjw import simulate_sensors_mjw
+
+        return simulate_sensors_mjw(cfg, protocols, device)
+    n = episode_length(protocols)
     sub = cfg.sampling.substeps
     nstep = (n - 1) * sub
     m = build_model(cfg)

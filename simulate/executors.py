@@ -123,6 +123,7 @@ def generate(
         raise ValueError(f"workers must be >= 1 (got {workers})")
     if max_retries < 0:
         raise ValueError(f"max_retries must be >= 0 (got {max_retries})")
+    run.check_record(cfg)
     if executor == "local" and workers == 1:
         return run.generate(cfg, out_dir, backend=backend, device=device, on_shard=on_shard)
 

@@ -73,15 +73,32 @@ def _channels(
         "pressure": batch.pressure_pa[j].astype(f32),
         "shear": batch.shear_pa[j].astype(f32),
     }
+    keep = cfg.generation.record
     ch = {}
     for name, arr in arrays.items():
+        if keep is not None and name not in keep:
+            continue
         units, dims, desc = LOAD_CHANNELS[name]
         if name == "target" and cfg.protocol.control == "force":
             units = "N"
         ch[name] = Channel(arr, units, dims, desc)
     for name, spec in sensor.outputs.items():
-        ch[name] = Channel(out[name][j], spec.units, spec.dims, spec.description)
+        if keep is None or name in keep:
+            ch[name] = Channel(out[name][j], spec.units, spec.dims, spec.description)
     return ch
+
+
+def check_record(cfg: SceneConfig) -> None:
+    """generation.record must name channels this scene produces (ValueError naming the allowed ones)."""
+    from sensors.registry import sensor_class
+
+    keep = cfg.generation.record
+    if keep is None:
+        return
+    allowed = list(LOAD_CHANNELS) + list(sensor_class(cfg.sensor.family).outputs)
+    bad = [k for k in keep if k not in allowed]
+    if bad or not keep:
+        raise ValueError(f"generation.record: unknown channel(s) {bad or '(empty list)'}; allowed: {', '.join(allowed)}")
 
 
 def episode_ids_of_shard(cfg: SceneConfig, shard: int) -> list[int]:
@@ -203,6 +220,7 @@ def generate(
     ns = n_shards(cfg)
     sha = config_sha256(cfg)
     todo = set(first_missing_shards(out, ns, sha))
+    check_record(cfg)
     sensor = make_sensor(cfg, backend, device)
     mjcf = build_mjcf(cfg)
     for s in range(ns):

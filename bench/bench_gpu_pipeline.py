@@ -1,0 +1,235 @@
+"""One GPU, end to end: MuJoCo Warp worlds -> load field -> Warp sensor chain on CUDA -> HDF5 on disk.
+
+    python bench/bench_gpu_pipeline.py --device cuda:0 [--worlds 1024,4096,16384] [--episodes 8192] [--workers 1,4]
+
+Scene: the cnt_pdms preset as a 6 x 6 tactile array (sensor.readout = taxel: one bridge + 14-bit ADC per
+taxel), 0.5 Hz presses, 100 Hz samples, 1 ms physics steps. A "sensor sample" is one 100 Hz frame of one
+episode as written: 36 ADC codes + its labels (time, target, indenter position, net contact force, the 36
+per-taxel forces) = `generation.record` below, 252 bytes.
+
+Measured in one run, written to bench/results/gpu-pipeline-<device>.json:
+1. physics: MuJoCo Warp world-steps/s against the number of worlds (CUDA graph per sample period), and
+   the C MuJoCo rollout on all host cores for the same batch (ratio);
+2. equivalence: MuJoCo Warp on the GPU vs C MuJoCo, same episodes (force and position differences);
+3. stages: seconds per stage for one batch in one process (controls, physics, load field, sensor chain,
+   HDF5 write) -> what limits the throughput;
+4. end to end: `simulate.executors.generate` (the code `piezotwin generate --physics mujoco_warp` runs)
+   with 1..W worker processes sharing the GPU, samples/s and MB/s on disk, against the raw write speed of
+   the same bytes to the same disk measured right after (plain file, 64 MiB blocks, fsync at the end in both).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+RECORD = ["time", "target", "position", "contact_force", "force_taxel", "adc"]
+BASE = ["protocol.frequencies_hz=[0.5]", "pad.taxels_x=6", "pad.taxels_y=6", "sensor.readout=taxel",
+        "generation.compression=none", f"generation.record=[{','.join(RECORD)}]"]
+
+
+def _cfg(extra: list[str], device: str | None = None):
+    """The bench scene; with a device, the contact stage runs on MuJoCo Warp there."""
+    from scenes import load_scene
+
+    if device is not None:
+        extra = ["generation.physics=mujoco_warp", f"generation.device={'cuda' if device.startswith('cuda') else 'cpu'}", *extra]
+    return load_scene("cnt_pdms", BASE + extra)
+
+
+def physics(device: str, worlds: list[int], n_samples: int) -> dict:
+    """World-steps/s of MuJoCo Warp against batch size, and C MuJoCo (all cores) on the largest batch <= 4096."""
+    from simulate.contact import _initial_states, build_model, episode_controls, simulate_sensors
+    from simulate.contact_mjw import WarpWorlds
+    from simulate.protocols import make_episode_protocol
+
+    cfg = _cfg([])
+    sub = cfg.sampling.substeps
+    m = build_model(cfg)
+    out = {"n_samples": n_samples, "substeps": sub, "mujoco_warp": {}}
+    for W in worlds:
+        protos = [make_episode_protocol(cfg, s) for s in range(W)]
+        nstep = (n_samples - 1) * sub
+        ctrl, _ = episode_controls(cfg, protos, nstep)
+        st, s0 = _initial_states(m, cfg, protos, ctrl[:, 0])
+        ww = WarpWorlds(m, W, device)
+        ww.run(st[:, 1:1 + m.nq], ctrl[:, : 5 * sub], s0, sub, 6)  # compile + capture outside the timing
+        t0 = time.perf_counter()
+        ww.run(st[:, 1:1 + m.nq], ctrl, s0, sub, n_samples)
+        dt = time.perf_counter() - t0
+        out["mujoco_warp"][W] = {"seconds": dt, "world_steps_per_s": W * nstep / dt, "samples_per_s": W * (n_samples - 1) / dt}
+        print(f"MuJoCo Warp {W:6d} worlds: {W * nstep / dt:.3g} world-steps/s, {W * (n_samples - 1) / dt:.3g} samples/s")
+        del ww
+    W = max(w for w in worlds if w <= 4096) if any(w <= 4096 for w in worlds) else worlds[0]
+    protos = [make_episode_protocol(cfg, s) for s in range(W)]
+    threads = os.cpu_count() or 1
+    t0 = time.perf_counter()
+    simulate_sensors(cfg, protos, threads=threads)
+    dt = time.perf_counter() - t0
+    nstep = (protos[0].n_samples - 1) * sub
+    out["mujoco_c"] = {"worlds": W, "threads": threads, "world_steps_per_s": W * nstep / dt}
+    print(f"C MuJoCo rollout, {W} episodes on {threads} threads: {W * nstep / dt:.3g} world-steps/s")
+    return out
+
+
+def equivalence(device: str, n: int = 16) -> dict:
+    from simulate.contact import simulate_sensors
+    from simulate.protocols import make_episode_protocol
+
+    cfg = _cfg([])
+    cfg_w = _cfg([], device)
+    protos = [make_episode_protocol(cfg, s) for s in range(n)]
+    a, _ = simulate_sensors(cfg, protos)
+    b, _ = simulate_sensors(cfg_w, protos)
+    fmax = float(np.abs(a[..., 4:7]).max())
+    res = {"episodes": n, "force_max_n": fmax, "force_max_abs_diff_n": float(np.abs(a[..., 4:7] - b[..., 4:7]).max()),
+           "position_max_abs_diff_m": float(np.abs(a[..., 0:3] - b[..., 0:3]).max())}
+    print(f"MuJoCo Warp ({device}) vs C MuJoCo: force max |diff| {res['force_max_abs_diff_n']:.3g} N of {fmax:.3g} N, "
+          f"position {res['position_max_abs_diff_m']:.3g} m")
+    return res
+
+
+def stages(device: str, batch: int) -> dict:
+    """Seconds per stage for one batch of `batch` episodes in this process (after a warm-up)."""
+    from sensors.manifest import episode_seed
+    from sensors.recording import RecordingWriter
+    from sensors.registry import make_sensor
+    from simulate import contact
+    from simulate.protocols import make_episode_protocol
+    from simulate.run import _channels, _episode_attrs, EpisodeResult
+
+    cfg = _cfg([], device)
+    sensor = make_sensor(cfg, "warp", device)
+    seeds = [episode_seed(0, k) for k in range(batch)]
+    t = {}
+    t0 = time.perf_counter()
+    protos = [make_episode_protocol(cfg, s) for s in seeds]
+    n = protos[0].n_samples
+    t["protocols"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    contact.episode_controls(cfg, protos, (n - 1) * cfg.sampling.substeps)
+    t["controls (inside physics)"] = time.perf_counter() - t0
+    contact.run_episodes(cfg, protos[:8])  # warm-up: compile, capture
+    sensor.run_load(contact.run_episodes(cfg, protos[:8]), seeds[:8])
+    t0 = time.perf_counter()
+    sens, target = contact.simulate_sensors(cfg, protos)
+    t["physics (MuJoCo Warp)"] = time.perf_counter() - t0
+    real = contact.simulate_sensors
+    contact.simulate_sensors = lambda *a, **k: (sens, target)
+    try:
+        t0 = time.perf_counter()
+        batch_ = contact.run_episodes(cfg, protos)
+        t["load field (numpy)"] = time.perf_counter() - t0
+    finally:
+        contact.simulate_sensors = real
+    t0 = time.perf_counter()
+    out = sensor.run_load(batch_, seeds)
+    t["sensor chain (Warp)"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    res = [EpisodeResult(f"ep-{j}", s, p, _channels(batch_, out, j, cfg, sensor)) for j, (s, p) in enumerate(zip(seeds, protos))]
+    t["channels"] = time.perf_counter() - t0
+    nbytes = sum(c.data.nbytes for r in res for c in r.channels.values())
+    with tempfile.TemporaryDirectory(dir=os.environ.get("BENCH_DIR")) as tmp:
+        t0 = time.perf_counter()
+        with RecordingWriter(Path(tmp) / "a.h5", source="sim", config_json="{}", root_seed=0, shard_index=0,
+                             sensor_attrs={"family": "cnt_pdms"}, compression="none") as w:
+            for k, r in enumerate(res):
+                w.add_episode(r.ep_id, r.channels, _episode_attrs(r, k))
+        t["hdf5 write"] = time.perf_counter() - t0
+    samples = batch * n
+    total = sum(v for k, v in t.items() if "inside" not in k)
+    print(f"stages for {batch} episodes x {n} samples ({nbytes / samples:.0f} B/sample):")
+    for k, v in t.items():
+        print(f"  {k:28s} {v:7.3f} s  {v / total:5.1%}  ({samples / v:.3g} samples/s)")
+    return {"episodes": batch, "samples": samples, "bytes_per_sample": nbytes / samples,
+            "seconds": t, "serial_samples_per_s": samples / total}
+
+
+def raw_write(folder: Path, nbytes: int) -> float:
+    """MB/s of writing nbytes to a plain file in 64 MiB blocks, fsync at the end."""
+    block = np.random.default_rng(0).integers(0, 255, 64 * 2**20, dtype=np.uint8).tobytes()
+    p = folder / "raw.bin"
+    t0 = time.perf_counter()
+    with open(p, "wb") as f:
+        left = nbytes
+        while left > 0:
+            f.write(block[: min(left, len(block))])
+            left -= len(block)
+        f.flush()
+        os.fsync(f.fileno())
+    dt = time.perf_counter() - t0
+    p.unlink()
+    return nbytes / dt / 1e6
+
+
+def end_to_end(device: str, episodes: int, workers: int, shards_per_worker: int) -> dict:
+    from simulate.executors import generate
+
+    per_shard = -(-episodes // (workers * shards_per_worker))
+    cfg = _cfg([f"generation.episodes={episodes}", f"generation.episodes_per_shard={per_shard}"], device)
+    root = Path(os.environ.get("BENCH_DIR", tempfile.gettempdir())) / f"e2e-{workers}"
+    shutil.rmtree(root, ignore_errors=True)
+    t0 = time.perf_counter()
+    generate(cfg, root, executor="local", workers=workers, device=device)
+    os.sync()
+    dt = time.perf_counter() - t0
+    nbytes = sum(p.stat().st_size for p in root.glob("*.h5"))
+    from simulate.protocols import make_episode_protocol
+
+    samples = episodes * make_episode_protocol(cfg, 0).n_samples
+    raw = raw_write(root, nbytes)
+    shutil.rmtree(root, ignore_errors=True)
+    r = {"workers": workers, "episodes": episodes, "shards": -(-episodes // per_shard), "seconds": dt,
+         "samples_per_s": samples / dt, "disk_MB_per_s": nbytes / dt / 1e6, "raw_write_MB_per_s_same_bytes": raw,
+         "fraction_of_raw_write": nbytes / dt / 1e6 / raw, "bytes": nbytes}
+    print(f"end to end, {workers} worker(s), {episodes} episodes: {samples / dt:.3g} samples/s, "
+          f"{nbytes / dt / 1e6:.0f} MB/s on disk = {r['fraction_of_raw_write']:.0%} of raw write ({raw:.0f} MB/s), incl. start-up")
+    return r
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--device", default="cuda:0")
+    ap.add_argument("--worlds", default="1024,4096,16384")
+    ap.add_argument("--physics-samples", type=int, default=101)
+    ap.add_argument("--stage-batch", type=int, default=2048)
+    ap.add_argument("--episodes", type=int, default=8192)
+    ap.add_argument("--workers", default="1,4")
+    ap.add_argument("--shards-per-worker", type=int, default=2)
+    ap.add_argument("--parts", default="physics,equivalence,stages,e2e")
+    ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
+    a = ap.parse_args()
+
+    from sensors.warp_setup import init_warp
+
+    init_warp()
+    import warp as wp
+
+    res: dict = {"host": platform.node(), "cpus": os.cpu_count(), "device": a.device,
+                 "device_name": wp.get_device(a.device).name if a.device != "cpu" else platform.processor(),
+                 "scene": {"preset": "cnt_pdms", "overrides": BASE}}
+    parts = a.parts.split(",")
+    if "physics" in parts:
+        res["physics"] = physics(a.device, [int(w) for w in a.worlds.split(",")], a.physics_samples)
+    if "equivalence" in parts:
+        res["equivalence"] = equivalence(a.device)
+    if "stages" in parts:
+        res["stages"] = stages(a.device, a.stage_batch)
+    if "e2e" in parts:
+        res["end_to_end"] = [end_to_end(a.device, a.episodes, int(w), a.shards_per_worker) for w in a.workers.split(",")]
+    a.out.mkdir(parents=True, exist_ok=True)
+    path = a.out / f"gpu-pipeline-{'gpu' if a.device != 'cpu' else 'cpu'}.json"
+    path.write_text(json.dumps(res, indent=2, default=str))
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,137 @@
+"""The contact stage on MuJoCo Warp: all episodes as batched worlds on one device (GPU, or Warp's CPU).
+
+Same model, controls and outputs as `simulate.contact.simulate_sensors` (the C MuJoCo `rollout` path):
+sensordata (E, T, nsensordata) read after every `substeps`-th step, so everything downstream (load
+field, sensor chain, recording) is shared. Source of the engine: MuJoCo Warp 4.0 (`mujoco_warp`).
+
+On CUDA one sample period (substeps x [set ctrl, step] + record sensors) is captured once as a CUDA graph
+and replayed; per-step controls come from a device buffer indexed by a device-side step counter, so no
+Python runs per physics step. Controls are uploaded and sensors read back in time chunks that bound
+device memory. MuJoCo Warp computes in float32 (C MuJoCo in float64) and its contact solver sums with
+atomics on the GPU, so results agree with the C path within float32 tolerances, not bit for bit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from scenes.config import SceneConfig
+from simulate.protocols import EpisodeProtocol, target_waveform
+
+CHUNK_BYTES = 256 * 2**20  # device memory for one chunk of controls + recorded sensors
+
+
+@wp.kernel
+def _set_ctrl(seq: wp.array3d(dtype=wp.float32), counter: wp.array(dtype=wp.int32), ctrl: wp.array2d(dtype=wp.float32)):
+    w, j = wp.tid()
+    ctrl[w, j] = seq[w, counter[0], j]
+
+
+@wp.kernel
+def _record(sensordata: wp.array2d(dtype=wp.float32), counter: wp.array(dtype=wp.int32), out: wp.array3d(dtype=wp.float32)):
+    w, j = wp.tid()
+    out[w, counter[1], j] = sensordata[w, j]
+
+
+@wp.kernel
+def _advance(counter: wp.array(dtype=wp.int32), which: int):
+    counter[which] = counter[which] + 1
+
+
+def available() -> bool:
+    """True when mujoco_warp can be imported (it is an optional dependency: extra `gpu`)."""
+    try:
+        import mujoco_warp  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+class WarpWorlds:
+    """E batched MuJoCo Warp worlds of one scene on one device; run() replays the episodes' controls.
+
+    Shapes: ctrl (E, nstep, nu) float; returns sensordata (E, n_samples, nsensordata) float64.
+    """
+
+    def __init__(self, m, n_worlds: int, device: str):
+        import mujoco
+        import mujoco_warp as mjw
+
+        self.mjm, self.E, self.device = m, n_worlds, device
+        self.mjd = mujoco.MjData(m)
+        with wp.ScopedDevice(device):
+            self.m = mjw.put_model(m)
+            # one indenter-pad pair: a box-box contact has at most 8 points, 3 rows each (elliptic, condim 3)
+            self.d = mjw.put_data(m, self.mjd, nworld=n_worlds, nconmax=8, njmax=8 * 3 + 2 * m.nu)
+            self.counter = wp.zeros(2, dtype=wp.int32)
+
+    def _step_sample(self, seq: wp.array3d, out: wp.array3d, substeps: int) -> None:
+        import mujoco_warp as mjw
+
+        E, nu, ns = self.E, self.mjm.nu, self.mjm.nsensordata
+        for _ in range(substeps):
+            wp.launch(_set_ctrl, dim=(E, nu), inputs=[seq, self.counter, self.d.ctrl])
+            mjw.step(self.m, self.d)
+            wp.launch(_advance, dim=1, inputs=[self.counter, 0])
+        wp.launch(_record, dim=(E, ns), inputs=[self.d.sensordata, self.counter, out])
+        wp.launch(_advance, dim=1, inputs=[self.counter, 1])
+
+    def run(self, qpos0: np.ndarray, ctrl: np.ndarray, sens0: np.ndarray, substeps: int, n_samples: int) -> np.ndarray:
+        """Reset the worlds to qpos0 (E, nq) at rest and replay ctrl; sensors at samples 1..n-1 after
+        each substeps-th step (sample 0 = sens0, computed by the caller with mj_forward)."""
+        import mujoco_warp as mjw
+
+        E, nu, ns = self.E, self.mjm.nu, self.mjm.nsensordata
+        out = np.zeros((E, n_samples, ns))
+        out[:, 0] = sens0
+        per_sample = E * (substeps * nu + ns) * 4
+        chunk = int(max(1, min(n_samples - 1, CHUNK_BYTES // per_sample)))
+        cuda = wp.get_device(self.device).is_cuda
+        with wp.ScopedDevice(self.device):
+            seq = wp.zeros((E, chunk * substeps, nu), dtype=wp.float32)
+            rec = wp.zeros((E, chunk, ns), dtype=wp.float32)
+            if cuda:  # load (compile) every kernel before a graph capture
+                self.counter.zero_()
+                self._step_sample(seq, rec, 1)
+            mjw.reset_data(self.m, self.d)
+            self.d.qpos.assign(np.ascontiguousarray(qpos0, np.float32))
+            graph = None
+            for a in range(1, n_samples, chunk):
+                k = min(chunk, n_samples - a)
+                host = np.zeros((E, chunk * substeps, nu), np.float32)
+                host[:, : k * substeps] = ctrl[:, (a - 1) * substeps : (a - 1 + k) * substeps]
+                seq.assign(host)
+                self.counter.zero_()
+                if cuda:
+                    if graph is None:  # captured once (recorded, not run): its buffers are refilled in place
+                        with wp.ScopedCapture() as cap:
+                            self._step_sample(seq, rec, substeps)
+                        graph = cap.graph
+                    for _ in range(k):
+                        wp.capture_launch(graph)
+                else:
+                    for _ in range(k):
+                        self._step_sample(seq, rec, substeps)
+                out[:, a : a + k] = rec.numpy()[:, :k]
+        return out
+
+
+def simulate_sensors_mjw(cfg: SceneConfig, protocols: list[EpisodeProtocol], device: str) -> tuple[np.ndarray, np.ndarray]:
+    """Like simulate.contact.simulate_sensors, on MuJoCo Warp worlds: (sensordata (E, T, ns), target (E, T))."""
+    from simulate.contact import _initial_states, build_model, episode_controls, episode_length
+
+    n = episode_length(protocols)
+    sub = cfg.sampling.substeps
+    nstep = (n - 1) * sub
+    m = build_model(cfg)
+    ctrl, tgt_steps = episode_controls(cfg, protocols, nstep)
+    states0, sens0 = _initial_states(m, cfg, protocols, ctrl[:, 0])
+    qpos0 = states0[:, 1 : 1 + m.nq]  # full-physics state = (time, qpos, qvel, ...)
+    worlds = WarpWorlds(m, len(protocols), device)
+    out = worlds.run(qpos0, ctrl, sens0, sub, n)
+    rows = np.arange(1, n) * sub - 1
+    target = np.zeros((len(protocols), n))
+    target[:, 1:] = tgt_steps[:, rows]
+    target[:, 0] = [target_waveform(p, cfg, np.zeros(1))[0] for p in protocols]
+    return out, target
