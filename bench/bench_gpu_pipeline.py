@@ -14,7 +14,7 @@ Measured in one run, written to bench/results/gpu-pipeline-<device>.json:
 3. stages: seconds per stage for one batch in one process (controls, physics, load field, sensor chain,
    HDF5 write) -> what limits the throughput;
 4. end to end: `simulate.executors.generate` (the code `piezotwin generate --physics mujoco_warp` runs)
-   with 1..W worker processes sharing the GPU, samples/s and MB/s on disk, against the raw write speed of
+   with 1..W worker processes sharing the GPU(s) (pinned round-robin when there are several), samples/s and MB/s on disk, against the raw write speed of
    the same bytes to the same disk measured right after (plain file, 64 MiB blocks, fsync at the end in both).
 """
 
@@ -170,10 +170,11 @@ def raw_write(folder: Path, nbytes: int) -> float:
     return nbytes / dt / 1e6
 
 
-def end_to_end(device: str, episodes: int, workers: int, shards_per_worker: int) -> dict:
+def end_to_end(device: str, per_shard: int, workers: int, shards_per_worker: int) -> dict:
+    """`workers` processes share the GPU(s), each writing `shards_per_worker` shards of `per_shard` episodes."""
     from simulate.executors import generate
 
-    per_shard = -(-episodes // (workers * shards_per_worker))
+    episodes = per_shard * workers * shards_per_worker
     cfg = _cfg([f"generation.episodes={episodes}", f"generation.episodes_per_shard={per_shard}"], device)
     root = Path(os.environ.get("BENCH_DIR", tempfile.gettempdir())) / f"e2e-{workers}"
     shutil.rmtree(root, ignore_errors=True)
@@ -190,7 +191,7 @@ def end_to_end(device: str, episodes: int, workers: int, shards_per_worker: int)
     r = {"workers": workers, "episodes": episodes, "shards": -(-episodes // per_shard), "seconds": dt,
          "samples_per_s": samples / dt, "disk_MB_per_s": nbytes / dt / 1e6, "raw_write_MB_per_s_same_bytes": raw,
          "fraction_of_raw_write": nbytes / dt / 1e6 / raw, "bytes": nbytes}
-    print(f"end to end, {workers} worker(s), {episodes} episodes: {samples / dt:.3g} samples/s, "
+    print(f"end to end, {workers} worker(s), {episodes} episodes ({per_shard} per shard): {samples / dt:.3g} samples/s, "
           f"{nbytes / dt / 1e6:.0f} MB/s on disk = {r['fraction_of_raw_write']:.0%} of raw write ({raw:.0f} MB/s), incl. start-up")
     return r
 
@@ -201,9 +202,9 @@ def main() -> None:
     ap.add_argument("--worlds", default="1024,4096,16384")
     ap.add_argument("--physics-samples", type=int, default=101)
     ap.add_argument("--stage-batch", type=int, default=2048)
-    ap.add_argument("--episodes", type=int, default=8192)
-    ap.add_argument("--workers", default="1,4")
-    ap.add_argument("--shards-per-worker", type=int, default=2)
+    ap.add_argument("--shard-episodes", type=int, default=8192)
+    ap.add_argument("--workers", default="1,2,4")
+    ap.add_argument("--shards-per-worker", type=int, default=1)
     ap.add_argument("--parts", default="physics,equivalence,stages,e2e")
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     a = ap.parse_args()
@@ -224,7 +225,13 @@ def main() -> None:
     if "stages" in parts:
         res["stages"] = stages(a.device, a.stage_batch)
     if "e2e" in parts:
-        res["end_to_end"] = [end_to_end(a.device, a.episodes, int(w), a.shards_per_worker) for w in a.workers.split(",")]
+        from simulate.run import GPU_BATCH
+
+        res["gpu_batch"] = GPU_BATCH
+        res["end_to_end"] = [end_to_end(a.device, a.shard_episodes, int(w), a.shards_per_worker) for w in a.workers.split(",")]
+        r1 = res["end_to_end"][0]
+        for r in res["end_to_end"]:
+            r["scaling_efficiency_vs_first"] = r["samples_per_s"] / (r1["samples_per_s"] * r["workers"] / r1["workers"])
     a.out.mkdir(parents=True, exist_ok=True)
     path = a.out / f"gpu-pipeline-{'gpu' if a.device != 'cpu' else 'cpu'}.json"
     path.write_text(json.dumps(res, indent=2, default=str))

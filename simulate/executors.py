@@ -18,6 +18,9 @@ Executors (`generate(..., executor=...)`):
   optional extra (``pip install 'piezotwin[ray]'``). On a real cluster every node needs piezotwin
   installed and ``out_dir`` on storage all nodes share.
 
+GPUs: with a CUDA device and several GPUs visible, the local pool pins worker k to GPU k mod n (through
+CUDA_VISIBLE_DEVICES, set before the worker imports Warp), so W workers spread over all GPUs of the host.
+
 MuJoCo rollout threads per worker: ``threads`` (default ``generation.threads // workers``, at least 1);
 they do not change the output (each rollout trajectory is deterministic on its own).
 
@@ -146,6 +149,25 @@ def generate(
     return run.write_dataset_manifest(cfg, out)
 
 
+def _cuda_device_count() -> int:
+    from sensors.warp_setup import init_warp
+
+    init_warp()
+    import warp as wp
+
+    return wp.get_cuda_device_count()
+
+
+def _pin_gpu(counter, n_gpus: int) -> None:
+    """Pool initializer (before the worker imports Warp): this worker uses GPU k mod n_gpus only."""
+    with counter.get_lock():
+        k = counter.value
+        counter.value += 1
+    visible = os.environ.get("CUDA_VISIBLE_DEVICES")
+    ids = visible.split(",") if visible else [str(i) for i in range(n_gpus)]
+    os.environ["CUDA_VISIBLE_DEVICES"] = ids[k % len(ids)]
+
+
 def _check_written(out: Path, shard: int, sha: str) -> None:
     if not is_shard_complete(shard_path(out, shard), sha):
         raise RuntimeError(f"worker reported shard {shard} done but {shard_path(out, shard).name} is not a complete recording")
@@ -172,8 +194,13 @@ def _run_local(cfg, out: Path, todo: list[int], workers: int, max_retries: int, 
             )
         queue.insert(0, s)
 
+    pin = {}
+    n_gpus = _cuda_device_count() if str(kw.get("device", "cpu")).startswith("cuda") else 0
+    if n_gpus > 1:  # spread the workers over the GPUs: worker k sees only GPU k mod n as its cuda:0
+        pin = dict(initializer=_pin_gpu, initargs=(ctx.Value("i", 0), n_gpus))
+        kw = {**kw, "device": "cuda:0"}
     while queue:
-        pool = ProcessPoolExecutor(max_workers=min(workers, len(queue)), mp_context=ctx)
+        pool = ProcessPoolExecutor(max_workers=min(workers, len(queue)), mp_context=ctx, **pin)
         try:
             futs: dict = {}
             broken = False

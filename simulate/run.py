@@ -19,7 +19,7 @@ from sensors.registry import make_sensor
 from sensors.manifest import build_manifest, episode_seed, first_missing_shards, shard_path
 from sensors.recording import Channel, RecordingWriter
 from sensors.base import LoadBatch
-from simulate.contact import run_episodes
+from simulate.contact import physics_engine, run_episodes
 from simulate.mjcf import build_mjcf
 from simulate.protocols import EpisodeProtocol, make_episode_protocol
 
@@ -115,9 +115,15 @@ PIPELINE_PARTS = 4  # a shard is simulated in up to this many batches; batch i i
 MIN_BATCH = 4  # ... of at least this many episodes
 
 
-def shard_batches(n_episodes: int) -> list[slice]:
-    """Contiguous batches of a shard's episodes: up to PIPELINE_PARTS, each >= MIN_BATCH episodes."""
+GPU_BATCH = 4096  # MuJoCo Warp worlds per batch: 6.6e6 world-steps/s on an H100 (1.2e7 at 16k, at 4x the host memory)
+
+
+def shard_batches(n_episodes: int, max_batch: int | None = None) -> list[slice]:
+    """Contiguous batches of a shard's episodes: up to PIPELINE_PARTS, each >= MIN_BATCH episodes; with
+    max_batch (batched GPU worlds), as few batches of at most max_batch as cover the shard."""
     size = max(MIN_BATCH, -(-n_episodes // PIPELINE_PARTS))
+    if max_batch is not None:
+        size = min(max_batch, n_episodes)
     return [slice(a, min(n_episodes, a + size)) for a in range(0, n_episodes, size)]
 
 
@@ -172,7 +178,8 @@ def write_shard(
     with writer as w, ThreadPoolExecutor(1, thread_name_prefix="shard-writer") as pool:
         pending = None
         try:
-            for sl in shard_batches(len(gids)):
+            gpu = physics_engine(cfg)[0] == "mujoco_warp"
+            for sl in shard_batches(len(gids), GPU_BATCH if gpu else None):
                 results = simulate_episodes(cfg, seeds[sl], ids[sl], sensor, threads=g.threads if threads is None else threads)
                 if pending is not None:
                     pending.result()  # one batch in flight: bounded memory, errors surface here
