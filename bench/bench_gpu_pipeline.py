@@ -80,6 +80,49 @@ def physics(device: str, worlds: list[int], n_samples: int) -> dict:
     return out
 
 
+def _physics_worker(args) -> tuple[float, int]:
+    """In a fresh process pinned to one GPU: MuJoCo Warp world-steps/s for `worlds` worlds."""
+    gpu, worlds, n_samples = args
+    os.environ["CUDA_VISIBLE_DEVICES"] = str(gpu)
+    from sensors.warp_setup import init_warp
+
+    init_warp()
+    from simulate.contact import _initial_states, build_model, episode_controls
+    from simulate.contact_mjw import WarpWorlds
+    from simulate.protocols import make_episode_protocol
+
+    cfg = _cfg([])
+    sub, m = cfg.sampling.substeps, build_model(cfg)
+    protos = [make_episode_protocol(cfg, s) for s in range(worlds)]
+    nstep = (n_samples - 1) * sub
+    ctrl, _ = episode_controls(cfg, protos, nstep)
+    st, s0 = _initial_states(m, cfg, protos, ctrl[:, 0])
+    ww = WarpWorlds(m, worlds, "cuda:0")
+    ww.run(st[:, 1:1 + m.nq], ctrl[:, : 5 * sub], s0, sub, 6)
+    t0 = time.perf_counter()
+    ww.run(st[:, 1:1 + m.nq], ctrl, s0, sub, n_samples)
+    return worlds * nstep / (time.perf_counter() - t0), gpu
+
+
+def physics_multi_gpu(worlds: int, n_samples: int) -> dict:
+    """MuJoCo Warp on 1 GPU, then on every GPU at once (one process each): aggregate world-steps/s."""
+    import multiprocessing as mp
+
+    import warp as wp
+
+    n = wp.get_cuda_device_count()
+    ctx = mp.get_context("spawn")
+    out = {"worlds_per_gpu": worlds, "gpus": n}
+    for k in sorted({1, n}):
+        with ctx.Pool(k) as pool:
+            rates = pool.map(_physics_worker, [(g, worlds, n_samples) for g in range(k)])
+        out[f"{k}_gpu"] = {"world_steps_per_s": sum(r for r, _ in rates), "per_gpu": [r for r, _ in rates]}
+        print(f"MuJoCo Warp on {k} GPU(s), {worlds} worlds each: {sum(r for r, _ in rates):.3g} world-steps/s")
+    if n > 1:
+        out["scaling_efficiency"] = out[f"{n}_gpu"]["world_steps_per_s"] / (n * out["1_gpu"]["world_steps_per_s"])
+    return out
+
+
 def equivalence(device: str, n: int = 16) -> dict:
     from simulate.contact import simulate_sensors
     from simulate.protocols import make_episode_protocol
@@ -206,6 +249,7 @@ def main() -> None:
     ap.add_argument("--workers", default="1,2,4")
     ap.add_argument("--shards-per-worker", type=int, default=1)
     ap.add_argument("--parts", default="physics,equivalence,stages,e2e")
+    ap.add_argument("--tag", default="", help="result file name: gpu-pipeline-<tag>.json")
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     a = ap.parse_args()
 
@@ -220,6 +264,8 @@ def main() -> None:
     parts = a.parts.split(",")
     if "physics" in parts:
         res["physics"] = physics(a.device, [int(w) for w in a.worlds.split(",")], a.physics_samples)
+    if "multigpu" in parts:
+        res["physics_multi_gpu"] = physics_multi_gpu(int(a.worlds.split(",")[-1]), a.physics_samples)
     if "equivalence" in parts:
         res["equivalence"] = equivalence(a.device)
     if "stages" in parts:
@@ -233,7 +279,7 @@ def main() -> None:
         for r in res["end_to_end"]:
             r["scaling_efficiency_vs_first"] = r["samples_per_s"] / (r1["samples_per_s"] * r["workers"] / r1["workers"])
     a.out.mkdir(parents=True, exist_ok=True)
-    path = a.out / f"gpu-pipeline-{'gpu' if a.device != 'cpu' else 'cpu'}.json"
+    path = a.out / f"gpu-pipeline-{a.tag or ('gpu' if a.device != 'cpu' else 'cpu')}.json"
     path.write_text(json.dumps(res, indent=2, default=str))
     print(f"wrote {path}")
 
