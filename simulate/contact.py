@@ -214,7 +214,13 @@ def run_episodes(cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: in
     pos_world = q + np.array([0.0, 0.0, top])
     f_pad = sens[..., _FORCE]  # force on the pad, global frame
     force = np.concatenate([f_pad[..., :2], -f_pad[..., 2:3]], axis=-1)
-    deform, pressure, shear = load_field(cfg, q, force)
+    engine, device = physics_engine(cfg)
+    if engine == "mujoco_warp":  # the GPU path: the numpy field would be the host's largest cost
+        from simulate.load_field_warp import load_field_warp
+
+        deform, pressure, shear = load_field_warp(cfg, q, force, device)
+    else:
+        deform, pressure, shear = load_field(cfg, q, force)
     n = sens.shape[1]
     return LoadBatch(
         time_s=np.arange(n) / cfg.sampling.sample_rate_hz,
