@@ -85,7 +85,7 @@ MODES = {
                  {**TCN_BASE, "max_epochs": 200, "patience": 15}),
     "quick": Mode("quick", _gen(36, 18, 120), CAL + _gen(36, 18, 100), AE + _gen(10, 10, 110),
                   {"max_epochs": 150, "patience": 25, "batch_size": 64}, list(range(3, 13)),
-                  {**TCN_BASE, "max_epochs": 20, "patience": 6, "max_batches_per_epoch": 30}),
+                  {**TCN_BASE, "max_epochs": 40, "patience": 8, "max_batches_per_epoch": 40}),
     "tiny": Mode("tiny", _gen(4, 4, 40), CAL + _gen(4, 4, 50), AE + _gen(2, 2, 40),
                  {"max_epochs": 30, "patience": 10}, [4],
                  {"channels": 8, "dilations": [1, 2, 4, 8], "chunk": 64, "max_epochs": 4, "patience": 3,
