@@ -24,7 +24,7 @@ from typing import Any, Callable
 import numpy as np
 
 from learn.data import Sequence, dataset_fingerprint, dumps, load_sequences, stratified_split
-from learn.experiments.common import fmt, md_table
+from learn.experiments.common import fmt, md_table, single_thread
 from learn import metrics as M
 
 KEY = "velostat"
@@ -255,6 +255,7 @@ def ae_errors(seqs: list[Sequence], preds: list[np.ndarray], rate: float) -> dic
             "points": [list(r) for r in rows]}
 
 
+@single_thread
 def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None = None,
         overrides: list[str] | None = None, models: list[str] | None = None, seed: int = 0,
         progress: bool = True, log: Callable[[str], None] = print) -> dict[str, Any]:
