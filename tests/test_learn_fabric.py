@@ -181,16 +181,24 @@ def test_experiment_fabric_bad_input_exit_2(tmp_path):
     assert not any(tmp_path.iterdir())
 
 
+def raw_hyst(L):
+    return L["raw"]["hyst_full_mean"]
+
+
 def test_experiment_fabric_tiny(tmp_path):
     out = tmp_path / "exp"
-    res = runner.invoke(app, ["experiment", "fabric", "--mode", "tiny", "--models", "linear,bp_lm", "-o", str(out)])
+    res = runner.invoke(app, ["experiment", "fabric", "--mode", "tiny", "--models", "linear,bp_lm,tcn", "-o", str(out)])
     assert res.exit_code == 0, res.output
     m = json.loads((out / "metrics.json").read_text())
     assert {"experiment", "mode", "layers", "paper", "findings"} <= set(m)
     assert set(m["layers"]) == {"1", "3"}
     assert m["paper"]["hysteresis_fso"]["1"] == {"before": 24.2, "after": 13.5}
     for n, L in m["layers"].items():
-        assert set(L["models"]) == {"mean", "linear", "bp_lm"}
+        assert set(L["models"]) == {"mean", "linear", "bp_lm", "tcn"}
+        tcn = L["models"]["tcn"]
+        assert tcn["hparams"]["log_inputs"] == [0]  # ours reads (R, ln R)
+        assert tcn["test"]["mse"] < min(L["models"][k]["test"]["mse"] for k in ("mean", "linear"))  # beats trivial baselines
+        assert tcn["test"]["hyst_full_mean"] < raw_hyst(L) and tcn["latency"]["stream_vs_batch_max_abs"] < 1e-2
         assert {"dataset", "split", "target_poly", "raw", "table2"} <= set(L)
         assert not set(L["split"]["test"]) & set(L["split"]["train"] + L["split"]["valid"])
         assert not set(L["episode_seeds"]["test"]) & set(L["episode_seeds"]["train"])  # new random force sequences
@@ -220,3 +228,7 @@ def test_experiment_fabric_quick(tmp_path):
     m = json.loads((out / "metrics.json").read_text())
     assert set(m["layers"]) == {"1", "3", "6", "12"}
     assert all(m["findings"]["bp_reduces_full_range_hysteresis"].values())
+    # ours (TCN on R, ln R) beats the paper's BP net on every layer count: test MSE, full cycle, worst loop
+    assert set(m["findings"]["tcn_beats_bp_lm"]) == {"1", "3", "6", "12"}
+    for n, d in m["findings"]["tcn_beats_bp_lm"].items():
+        assert all(d.values()), (n, d)

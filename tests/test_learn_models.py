@@ -137,3 +137,28 @@ def test_edge_windows_and_split():
     assert {s.meta["frequency_hz"] for s in sp["test"]} == {0.5, 1.0, 2.0}
     keys = [s.key for v in sp.values() for s in v]
     assert len(keys) == len(set(keys)) == 12
+
+
+def test_tcn_log_inputs_stream_checkpoint_and_errors(tmp_path):
+    """log_inputs: ln R joins R (stats as net buffers): beats the mean, streams = batch, round-trips, and refuses
+    a non-positive channel or an index outside the inputs."""
+    sp = stratified_split(synth(), "frequency_hz", 0, (0.6, 0.1, 0.3))
+    tr, va, te = sp["train"], sp["valid"], sp["test"]
+    hp = {**TINY["tcn"], "log_inputs": [0]}
+    m = make_model("tcn", **hp).fit([s.x for s in tr], [s.y for s in tr], valid=([s.x for s in va], [s.y for s in va]),
+                                   seed=3, inputs=["r"], targets=["f"], units={"r": "ohm", "f": "N"})
+    mean = make_model("mean").fit([s.x for s in tr], [s.y for s in tr])
+    assert _rmse(m, te) < 0.5 * _rmse(mean, te)
+    lr = np.log(np.concatenate([s.x[:, 0] for s in tr]))
+    assert float(m.net.feat.l_mean[0]) == pytest.approx(lr.mean(), rel=1e-5)
+    assert float(m.net.feat.l_std[0]) == pytest.approx(lr.std(), rel=1e-4)
+    x = te[0].x
+    np.testing.assert_allclose(m.stream().run(x), m.predict(x), rtol=1e-4, atol=1e-4)
+    save_checkpoint(m, tmp_path / "ck")
+    m2 = load_checkpoint(tmp_path / "ck")
+    assert m2.hparams["log_inputs"] == [0]
+    np.testing.assert_array_equal(m2.predict(x), m.predict(x))
+    with pytest.raises(ValueError, match="positive"):
+        make_model("tcn", **hp).fit([s.x - 100.0 for s in tr], [s.y for s in tr])
+    with pytest.raises(ValueError, match="outside"):
+        make_model("tcn", **{**hp, "log_inputs": [1]}).fit([s.x for s in tr], [s.y for s in tr])

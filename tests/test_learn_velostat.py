@@ -203,3 +203,8 @@ def test_experiment_velostat_quick(tmp_path):
     R = m["models"]
     assert R["paper_unit"]["test"]["rmse"] < R["literal_unit"]["test"]["rmse"]  # ln R + one-hot beats the literal
     assert R["paper_unit"]["ae"]["max_abs_n"] < 5.0
+    # ours beats the best paper chain (and BP without compensation) on the held-out RMSE and the worst A-E point
+    for k in ("raw_bp", "paper_unit", "paper_cluster", "literal_unit", "literal_cluster"):
+        assert R["tcn"]["test"]["rmse"] < R[k]["test"]["rmse"], k
+        assert R["tcn"]["ae"]["max_abs_n"] < R[k]["ae"]["max_abs_n"], k
+    assert all(m["findings"]["tcn_beats_best_paper"].values())

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import time
+from pathlib import Path
 from typing import Any, Callable, Sequence as Seq
 
 import numpy as np
@@ -13,7 +14,9 @@ from learn import metrics as M
 from learn.data import Sequence
 from learn.models.base import Compensator
 
-__all__ = ["evaluate", "streaming_latency", "batch_latency", "md_table", "fmt"]
+HISTORY_CURVES = ("train_loss", "valid_loss")  # per-epoch curves: "loss_curve", not "training"
+
+__all__ = ["evaluate", "streaming_latency", "batch_latency", "md_table", "fmt", "fit_model", "single_thread"]
 
 
 def evaluate(comp: Compensator, seqs: Seq[Sequence], drive: str | None = None) -> dict[str, Any]:
@@ -39,6 +42,69 @@ def raw_hysteresis(seqs: Seq[Sequence], drive: str) -> dict[str, float]:
     cyc = [h for h in cyc if np.isfinite(h)]
     return {"hyst_mean": float(np.mean(cyc)) if cyc else float("nan"),
             "hyst_worst": float(np.max(cyc)) if cyc else float("nan"), "n_cycles": len(cyc)}
+
+
+def single_thread(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """Run ``fn`` with torch on one thread (restored afterwards): the nets here are small, and two threads
+    contending for two busy cores were several times slower than one."""
+    import functools
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        old = torch.get_num_threads()
+        torch.set_num_threads(1)
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            torch.set_num_threads(old)
+
+    return wrapper
+
+
+def fit_model(
+    kind: str,
+    hparams: dict[str, Any],
+    xs: Seq[np.ndarray],
+    ys: Seq[np.ndarray],
+    valid: tuple[Seq[np.ndarray], Seq[np.ndarray]] | None,
+    *,
+    seed: int,
+    progress: bool = False,
+    fit_kw: dict[str, Any] | None = None,
+    assess: Callable[[Compensator], dict[str, Any]] | None = None,
+    latency_x: np.ndarray | None = None,
+    latency_n: int = 300,
+    history_skip: Seq[str] = (),
+    checkpoint: Path | None = None,
+    dataset: Any = None,
+    checkpoint_extra: Callable[[dict[str, Any]], dict[str, Any]] | None = None,
+) -> tuple[Compensator, dict[str, Any]]:
+    """The experiments' "train one model, evaluate, time, checkpoint" step.
+
+    make_model(kind, **hparams).fit(xs, ys, valid, seed, progress, **fit_kw) (inputs / targets / units go in
+    fit_kw), then a record: what ``assess(comp)`` returns (the experiment's own metrics, in its order),
+    "fit_seconds", "hparams", "training" (the history without its per-epoch curves and ``history_skip``),
+    "loss_curve" (train / valid per epoch), and with ``latency_x`` "latency" (streaming_latency over
+    ``latency_n`` samples). With ``checkpoint`` the model is saved there (``dataset`` hash, extra =
+    ``checkpoint_extra(record)``). Returns (fitted model, record)."""
+    from learn.checkpoint import save_checkpoint
+    from learn.models import make_model
+
+    comp = make_model(kind, **hparams)
+    t0 = time.perf_counter()
+    comp.fit(xs, ys, valid=valid, seed=seed, progress=progress, **(fit_kw or {}))
+    rec: dict[str, Any] = {"fit_seconds": time.perf_counter() - t0}
+    if assess is not None:
+        rec = {**assess(comp), **rec}
+    skip = set(HISTORY_CURVES) | set(history_skip)
+    rec["hparams"] = comp.hparams
+    rec["training"] = {k: v for k, v in comp.history.items() if k not in skip}
+    rec["loss_curve"] = {"train": comp.history.get("train_loss", []), "valid": comp.history.get("valid_loss", [])}
+    if latency_x is not None:
+        rec["latency"] = streaming_latency(comp, latency_x, n=latency_n)
+    if checkpoint is not None:
+        save_checkpoint(comp, checkpoint, dataset=dataset, extra=checkpoint_extra(rec) if checkpoint_extra else None)
+    return comp, rec
 
 
 def streaming_latency(comp: Compensator, x: np.ndarray, n: int = 300, warmup: int = 20, threads: int = 1) -> dict[str, float]:

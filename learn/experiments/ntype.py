@@ -40,7 +40,7 @@ from typing import Any, Callable
 import numpy as np
 
 from learn.data import dataset_fingerprint, dumps, load_sequences
-from learn.experiments.common import fmt, md_table
+from learn.experiments.common import fit_model, fmt, md_table
 
 KEY = "ntype"
 INPUTS, TARGETS = ["resistance_measured"], ["force_element"]
@@ -238,8 +238,6 @@ def run(
 
 def _run(md: Mode, mode: str, out: Path, data: Path, seqs: list, fp: dict, folds: list[np.ndarray], want: set[str],
          seed: int, progress: bool, log: Callable[[str], None]) -> dict[str, Any]:
-    from learn.checkpoint import save_checkpoint
-    from learn.models import make_model
     from learn.models.element_mlp import ElementMLP
     from learn.models.rbf import KMeans, RBFNetwork
 
@@ -256,7 +254,6 @@ def _run(md: Mode, mode: str, out: Path, data: Path, seqs: list, fp: dict, folds
     res_mean: list[dict] = []
     keep_pred: dict[str, Any] = {}
     timing: dict[str, float] = {"rbf_col": 0.0, "rbf_win": 0.0, "elem_mlp": 0.0, "map_cnn": 0.0}
-    cnn_comp = None
     t_all = time.perf_counter()
     for fi, test_idx in enumerate(folds):
         tr_idx = np.setdiff1d(np.arange(len(seqs)), test_idx)
@@ -311,16 +308,18 @@ def _run(md: Mode, mode: str, out: Path, data: Path, seqs: list, fp: dict, folds
             tr_list = list(rng.permutation(tr_idx))
             nv = max(1, int(round(md.cnn_valid_share * len(tr_list))))
             va, tr = tr_list[:nv], tr_list[nv:]
-            comp = make_model("map_cnn", **md.cnn)
-            comp.fit([seqs[i].x for i in tr], [seqs[i].y for i in tr],
-                     valid=([seqs[i].x for i in va], [seqs[i].y for i in va]), seed=seed + fi,
-                     progress=progress, inputs=INPUTS, targets=TARGETS, units=units)
-            p = comp.predict(Xte.reshape(len(Xte), -1)).reshape(Yte.shape)
+            _, rec = fit_model("map_cnn", md.cnn, [seqs[i].x for i in tr], [seqs[i].y for i in tr],
+                                  ([seqs[i].x for i in va], [seqs[i].y for i in va]), seed=seed + fi, progress=progress,
+                                  fit_kw={"inputs": INPUTS, "targets": TARGETS, "units": units},
+                                  assess=lambda c: {"pred": c.predict(Xte.reshape(len(Xte), -1)).reshape(Yte.shape)},
+                                  checkpoint=out / "checkpoints" / "map_cnn" if last else None, dataset=fp,
+                                  checkpoint_extra=lambda r: {"experiment": KEY, "mode": mode, "fold": fi,
+                                                              "test": component_errors(Yte, r["pred"], md.min_abs_ref)})
+            p = rec["pred"]
             res_cnn.append(component_errors(Yte, p, md.min_abs_ref))
             timing["map_cnn"] += time.perf_counter() - t0
             if last:
                 keep_pred["map_cnn"] = p
-                cnn_comp = comp
         if last:
             keep_pred["ref"] = Yte
         log(f"fold {fi + 1}/{len(folds)} done ({time.perf_counter() - t_all:.0f} s)")
@@ -334,8 +333,6 @@ def _run(md: Mode, mode: str, out: Path, data: Path, seqs: list, fp: dict, folds
         results["elem_mlp"] = _avg(res_emlp)
     if "map_cnn" in want:
         results["map_cnn"] = _avg(res_cnn)
-        save_checkpoint(cnn_comp, out / "checkpoints" / "map_cnn", dataset=fp,
-                        extra={"experiment": KEY, "mode": mode, "fold": len(folds) - 1, "test": res_cnn[-1]})
     metrics = {
         "experiment": KEY, "mode": mode, "seed": seed, "dataset": fp,
         "protocol": {"folds": md.folds, "episodes": len(seqs), "samples": int(sum(len(s) for s in seqs)),

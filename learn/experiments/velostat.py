@@ -24,7 +24,7 @@ from typing import Any, Callable
 import numpy as np
 
 from learn.data import Sequence, dataset_fingerprint, dumps, load_sequences, stratified_split
-from learn.experiments.common import fmt, md_table
+from learn.experiments.common import fmt, md_table, single_thread
 from learn import metrics as M
 
 KEY = "velostat"
@@ -85,7 +85,7 @@ MODES = {
                  {**TCN_BASE, "max_epochs": 200, "patience": 15}),
     "quick": Mode("quick", _gen(36, 18, 120), CAL + _gen(36, 18, 100), AE + _gen(10, 10, 110),
                   {"max_epochs": 150, "patience": 25, "batch_size": 64}, list(range(3, 13)),
-                  {**TCN_BASE, "max_epochs": 20, "patience": 6, "max_batches_per_epoch": 30}),
+                  {**TCN_BASE, "max_epochs": 40, "patience": 8, "max_batches_per_epoch": 40}),
     "tiny": Mode("tiny", _gen(4, 4, 40), CAL + _gen(4, 4, 50), AE + _gen(2, 2, 40),
                  {"max_epochs": 30, "patience": 10}, [4],
                  {"channels": 8, "dilations": [1, 2, 4, 8], "chunk": 64, "max_epochs": 4, "patience": 3,
@@ -255,6 +255,7 @@ def ae_errors(seqs: list[Sequence], preds: list[np.ndarray], rate: float) -> dic
             "points": [list(r) for r in rows]}
 
 
+@single_thread
 def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None = None,
         overrides: list[str] | None = None, models: list[str] | None = None, seed: int = 0,
         progress: bool = True, log: Callable[[str], None] = print) -> dict[str, Any]:

@@ -50,9 +50,13 @@ class TorchCompensator(Compensator):
         return TrainConfig(lr=h["lr"], batch_size=h["batch_size"], max_epochs=h["max_epochs"], patience=h["patience"],
                            grad_clip=h["grad_clip"], max_batches_per_epoch=h["max_batches_per_epoch"], seed=seed)
 
+    def _prepare(self, zx: list[np.ndarray]) -> None:
+        """After the net is built, before training: set anything the net computes from the training inputs."""
+
     def _fit(self, zx, zy, zv, *, seed, progress):
         with seeded(seed):
             self.net = self._build()
+        self._prepare(zx)
         tr = self._examples(zx, zy, True)
         va = self._examples(*zv, False) if zv is not None else None
         hist = train_model(self.net, tr, va, self.train_config(seed), progress=progress, description=self.kind)

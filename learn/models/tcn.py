@@ -10,6 +10,11 @@ each layer keeps a ring buffer of its last (k-1) d + 1 inputs, so no window is r
     h_0 = W_in x                                (1x1 conv)
     h_{l+1} = h_l + SiLU(conv_{k, d_l}(h_l))     (causal, valid, residual)
     y = W_out h_L + W_skip x                     (1x1 convs; the skip is a linear path from input)
+
+``log_inputs`` (indices of input channels, default none): ln x of those channels joins the inputs (z-scored
+with the training statistics, kept as buffers of the net, so checkpoints and stream() need nothing else).
+For a resistance that spans a decade or more (the fabric stacks) the log is the natural scale of the
+contact law (R_c ~ F^-1/3 .. F^-1/2) and a z-scored R alone crowds the high-force end.
 """
 
 from __future__ import annotations
@@ -24,11 +29,52 @@ from learn.models.neural import TRAIN_DEFAULTS, TorchCompensator, _f32
 __all__ = ["CausalTCN", "TCNCompensator"]
 
 
-class CausalTCN(nn.Module):
-    """[B, L, n_in] -> [B, L - rf + 1, n_out] (valid causal convolutions)."""
+class LogFeatures(nn.Module):
+    """Normalised x [..., n_in] -> [..., n_in + len(idx)]: x, then z-scored ln of the raw channels ``idx``.
+    Buffers: the x statistics (to undo the z-score) and those of ln x."""
 
-    def __init__(self, n_in: int, n_out: int, channels: int, kernel: int, dilations: list[int]):
+    def __init__(self, n_in: int, idx: list[int]):
         super().__init__()
+        self.idx = [int(i) for i in idx]
+        for name, n in (("x_mean", n_in), ("x_std", n_in), ("l_mean", len(self.idx)), ("l_std", len(self.idx))):
+            self.register_buffer(name, torch.ones(n, dtype=torch.float32))
+
+    def raw_log(self, z: np.ndarray | torch.Tensor):
+        """ln of the raw channels idx from normalised z (numpy or torch), floored at 1e-12."""
+        if isinstance(z, torch.Tensor):
+            raw = z[..., self.idx] * self.x_std[self.idx] + self.x_mean[self.idx]
+            return torch.log(torch.clamp(raw, min=1e-12))
+        g = lambda t: t.detach().double().numpy()  # noqa: E731
+        raw = z[..., self.idx] * g(self.x_std)[self.idx] + g(self.x_mean)[self.idx]
+        return np.log(np.maximum(raw, 1e-12))
+
+    def set_stats(self, x_mean, x_std, zx: list[np.ndarray]) -> None:
+        self.x_mean.copy_(torch.as_tensor(np.asarray(x_mean), dtype=torch.float32))
+        self.x_std.copy_(torch.as_tensor(np.asarray(x_std), dtype=torch.float32))
+        lg = np.concatenate([self.raw_log(np.asarray(z, np.float64)) for z in zx])
+        self.l_mean.copy_(torch.as_tensor(lg.mean(0), dtype=torch.float32))
+        self.l_std.copy_(torch.as_tensor(np.maximum(lg.std(0), 1e-12), dtype=torch.float32))
+
+    def forward(self, z: torch.Tensor) -> torch.Tensor:
+        return torch.cat([z, (self.raw_log(z) - self.l_mean) / self.l_std], dim=-1)
+
+    def numpy(self, z: np.ndarray) -> np.ndarray:
+        g = lambda t: t.detach().double().numpy()  # noqa: E731
+        return np.concatenate([z, (self.raw_log(z) - g(self.l_mean)) / g(self.l_std)], axis=-1)
+
+
+class CausalTCN(nn.Module):
+    """[B, L, n_in] -> [B, L - rf + 1, n_out] (valid causal convolutions). With ``log_inputs`` the net
+    first appends the z-scored ln of those raw input channels (LogFeatures)."""
+
+    def __init__(self, n_in: int, n_out: int, channels: int, kernel: int, dilations: list[int],
+                 log_inputs: list[int] | None = None):
+        super().__init__()
+        if log_inputs:
+            self.feat = LogFeatures(n_in, list(log_inputs))
+            n_in = n_in + len(self.feat.idx)
+        else:
+            self.feat = None
         self.kernel, self.dilations = int(kernel), [int(d) for d in dilations]
         self.rf = 1 + (self.kernel - 1) * sum(self.dilations)
         self.inp = nn.Conv1d(n_in, channels, 1)
@@ -37,6 +83,8 @@ class CausalTCN(nn.Module):
         self.skip = nn.Conv1d(n_in, n_out, 1)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if self.feat is not None:
+            x = self.feat(x)
         x = x.transpose(1, 2)
         h = self.inp(x)
         for conv, d in zip(self.convs, self.dilations):
@@ -51,7 +99,7 @@ class TCNCompensator(TorchCompensator):
     early-stopping loop as the paper's models."""
 
     DEFAULTS = {**TRAIN_DEFAULTS, "channels": 32, "kernel": 3, "dilations": [1, 2, 4, 8, 16, 32],
-                "chunk": 64, "batch_size": 16, "lr": 2e-3}
+                "chunk": 64, "batch_size": 16, "lr": 2e-3, "log_inputs": None}
     temporal = True
 
     @property
@@ -61,7 +109,20 @@ class TCNCompensator(TorchCompensator):
 
     def _build(self):
         h = self.hparams
-        return CausalTCN(self.n_in, self.n_out, int(h["channels"]), int(h["kernel"]), list(h["dilations"]))
+        return CausalTCN(self.n_in, self.n_out, int(h["channels"]), int(h["kernel"]), list(h["dilations"]),
+                         list(h["log_inputs"] or []))
+
+    def _prepare(self, zx):
+        idx = list(self.hparams["log_inputs"] or [])
+        if not idx:
+            return
+        bad = [i for i in idx if not 0 <= int(i) < self.n_in]
+        if bad:
+            raise ValueError(f"tcn: log_inputs {bad} outside the {self.n_in} input channels")
+        lo = min(float((z * self.x_norm.std + self.x_norm.mean)[:, idx].min()) for z in zx)
+        if lo <= 0:
+            raise ValueError(f"tcn: log_inputs need positive inputs (minimum {lo:g})")
+        self.net.feat.set_stats(self.x_norm.mean, self.x_norm.std, zx)
 
     def _pad(self, z: np.ndarray) -> np.ndarray:
         return np.concatenate([np.repeat(z[:1], self.context - 1, axis=0), z], axis=0)
@@ -92,6 +153,7 @@ class TCNStreamer(Streamer):
         net = comp.net
         g = lambda t: t.detach().double().numpy()  # noqa: E731
         self.xm, self.xs = comp.x_norm.mean, comp.x_norm.std
+        self.feat = net.feat
         self.ym, self.ys = comp.y_norm.mean, comp.y_norm.std
         self.w_in, self.b_in = g(net.inp.weight)[:, :, 0], g(net.inp.bias)
         self.k = net.kernel
@@ -110,6 +172,8 @@ class TCNStreamer(Streamer):
 
     def step(self, x: np.ndarray) -> np.ndarray:
         z = (np.asarray(x, np.float64).reshape(-1) - self.xm) / self.xs
+        if self.feat is not None:
+            z = self.feat.numpy(z)
         h = self.w_in @ z + self.b_in
         first = self.bufs is None
         if first:
