@@ -62,13 +62,16 @@ class CntPdmsSensor:
         return np.stack([el.readout_noise_v(s, n_steps, self.n_channels, e.white_noise_v, e.pink_noise_v) for s in seeds])
 
     def run(self, drive: np.ndarray, seeds: list[int]) -> dict[str, np.ndarray]:
-        """drive [E,T,N] float32 -> dict of outputs (see OUTPUTS), each [E, T, ...]."""
+        """drive [E,T,N] float32 -> dict of outputs (see OUTPUTS; with generation.record, only those), each [E, T, ...]."""
         E, T, N = drive.shape
         if N != self.n_taxels:
             raise ValueError(f"drive has {N} taxels; the pad has {self.n_taxels}")
         if len(seeds) != E:
             raise ValueError(f"need one seed per episode ({E}); got {len(seeds)}")
         noise = self.noise(seeds, T)
+        want = set(self.cfg.generation.record or OUTPUTS)  # outputs to return (and copy off the device)
+        ro_names = {"resistance": "resistance", "bridge_v": "bridge_v", "adc": "adc", "voltage": "filtered_v",
+                    "resistance_measured": "resistance_measured"}
         if self.backend == "numpy":
             strain, stress, cond, _ = taxel_chain_numpy(drive, self.mode, self.tp, TaxelState.zeros(E * N, self.tp))
             g, force = el.sum_channels_numpy(cond, stress, self.taxel_channel, self.n_channels, self.tp.taxel_area_m2)
@@ -84,19 +87,20 @@ class CntPdmsSensor:
             g_d, f_d = el.sum_channels_warp(
                 c_d, st_d, self.taxel_channel, self.n_channels, self.tp.taxel_area_m2, (E, T, N), self.device
             )
-            ro, _ = el.readout_warp(g_d, (E, T, self.n_channels), noise, self.ep, None, self.device)
-            force = f_d.numpy().reshape(E, T)
-            strain, stress = s_d.numpy().reshape(E, T, N), st_d.numpy().reshape(E, T, N)
-        return {
-            "strain": strain,
-            "force_taxel": (stress * np.float32(self.tp.taxel_area_m2)).astype(np.float32),
-            "force": force.astype(np.float32),
-            "resistance": ro["resistance"].astype(np.float32),
-            "bridge_v": ro["bridge_v"].astype(np.float32),
-            "adc": ro["adc"].astype(np.int16 if self.ep.adc_bits <= 16 else np.int32),
-            "voltage": ro["filtered_v"].astype(np.float32),
-            "resistance_measured": ro["resistance_measured"].astype(np.float32),
+            keep_ro = {ro_names[k] for k in want if k in ro_names}
+            ro, _ = el.readout_warp(g_d, (E, T, self.n_channels), noise, self.ep, None, self.device, keep=keep_ro)
+            force = f_d.numpy().reshape(E, T) if "force" in want else None
+            strain = s_d.numpy().reshape(E, T, N) if "strain" in want else None
+            stress = st_d.numpy().reshape(E, T, N) if "force_taxel" in want else None
+        adc_dtype = np.int16 if self.ep.adc_bits <= 16 else np.int32
+        make = {
+            "strain": lambda: strain,
+            "force_taxel": lambda: (stress * np.float32(self.tp.taxel_area_m2)).astype(np.float32),
+            "force": lambda: force.astype(np.float32),
+            "adc": lambda: ro["adc"].astype(adc_dtype),
+            **{k: (lambda r=r: ro[r].astype(np.float32)) for k, r in ro_names.items() if k != "adc"},
         }
+        return {k: make[k]() for k in OUTPUTS if k in want}
 
     def attrs(self) -> dict:
         """/sensor attrs for recordings."""

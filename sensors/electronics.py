@@ -228,9 +228,11 @@ def sum_channels_warp(
 
 def readout_warp(
     g: wp.array, shape: tuple[int, int, int], noise_v: np.ndarray, ep: ElectronicsParams,
-    state: ElectronicsState | None, device: str,
+    state: ElectronicsState | None, device: str, keep=None,
 ):
-    """Channel conductance on the device (flat [E*T*C]) -> (dict of numpy [E,T,C] outputs, state)."""
+    """Channel conductance on the device (flat [E*T*C]) -> (dict of numpy [E,T,C] outputs, state).
+    keep: names of the outputs to copy back to the host (default all: resistance, bridge_v, adc,
+    filtered_v, resistance_measured)."""
     E, T, C = shape
     d = device
     st = state or ElectronicsState.zeros(E * C)
@@ -251,5 +253,5 @@ def readout_warp(
         device=d,
     )
     names = ["resistance", "bridge_v", "adc", "filtered_v", "resistance_measured"]
-    result = {n: o.numpy().reshape(E, T, C) for n, o in zip(names, outs)}
+    result = {n: o.numpy().reshape(E, T, C) for n, o in zip(names, outs) if keep is None or n in keep}
     return result, ElectronicsState(filt.numpy(), primed.numpy())
