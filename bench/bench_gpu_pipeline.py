@@ -170,7 +170,7 @@ def stages(device: str, batch: int) -> dict:
     try:
         t0 = time.perf_counter()
         batch_ = contact.run_episodes(cfg, protos)
-        t["load field (numpy)"] = time.perf_counter() - t0
+        t["load field (Warp)"] = time.perf_counter() - t0
     finally:
         contact.simulate_sensors = real
     t0 = time.perf_counter()
