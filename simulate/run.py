@@ -160,6 +160,7 @@ def write_shard(
     ids = [f"ep-{k:06d}" for k in gids]
     sensor_attrs = dict(sensor.attrs())
     sensor_attrs["taxel_xy_m"] = _taxel_xy(cfg)
+    engine, engine_device = physics_engine(cfg)
     writer = RecordingWriter(
         shard_path(out_dir, shard),
         source="sim",
@@ -169,6 +170,9 @@ def write_shard(
         sensor_attrs=sensor_attrs,
         mjcf=mjcf,
         compression=g.compression,
+        # the contact engine that ran (generation.physics may say "auto"); MuJoCo Warp on a GPU is float32 and
+        # may sum with GPU atomics, so its shards are not guaranteed bit-reproducible (C MuJoCo's are)
+        extra_attrs={"physics_engine": engine, "physics_device": engine_device},
     )
 
     def write(results: list[EpisodeResult], ks: list[int]) -> None:
@@ -178,8 +182,7 @@ def write_shard(
     with writer as w, ThreadPoolExecutor(1, thread_name_prefix="shard-writer") as pool:
         pending = None
         try:
-            gpu = physics_engine(cfg)[0] == "mujoco_warp"
-            for sl in shard_batches(len(gids), GPU_BATCH if gpu else None):
+            for sl in shard_batches(len(gids), GPU_BATCH if engine == "mujoco_warp" else None):
                 results = simulate_episodes(cfg, seeds[sl], ids[sl], sensor, threads=g.threads if threads is None else threads)
                 if pending is not None:
                     pending.result()  # one batch in flight: bounded memory, errors surface here

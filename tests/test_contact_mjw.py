@@ -68,6 +68,7 @@ def test_record_subset_and_errors(tmp_path):
     from sensors.manifest import shard_path
 
     with Recording(shard_path(tmp_path / "ds", 0)) as rec:
+        assert rec.attrs["physics_engine"] == "mujoco"  # the engine that ran is recorded in every shard
         ep = rec.episode_ids[0]
         assert sorted(rec.channels(ep)) == sorted(keep)
         assert rec.shape(ep, "adc")[-1] == 36  # one ADC channel per taxel
