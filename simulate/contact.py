@@ -120,12 +120,9 @@ def physics_engine(cfg: SceneConfig) -> tuple[str, str]:
 def simulate_sensors(
     cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Run the episodes; returns sensordata (E, T, nsensordata) at the sample times and target (E, T)."""
+    """Run the episodes; returns sensordata (E, T, nsensordata) at the sample times and target (E, T).
+    Stepping: C MuJoCo's rollout on `threads` threads, or MuJoCo Warp worlds (`physics_engine`)."""
     engine, device = physics_engine(cfg)
-    if engine == "mujoco_warp":
-        from simulate.contact_mjw import simulate_sensors_mjw
-
-        return simulate_sensors_mjw(cfg, protocols, device)
     n = episode_length(protocols)
     sub = cfg.sampling.substeps
     nstep = (n - 1) * sub
@@ -133,16 +130,22 @@ def simulate_sensors(
     ctrl, tgt_steps = episode_controls(cfg, protocols, nstep)
     states0, sens0 = _initial_states(m, cfg, protocols, ctrl[:, 0])
     E = len(protocols)
-    out = np.zeros((E, n, m.nsensordata))
-    out[:, 0] = sens0
     rows = np.arange(1, n) * sub - 1
-    datas = [mujoco.MjData(m) for _ in range(max(1, threads))]
-    data_arg = datas if threads > 1 else datas[0]
-    chunk = max(max(1, threads), MAX_STEPS_PER_CHUNK // nstep)
-    for a in range(0, E, chunk):
-        b = min(E, a + chunk)
-        _, sd = mujoco.rollout.rollout(m, data_arg, states0[a:b], ctrl[a:b], nstep=nstep)
-        out[a:b, 1:] = sd[:, rows]
+    if engine == "mujoco_warp":
+        from simulate.contact_mjw import WarpWorlds
+
+        qpos0 = states0[:, 1 : 1 + m.nq]  # full-physics state = (time, qpos, qvel, ...)
+        out = WarpWorlds(m, E, device).run(qpos0, ctrl, sens0, sub, n)
+    else:
+        out = np.zeros((E, n, m.nsensordata))
+        out[:, 0] = sens0
+        datas = [mujoco.MjData(m) for _ in range(max(1, threads))]
+        data_arg = datas if threads > 1 else datas[0]
+        chunk = max(max(1, threads), MAX_STEPS_PER_CHUNK // nstep)
+        for a in range(0, E, chunk):
+            b = min(E, a + chunk)
+            _, sd = mujoco.rollout.rollout(m, data_arg, states0[a:b], ctrl[a:b], nstep=nstep)
+            out[a:b, 1:] = sd[:, rows]
     target = np.zeros((E, n))
     target[:, 1:] = tgt_steps[:, rows]
     target[:, 0] = [target_waveform(p, cfg, np.zeros(1))[0] for p in protocols]

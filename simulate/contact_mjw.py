@@ -1,8 +1,8 @@
 """The contact stage on MuJoCo Warp: all episodes as batched worlds on one device (GPU, or Warp's CPU).
 
-Same model, controls and outputs as `simulate.contact.simulate_sensors` (the C MuJoCo `rollout` path):
-sensordata (E, T, nsensordata) read after every `substeps`-th step, so everything downstream (load
-field, sensor chain, recording) is shared. Source of the engine: MuJoCo Warp 4.0 (`mujoco_warp`).
+Same model, controls and outputs as the C MuJoCo `rollout` path of `simulate.contact.simulate_sensors`,
+which calls `WarpWorlds.run` when generation.physics picks MuJoCo Warp: sensordata (E, T, nsensordata) read
+after every `substeps`-th step, so everything downstream (load field, sensor chain, recording) is shared. Source of the engine: MuJoCo Warp 4.0 (`mujoco_warp`).
 
 On CUDA one sample period (substeps x [set ctrl, step] + record sensors) is captured once as a CUDA graph
 and replayed; per-step controls come from a device buffer indexed by a device-side step counter, so no
@@ -16,8 +16,6 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from scenes.config import SceneConfig
-from simulate.protocols import EpisodeProtocol, target_waveform
 
 CHUNK_BYTES = 256 * 2**20  # device memory for one chunk of controls + recorded sensors
 
@@ -116,22 +114,3 @@ class WarpWorlds:
                 out[:, a : a + k] = rec.numpy()[:, :k]
         return out
 
-
-def simulate_sensors_mjw(cfg: SceneConfig, protocols: list[EpisodeProtocol], device: str) -> tuple[np.ndarray, np.ndarray]:
-    """Like simulate.contact.simulate_sensors, on MuJoCo Warp worlds: (sensordata (E, T, ns), target (E, T))."""
-    from simulate.contact import _initial_states, build_model, episode_controls, episode_length
-
-    n = episode_length(protocols)
-    sub = cfg.sampling.substeps
-    nstep = (n - 1) * sub
-    m = build_model(cfg)
-    ctrl, tgt_steps = episode_controls(cfg, protocols, nstep)
-    states0, sens0 = _initial_states(m, cfg, protocols, ctrl[:, 0])
-    qpos0 = states0[:, 1 : 1 + m.nq]  # full-physics state = (time, qpos, qvel, ...)
-    worlds = WarpWorlds(m, len(protocols), device)
-    out = worlds.run(qpos0, ctrl, sens0, sub, n)
-    rows = np.arange(1, n) * sub - 1
-    target = np.zeros((len(protocols), n))
-    target[:, 1:] = tgt_steps[:, rows]
-    target[:, 0] = [target_waveform(p, cfg, np.zeros(1))[0] for p in protocols]
-    return out, target
