@@ -59,7 +59,7 @@ class CntPdmsSensor:
 
     def noise(self, seeds: list[int], n_steps: int) -> np.ndarray:
         e = self.cfg.sensor.electronics
-        return np.stack([el.readout_noise_v(s, n_steps, self.n_channels, e.white_noise_v, e.pink_noise_v) for s in seeds])
+        return el.readout_noise_batch(seeds, n_steps, self.n_channels, e.white_noise_v, e.pink_noise_v)
 
     def run(self, drive: np.ndarray, seeds: list[int]) -> dict[str, np.ndarray]:
         """drive [E,T,N] float32 -> dict of outputs (see OUTPUTS; with generation.record, only those), each [E, T, ...]."""

@@ -53,6 +53,27 @@ def readout_noise_v(seed: int, n_steps: int, n_channels: int, white_v: float, pi
     return (white + pink_noise(rng, (n_channels, n_steps), pink_v)).T
 
 
+def readout_noise_batch(seeds: list[int], n_steps: int, n_channels: int, white_v: float, pink_v: float) -> np.ndarray:
+    """[E, T, C] float64: `readout_noise_v` of every episode (same values), drawn on a thread pool for large
+    batches (numpy's generators and FFT release the GIL; each episode has its own generator)."""
+    import os
+    from concurrent.futures import ThreadPoolExecutor
+
+    out = np.empty((len(seeds), n_steps, n_channels))
+
+    def fill(i: int) -> None:
+        out[i] = readout_noise_v(seeds[i], n_steps, n_channels, white_v, pink_v)
+
+    workers = min(8, os.cpu_count() or 1)
+    if len(seeds) * n_steps * n_channels < 2_000_000 or workers == 1:
+        for i in range(len(seeds)):
+            fill(i)
+    else:
+        with ThreadPoolExecutor(workers, thread_name_prefix="noise") as pool:
+            list(pool.map(fill, range(len(seeds))))
+    return out
+
+
 def _sos_vectors(ep: ElectronicsParams) -> tuple[np.ndarray, np.ndarray, int]:
     ns = ep.sos.shape[0]
     if ns > MAX_SECTIONS:
