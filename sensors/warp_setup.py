@@ -26,4 +26,10 @@ def resolve_device(device: str) -> str:
         device = "cuda:0"
     if device.startswith("cuda") and wp.get_cuda_device_count() == 0:
         raise ValueError(f"device '{device}' requested but no CUDA device is available (allowed here: cpu, auto)")
+    if device.startswith("cuda:"):
+        n = wp.get_cuda_device_count()
+        idx = device.split(":", 1)[1]
+        if not idx.isdigit() or int(idx) >= n:
+            allowed = ", ".join(["cpu", "cuda", "auto"] + [f"cuda:{i}" for i in range(n)])
+            raise ValueError(f"device '{device}' does not exist here (allowed: {allowed})")
     return device
