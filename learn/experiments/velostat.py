@@ -621,8 +621,10 @@ DIFFERENCES = """
   0.6 N raw -> 3.3 N compensated; with the paper's band 0.6 N). `Mode.tracker["bounds"]` switches back.
 - **Silhouette sign**: eq. 7 prints a(i) - b(i); we use b(i) - a(i), the definition under which 1 is best.
 - **G_J**: the double sum of eq. 6 is read over pairs i < j, so s*_k is the mean in-cluster distance the text names.
-- **Units**: positions come from the decoded ITO position (4-wire, ~1 mm error), as in the paper's sensor; units
-  with no calibration recording in the training split take the cluster (one-hot: the unit) of the nearest unit that
+- **Units**: positions come from the decoded ITO position (4-wire, ~1 mm error), as in the paper's sensor. The
+  calibration folder sweeps the units (each round of 36 episodes calibrates every unit over 1-15 N, as the paper
+  calibrates all 36; with random units a third of them had no training calibration and B was extrapolated above
+  10 N); units with no calibration recording in the training split (the tiny mode) take the cluster (one-hot: the unit) of the nearest unit that
   has one. Cluster indices are ordered by mean R, so the literal scalar input is at least ordinal. E, the film's
   centre, is the common corner of four units: the decoded unit there depends on ~0.2 mm of decoding error (a
   genuine limit of a per-unit calibration, the paper's too). The elbow is the characterization's
