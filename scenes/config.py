@@ -81,7 +81,7 @@ class ProtocolConfig(Strict):
 
     kind: Literal[
         "sinusoid", "hold", "staircase", "press_stroke",
-        "velostat_steps", "velostat_staircase", "velostat_calibration", "velostat_mix",
+        "velostat_steps", "velostat_staircase", "velostat_calibration", "velostat_calibration_sweep", "velostat_mix",
     ] = "sinusoid"
     control: Literal["displacement", "force"] = "displacement"
     frequencies_hz: list[PositiveFloat] = Field(default_factory=lambda: [0.1, 0.5, 1.0, 2.0])  # cnt_pdms

@@ -34,6 +34,7 @@ class EpisodeProtocol:
     control: str = "displacement"
     kind: str = "sinusoid"
     params: dict = field(default_factory=dict)  # kind-specific draws (levels, hold times, stroke paths, ...)
+    index: int | None = None  # the episode's global index k, where the caller knows it (kinds that sweep need it)
 
 
 def n_samples_for(cfg: SceneConfig, frequency_hz: float) -> int:
@@ -41,9 +42,11 @@ def n_samples_for(cfg: SceneConfig, frequency_hz: float) -> int:
     return int(round(cfg.episode_duration_s(frequency_hz) * cfg.sampling.sample_rate_hz))
 
 
-def make_episode_protocol(cfg: SceneConfig, seed: int) -> EpisodeProtocol:
+def make_episode_protocol(cfg: SceneConfig, seed: int, index: int | None = None) -> EpisodeProtocol:
     """Draw one episode: frequency from cfg.protocol.frequencies_hz, amplitude U[min, max],
-    offset U[-jitter, +jitter]^2, with numpy.random.default_rng(seed)."""
+    offset U[-jitter, +jitter]^2, with numpy.random.default_rng(seed). index: the episode's global index
+    (seed = episode_seed(root_seed, index)); only kinds that sweep over episodes (velostat_calibration_sweep)
+    read it, and they raise without it."""
     rng = np.random.default_rng(seed)
     p = cfg.protocol
     f = float(p.frequencies_hz[int(rng.integers(len(p.frequencies_hz)))])
@@ -57,6 +60,7 @@ def make_episode_protocol(cfg: SceneConfig, seed: int) -> EpisodeProtocol:
         n_samples=n_samples_for(cfg, f),
         control=p.control,
         kind=p.kind,
+        index=None if index is None else int(index),
     )
     if p.kind in PARAM_DRAWS:  # kind-specific draws continue the same stream (kinds without draws unchanged)
         proto = PARAM_DRAWS[p.kind](proto, cfg, rng)

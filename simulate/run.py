@@ -45,10 +45,12 @@ class EpisodeResult:
 
 
 def simulate_episodes(
-    cfg: SceneConfig, seeds: list[int], ids: list[str], sensor: SensorModel, threads: int = 1
+    cfg: SceneConfig, seeds: list[int], ids: list[str], sensor: SensorModel, threads: int = 1,
+    indices: list[int] | None = None,
 ) -> list[EpisodeResult]:
-    """Simulate episodes (any mix of lengths: grouped by length into batched rollouts)."""
-    protos = [make_episode_protocol(cfg, s) for s in seeds]
+    """Simulate episodes (any mix of lengths: grouped by length into batched rollouts). indices: the
+    episodes' global indices (seeds[i] = episode_seed(root_seed, indices[i])), for kinds that sweep."""
+    protos = [make_episode_protocol(cfg, s, None if indices is None else indices[i]) for i, s in enumerate(seeds)]
     results: dict[int, EpisodeResult] = {}
     lengths = sorted({p.n_samples for p in protos})
     for n in lengths:
@@ -183,7 +185,8 @@ def write_shard(
         pending = None
         try:
             for sl in shard_batches(len(gids), GPU_BATCH if engine == "mujoco_warp" else None):
-                results = simulate_episodes(cfg, seeds[sl], ids[sl], sensor, threads=g.threads if threads is None else threads)
+                results = simulate_episodes(cfg, seeds[sl], ids[sl], sensor, threads=g.threads if threads is None else threads,
+                                            indices=gids[sl])
                 if pending is not None:
                     pending.result()  # one batch in flight: bounded memory, errors surface here
                 pending = pool.submit(write, results, gids[sl])

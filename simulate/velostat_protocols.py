@@ -11,7 +11,11 @@ kinds
                         (Fig. 3a: 1, 3, 5 N held 30 s; Fig. 5: 3 N at 1-6 mm/min).
   velostat_staircase    step_force_n, 2 step_force_n, ... staircase_max_n, step_hold_s per step (Fig. 6).
   velostat_calibration  the 36-unit grid: one unit's centre, 1 N ... amplitude_max in step_force_n steps
-                        (sect. 4.1, eq. 10).
+                        (sect. 4.1, eq. 10); the unit drawn at random per episode.
+  velostat_calibration_sweep  the same staircase, but every unit in turn (the paper calibrates all 36):
+                        episode k calibrates unit perm_r[k mod U], r = k div U, perm_r a shuffle of the U units
+                        seeded by (root_seed, r); so each round of U consecutive episodes covers every unit
+                        once. Needs the episode's global index (EpisodeProtocol.index).
   velostat_mix          one of the three per episode (0.4 / 0.3 / 0.3; estimate): the default dataset.
 Positions: the corners A-D (the corner units' centres), the centre E, or uniform over the film (sect. 3.2, 5.4).
 
@@ -89,6 +93,13 @@ def _position(cfg, rng, site: str) -> np.ndarray:
     return rng.uniform([-hx, -hy], [hx, hy])
 
 
+def sweep_unit(cfg, index: int) -> int:
+    """Unit of episode ``index`` under velostat_calibration_sweep (a shuffled round of all units per U episodes)."""
+    n = int(np.prod(_units(cfg)))
+    r, k = divmod(int(index), n)
+    return int(np.random.default_rng([int(cfg.generation.root_seed), r, 0x5EE9]).permutation(n)[k])
+
+
 def draw(proto, cfg, rng: np.random.Generator):
     """Fill an EpisodeProtocol of a velostat kind (offset, amplitude, params) from the episode's rng."""
     p = cfg.protocol
@@ -98,10 +109,18 @@ def draw(proto, cfg, rng: np.random.Generator):
         kind = names[int(rng.choice(len(names), p=np.asarray(w)))]
     dur = p.duration_s
     speed = float(p.loading_speeds_m_per_s[int(rng.integers(len(p.loading_speeds_m_per_s)))])
+    sweep = kind == "velostat_calibration_sweep"
+    if sweep:
+        if proto.index is None:
+            raise ValueError("protocol.kind=velostat_calibration_sweep needs the episode's global index "
+                             "(make_episode_protocol(cfg, seed, index))")
+        kind = "velostat_calibration"  # the inner kind: the same staircase
     params: dict = {"kind": kind}
     if kind == "velostat_calibration":
         centres = unit_centres_m(cfg)
-        u = int(rng.integers(len(centres)))
+        u = int(rng.integers(len(centres)))  # drawn either way: the rest of the stream stays the same
+        if sweep:
+            u = sweep_unit(cfg, proto.index)
         xy = centres[u]
         levels = np.arange(p.step_force_n, p.amplitude_max + 1e-9, p.step_force_n)
         ramps = ramp_s(cfg, levels[-1], speed) * 2
@@ -145,7 +164,7 @@ def waveform(proto, cfg, tau: np.ndarray) -> np.ndarray:
     return np.where(tau < 0.0, 0.0, np.interp(tau, t, f))
 
 
-KINDS = ("velostat_steps", "velostat_staircase", "velostat_calibration", "velostat_mix")
+KINDS = ("velostat_steps", "velostat_staircase", "velostat_calibration", "velostat_calibration_sweep", "velostat_mix")
 
 
 def register(waveforms: dict, drawers: dict) -> None:

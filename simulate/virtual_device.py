@@ -114,7 +114,7 @@ def load_source(source: str, channel: str | None = None, overrides: list[str] | 
     ch_name = channel or next(c for c in MEASURED if c in sensor.outputs)
     if ch_name not in sensor.outputs and ch_name not in ("force", "time"):
         raise DeviceError(f"preset {cfg.name}: no channel {ch_name!r} (has {', '.join(sensor.outputs)})")
-    res = simulate_episodes(cfg, [episode_seed(cfg.generation.root_seed, seed)], ["ep"], sensor)[0]
+    res = simulate_episodes(cfg, [episode_seed(cfg.generation.root_seed, seed)], ["ep"], sensor, indices=[seed])[0]
     c = res.channels[ch_name]
     return Source(_as_2d(c.data), float(cfg.sampling.sample_rate_hz), c.units, ch_name, f"preset {cfg.name}")
 

@@ -189,3 +189,18 @@ def test_element_mlp_strain_inversion_and_mirror():
     np.testing.assert_array_equal(Em[0, 0], E[0, 5][[1, 0, 2]])  # element (0, 0) <- (5, 0), R_x <-> R_y
     np.testing.assert_array_equal(Fm[1, 6], E[1, 11] * [-1, 1, 1])  # element (0, 1) <- (5, 1), F_x -> -F_x
     np.testing.assert_array_equal(mirror_x(*mirror_x(E, E))[1], E)
+
+
+def test_experiment_ntype_models_subset(tmp_path):
+    """`--models` on ntype: a bad name exits 2 with nothing written; a subset runs only that model (+ mean)."""
+    from piezotwin.cli import app
+
+    res = CliRunner().invoke(app, ["experiment", "ntype", "--mode", "tiny", "--models", "rbf_col,foo",
+                                   "-o", str(tmp_path / "bad")])
+    assert res.exit_code == 2 and "foo" in res.output and not (tmp_path / "bad").exists()
+    out = tmp_path / "sub"
+    res = CliRunner().invoke(app, ["experiment", "ntype", "--mode", "tiny", "--models", "rbf_col", "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    m = json.loads((out / "metrics.json").read_text())
+    assert set(m["models"]) == {"mean", "rbf_col"}
+    assert (out / "report.md").read_text()

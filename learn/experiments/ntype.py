@@ -75,6 +75,10 @@ class Mode:
     cnn_valid_share: float = 0.1
     emlp: dict[str, Any] = field(default_factory=dict)  # ElementMLP hyper-parameters (its DEFAULTS otherwise)
 
+    @property
+    def models(self) -> tuple[str, ...]:  # what --models can pick (the CLI checks against this, like velostat)
+        return MODELS
+
 
 def _modes() -> dict[str, Mode]:
     full = Mode("full", [])
@@ -215,9 +219,9 @@ def run(
     if mode not in MODES:
         raise ValueError(f"mode must be one of {sorted(MODES)}, got {mode!r}")
     md = MODES[mode]
-    unknown = [k for k in (models or []) if k not in MODELS]
+    unknown = [k for k in (models or []) if k not in md.models]
     if unknown:
-        raise ValueError(f"unknown model(s) {unknown}; known: {sorted(MODELS)}")
+        raise ValueError(f"unknown model(s) {unknown}; known: {sorted(md.models)}")
     want = set(models or MODELS) | {"mean"}
     cfg = scene(md, list(overrides or []), seed)
     out = Path(out_dir)

@@ -3,10 +3,14 @@ and our TCN, on the same held-out recordings; the paper's numbers beside ours.
 
   data     simulate.run.generate on the velostat preset, three folders (each reused when already there):
              mix  the preset's velostat_mix (steps / staircase / calibration at A-E, random places, units)
-             cal  protocol.kind=velostat_calibration: 1-15 N staircases on random units (sect. 4.1)
+             cal  protocol.kind=velostat_calibration_sweep: 1-15 N staircases on every unit in turn
+                  (sect. 4.1: the paper calibrates all 36 units over 1-15 N); each round of 36 episodes covers
+                  every unit once (shuffled order)
              ae   protocol.kind=velostat_staircase to 15 N, 5 s per step, at A-E or random (sect. 5.4, Fig. 23)
            inputs: resistance_measured (ohm) and position_measured (decoded ITO position, m); label force (N).
-  split    mix and cal by episode 70/10/20 (stratified by the inner protocol kind); ae is all test.
+  split    mix by episode 70/10/20 (stratified by the inner protocol kind); cal: the last 10 % of its episodes
+           validate, the rest train (so with >= 36 + 10 % episodes every unit has a training calibration over
+           1-15 N; calibrations are never test data); ae is all test.
   paper    CreepTracker (delta, K-means + G_J, silhouette, memberships, eq. 2) fitted on the training
            recordings without labels; per-hold compensated R of the calibration episodes -> per-unit R(F)
            curves -> Ward linkage, elbow -> BP (unit + R and cluster + R -> F), hidden nodes 3..12.
@@ -75,7 +79,7 @@ def _gen(n: int, per: int, dur: float) -> list[str]:
             f"protocol.duration_s={dur}"]
 
 
-CAL = ["protocol.kind=velostat_calibration"]
+CAL = ["protocol.kind=velostat_calibration_sweep"]  # every unit in turn, 1-15 N (random units left 13 of 36 out)
 CURVE_KINDS = ("velostat_calibration", "velostat_staircase")  # holds at whole-newton levels
 AE = ["protocol.kind=velostat_staircase", "protocol.staircase_max_n=15", "protocol.step_hold_s=5"]
 TCN_BASE = {"channels": 32, "dilations": [1, 2, 4, 8, 16, 32, 64], "chunk": 128}
@@ -83,7 +87,7 @@ MODES = {
     "full": Mode("full", _gen(144, 24, 150), CAL + _gen(216, 24, 150), AE + _gen(30, 15, 120),
                  {"max_epochs": 500, "patience": 60}, list(range(3, 13)),
                  {**TCN_BASE, "max_epochs": 200, "patience": 15}),
-    "quick": Mode("quick", _gen(36, 18, 120), CAL + _gen(36, 18, 100), AE + _gen(10, 10, 110),
+    "quick": Mode("quick", _gen(36, 18, 120), CAL + _gen(40, 20, 100), AE + _gen(10, 10, 110),
                   {"max_epochs": 150, "patience": 25, "batch_size": 64}, list(range(3, 13)),
                   {**TCN_BASE, "max_epochs": 40, "patience": 8, "max_batches_per_epoch": 40}),
     "tiny": Mode("tiny", _gen(4, 4, 40), CAL + _gen(4, 4, 50), AE + _gen(2, 2, 40),
@@ -108,9 +112,23 @@ def _load(data: Path, cfg) -> list[Sequence]:
 
     seqs = load_sequences(data, INPUTS, TARGETS, extra=EXTRA)
     for s in seqs:  # the inner kind, the site and the unit live in the protocol, re-drawn from the seed
-        p = make_episode_protocol(cfg, int(s.meta["seed"])).params
+        proto = make_episode_protocol(cfg, int(s.meta["seed"]), int(s.meta["global_index"]))
+        if not np.allclose(proto.offset_xy_m, np.asarray(s.meta["offset_xy_m"], float), atol=1e-9):
+            raise RuntimeError(f"{data}: episode {s.key} was recorded at {s.meta['offset_xy_m']}, its protocol "
+                               f"re-drawn from the seed puts it at {proto.offset_xy_m}")
+        p = proto.params
         s.meta["inner_kind"], s.meta["site"] = p.get("kind"), p.get("site")
     return seqs
+
+
+def calibration_split(seqs: list[Sequence], valid_share: float = 0.1) -> dict[str, list[Sequence]]:
+    """Calibration episodes -> train / valid: the last max(1, round(valid_share n)) episodes by global index
+    validate (none below 3 episodes), the rest train; no test (the A-E staircases and the mix test are the test
+    set). Under velostat_calibration_sweep the first round (one episode per unit) is then all training data
+    whenever n >= units + the valid share."""
+    order = sorted(seqs, key=lambda s: int(s.meta["global_index"]))
+    nv = max(1, int(round(valid_share * len(order)))) if len(order) >= 3 else 0
+    return {"train": order[:len(order) - nv], "valid": order[len(order) - nv:], "test": []}
 
 
 def unit_of(xy_m: np.ndarray, cfg) -> np.ndarray:
@@ -290,7 +308,7 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
     cfg = cfgs["mix"]
     rate = cfg.sampling.sample_rate_hz
     sp_mix = stratified_split(seqs["mix"], "inner_kind", seed)
-    sp_cal = stratified_split(seqs["cal"], "inner_kind", seed)
+    sp_cal = calibration_split(seqs["cal"])
     tr = sp_mix["train"] + sp_cal["train"]
     va = sp_mix["valid"] + sp_cal["valid"]
     te_mix, te_ae = sp_mix["test"], seqs["ae"]
@@ -603,8 +621,10 @@ DIFFERENCES = """
   0.6 N raw -> 3.3 N compensated; with the paper's band 0.6 N). `Mode.tracker["bounds"]` switches back.
 - **Silhouette sign**: eq. 7 prints a(i) - b(i); we use b(i) - a(i), the definition under which 1 is best.
 - **G_J**: the double sum of eq. 6 is read over pairs i < j, so s*_k is the mean in-cluster distance the text names.
-- **Units**: positions come from the decoded ITO position (4-wire, ~1 mm error), as in the paper's sensor; units
-  with no calibration recording in the training split take the cluster (one-hot: the unit) of the nearest unit that
+- **Units**: positions come from the decoded ITO position (4-wire, ~1 mm error), as in the paper's sensor. The
+  calibration folder sweeps the units (each round of 36 episodes calibrates every unit over 1-15 N, as the paper
+  calibrates all 36; with random units a third of them had no training calibration and B was extrapolated above
+  10 N); units with no calibration recording in the training split (the tiny mode) take the cluster (one-hot: the unit) of the nearest unit that
   has one. Cluster indices are ordered by mean R, so the literal scalar input is at least ordinal. E, the film's
   centre, is the common corner of four units: the decoded unit there depends on ~0.2 mm of decoding error (a
   genuine limit of a per-unit calibration, the paper's too). The elbow is the characterization's
