@@ -25,7 +25,9 @@ from typing import Any, Callable
 import numpy as np
 
 from learn.data import Sequence, dataset_fingerprint, dumps, group_by, load_sequences, stratified_split
-from learn.experiments.common import batch_latency, evaluate, fit_model, fmt, md_table, raw_hysteresis, single_thread
+from learn.experiments.common import (
+    batch_latency, evaluate, fit_model, fmt, md_table, raw_hysteresis, select_mode, single_thread,
+)
 
 KEY = "cnt_pdms"
 INPUTS, TARGETS, DRIVE = ["resistance_measured"], ["force"], "target"
@@ -118,12 +120,7 @@ def run(
     log: Callable[[str], None] = print,
 ) -> dict[str, Any]:
     """Generate (or reuse) the data, train every model, evaluate on the held-out episodes, write the report."""
-    if mode not in MODES:
-        raise ValueError(f"mode must be one of {sorted(MODES)}, got {mode!r}")
-    md = MODES[mode]
-    unknown = [k for k in (models or []) if k not in md.models]
-    if unknown:
-        raise ValueError(f"unknown model(s) {unknown}; known: {sorted(md.models)}")
+    md = select_mode(MODES, mode, models)
     cfg = scene(md, list(overrides or []), seed)  # validate before anything is written
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -16,7 +16,20 @@ from learn.models.base import Compensator
 
 HISTORY_CURVES = ("train_loss", "valid_loss")  # per-epoch curves: "loss_curve", not "training"
 
-__all__ = ["evaluate", "streaming_latency", "batch_latency", "md_table", "fmt", "fit_model", "single_thread"]
+__all__ = ["select_mode", "evaluate", "streaming_latency", "batch_latency", "md_table", "fmt", "fit_model", "single_thread"]
+
+
+def select_mode(modes: dict[str, Any], mode: str, models: Seq[str] | None, known: Seq[str] | None = None) -> Any:
+    """The experiment's Mode for `mode`, after checking that every requested model is one it knows
+    (ValueError naming the allowed values otherwise). known: the mode's model names (default mode.models)."""
+    if mode not in modes:
+        raise ValueError(f"mode must be one of {sorted(modes)}, got {mode!r}")
+    md = modes[mode]
+    names = list(md.models if known is None else known)
+    unknown = [k for k in (models or []) if k not in names]
+    if unknown:
+        raise ValueError(f"unknown model(s) {unknown}; known: {sorted(names)}")
+    return md
 
 
 def evaluate(comp: Compensator, seqs: Seq[Sequence], drive: str | None = None) -> dict[str, Any]:

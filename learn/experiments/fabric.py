@@ -37,7 +37,7 @@ import numpy as np
 
 from learn import metrics as M
 from learn.data import Sequence, dataset_fingerprint, dumps, load_sequences
-from learn.experiments.common import fit_model, fmt, md_table
+from learn.experiments.common import fit_model, fmt, md_table, select_mode
 
 KEY = "fabric"
 LAYERS = (1, 3, 6, 12)
@@ -248,12 +248,7 @@ def run(
 ) -> dict[str, Any]:
     """Per layer count: generate (or reuse) train and test data, fit the target polynomial, train every model,
     evaluate on the test episodes, run the Table 2 sweep; write the report."""
-    if mode not in MODES:
-        raise ValueError(f"mode must be one of {sorted(MODES)}, got {mode!r}")
-    md = MODES[mode]
-    unknown = [k for k in (models or []) if k not in md.models]
-    if unknown:
-        raise ValueError(f"unknown model(s) {unknown}; known: {sorted(md.models)}")
+    md = select_mode(MODES, mode, models)
     cfgs = {n: scenes_for(md, n, list(overrides or []), seed) for n in md.layers}  # validate before writing
     import torch
 

@@ -40,7 +40,7 @@ from typing import Any, Callable
 import numpy as np
 
 from learn.data import dataset_fingerprint, dumps, load_sequences
-from learn.experiments.common import fit_model, fmt, md_table
+from learn.experiments.common import fit_model, fmt, md_table, select_mode
 
 KEY = "ntype"
 INPUTS, TARGETS = ["resistance_measured"], ["force_element"]
@@ -216,12 +216,7 @@ def run(
     log: Callable[[str], None] = print,
 ) -> dict[str, Any]:
     """Generate (or reuse) the data, run the k-fold cross-validation of every model, write the report."""
-    if mode not in MODES:
-        raise ValueError(f"mode must be one of {sorted(MODES)}, got {mode!r}")
-    md = MODES[mode]
-    unknown = [k for k in (models or []) if k not in md.models]
-    if unknown:
-        raise ValueError(f"unknown model(s) {unknown}; known: {sorted(md.models)}")
+    md = select_mode(MODES, mode, models)
     want = set(models or MODELS) | {"mean"}
     cfg = scene(md, list(overrides or []), seed)
     out = Path(out_dir)
