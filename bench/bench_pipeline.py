@@ -30,7 +30,7 @@ def main() -> None:
 
     from scenes import config_json, load_scene
     from sensors.cnt_pdms import CntPdmsSensor
-    from sensors.recording import Channel, write_recording
+    from sensors.recording import write_recording
     from sensors.warp_setup import init_warp
     from simulate.contact import run_episodes
     from simulate.protocols import make_episode_protocol

@@ -245,7 +245,7 @@ def main() -> None:
                 print(f"scaling 1 -> 2 workers, PIPELINE_PARTS={parts}, shard of {b}: efficiency {eff[k]['wall']:.0%} "
                       f"(CPU time per sample 1 worker / 2 workers: {eff[k]['cpu']:.0%})")
     mem = prof["write_shard"]
-    print(f"memory per episode (peak Python/numpy heap of write_shard / episodes): "
+    print("memory per episode (peak Python/numpy heap of write_shard / episodes): "
           + ", ".join(f"PIPELINE_PARTS={k}: {v['peak_heap_MB_per_episode']:.2f} MB" for k, v in mem.items())
           + f"; recorded {prof['raw_bytes_per_episode'] / 1e6:.2f} MB raw, {prof['file_bytes_per_episode'] / 1e6:.2f} MB on disk")
     load = os.getloadavg()

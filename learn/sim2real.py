@@ -14,7 +14,6 @@ writes report.md, metrics.json, learning_curve.png, predictions.png and checkpoi
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 from typing import Any, Callable, Sequence as Seq

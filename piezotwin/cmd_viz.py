@@ -6,7 +6,6 @@ Bad input (missing file, unknown field, episode or time out of range, wrong suff
 
 from __future__ import annotations
 
-import sys
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Iterator, Optional

@@ -368,7 +368,6 @@ class NtypeArrayGeometry(FamilyGeometry):
                 (pv.merge(pads), dict(color="#c8a24a", lighting=True))]  # bottom electrodes
 
     def frame_parts(self, deformation_m, scale, index, field):
-        pv = _pv()
         values = self.view.fields.get(field)
         column_field = values is not None and self.is_column_field(values)
         if column_field:

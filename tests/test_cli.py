@@ -1,6 +1,5 @@
 """The command line: one-line errors with exit code 2 and nothing written; generate -> inspect round trip."""
 
-import numpy as np
 import pytest
 from typer.testing import CliRunner
 

@@ -3,7 +3,6 @@ a killed worker's shard is retried, exhausted retries give a clear error and a r
 
 import importlib.util
 
-import numpy as np
 import pytest
 
 import simulate.run as run

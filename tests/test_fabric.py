@@ -7,7 +7,7 @@ import pytest
 from scenes import ConfigError, load_scene
 from sensors.fabric import FabricSensor, multimeter_numpy
 from sensors.fabric_calib import PAPER_CURVES, loading_branch_x
-from sensors.fabric_ref import FabricState, fabric_chain_numpy, fabric_params, stack_resistance
+from sensors.fabric_ref import fabric_chain_numpy, fabric_params, stack_resistance
 from simulate.protocols import make_episode_protocol, staircase_levels, target_waveform
 
 PRESETS = {n: f"fabric_{n}" for n in (1, 3, 6, 12)}

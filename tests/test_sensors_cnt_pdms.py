@@ -9,7 +9,7 @@ from sensors.analysis import hysteresis_error_fso, loop_area
 from sensors.cnt_pdms import CntPdmsSensor
 from sensors.electronics import ElectronicsState, readout_numpy
 from sensors.params import MODE_DISPLACEMENT, MODE_FORCE, electronics_params, taxel_params
-from sensors.taxel_ref import TaxelState, taxel_chain_numpy
+from sensors.taxel_ref import taxel_chain_numpy
 from sensors.taxel_warp import TaxelChainWarp
 
 FS = 100.0

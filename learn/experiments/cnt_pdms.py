@@ -16,9 +16,7 @@ Modes: "full" = the preset's data and the paper's training budget (<= 200 epochs
 
 from __future__ import annotations
 
-import json
-import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
@@ -26,7 +24,7 @@ import numpy as np
 
 from learn.data import Sequence, dataset_fingerprint, dumps, group_by, load_sequences, stratified_split
 from learn.experiments.common import (
-    batch_latency, evaluate, fit_model, fmt, md_table, raw_hysteresis, select_mode, single_thread,
+    batch_latency, evaluate, fit_model, fmt, make_data, md_table, raw_hysteresis, select_mode, single_thread,
 )
 
 KEY = "cnt_pdms"
@@ -93,18 +91,6 @@ def scene(mode: Mode, overrides: list[str], seed: int):
     from scenes import load_scene
 
     return load_scene("cnt_pdms", [*mode.scene, f"generation.root_seed={seed}", *overrides])
-
-
-def make_data(data_dir: Path, cfg, log: Callable[[str], None]) -> Path:
-    """Generate the dataset into data_dir, or reuse the shards already there (same config)."""
-    from sensors.warp_setup import init_warp
-    from simulate.run import generate
-
-    init_warp()
-    t0 = time.perf_counter()
-    generate(cfg, data_dir)
-    log(f"data: {data_dir} ({cfg.generation.episodes} episodes, {time.perf_counter() - t0:.1f} s incl. reuse)")
-    return data_dir
 
 
 @single_thread

@@ -16,7 +16,21 @@ from learn.models.base import Compensator
 
 HISTORY_CURVES = ("train_loss", "valid_loss")  # per-epoch curves: "loss_curve", not "training"
 
-__all__ = ["select_mode", "evaluate", "streaming_latency", "batch_latency", "md_table", "fmt", "fit_model", "single_thread"]
+__all__ = ["make_data", "select_mode", "evaluate", "streaming_latency", "batch_latency", "md_table", "fmt", "fit_model", "single_thread"]
+
+
+def make_data(data_dir, cfg, log: Callable[[str], None]):
+    """Generate the dataset of `cfg` into data_dir, or reuse the shards already there (same config)."""
+    from pathlib import Path
+
+    from sensors.warp_setup import init_warp
+    from simulate.run import generate
+
+    init_warp()
+    t0 = time.perf_counter()
+    generate(cfg, data_dir)
+    log(f"data: {data_dir} ({cfg.generation.episodes} episodes, {time.perf_counter() - t0:.1f} s incl. reuse)")
+    return Path(data_dir)
 
 
 def select_mode(modes: dict[str, Any], mode: str, models: Seq[str] | None, known: Seq[str] | None = None) -> Any:

@@ -40,7 +40,7 @@ from typing import Any, Callable
 import numpy as np
 
 from learn.data import dataset_fingerprint, dumps, load_sequences
-from learn.experiments.common import fit_model, fmt, md_table, select_mode
+from learn.experiments.common import fit_model, fmt, md_table, make_data, select_mode
 
 KEY = "ntype"
 INPUTS, TARGETS = ["resistance_measured"], ["force_element"]
@@ -101,17 +101,6 @@ def scene(mode: Mode, overrides: list[str], seed: int):
     from scenes import load_scene
 
     return load_scene("ntype", [*mode.scene, f"generation.root_seed={seed}", *overrides])
-
-
-def make_data(data_dir: Path, cfg, log: Callable[[str], None]) -> Path:
-    from sensors.warp_setup import init_warp
-    from simulate.run import generate
-
-    init_warp()
-    t0 = time.perf_counter()
-    generate(cfg, data_dir)
-    log(f"data: {data_dir} ({cfg.generation.episodes} episodes, {time.perf_counter() - t0:.1f} s incl. reuse)")
-    return data_dir
 
 
 # ---------------------------------------------------------------------------------------------- inputs
@@ -278,7 +267,7 @@ def _run(md: Mode, mode: str, out: Path, data: Path, seqs: list, fp: dict, folds
                 keep_pred["rbf_col"] = preds
         if "rbf_win" in want:  # Tables 3/4: shared sliding-window network
             t0 = time.perf_counter()
-            Ytr_rows, Yte_rows = Ytr.reshape(-1, 3), Yte.reshape(-1, 3)
+            Ytr_rows = Ytr.reshape(-1, 3)
             rows = _balanced_rows(Ytr_rows, md.rest_keep, np.random.default_rng(seed + fi))
             for w in md.windows:
                 A = window_inputs(Ntr, w, pad)[rows]
