@@ -2,7 +2,8 @@
 
 Same model, controls and outputs as the C MuJoCo `rollout` path of `simulate.contact.simulate_sensors`,
 which calls `WarpWorlds.run` when generation.physics picks MuJoCo Warp: sensordata (E, T, nsensordata) read
-after every `substeps`-th step, so everything downstream (load field, sensor chain, recording) is shared. Source of the engine: MuJoCo Warp 4.0 (`mujoco_warp`).
+after every `substeps`-th step, so everything downstream (load field, sensor chain, recording) is shared.
+Source of the engine: MuJoCo Warp 4.0 (`mujoco_warp`).
 
 On CUDA one sample period (substeps x [set ctrl, step] + record sensors) is captured once as a CUDA graph
 and replayed; per-step controls come from a device buffer indexed by a device-side step counter, so no
@@ -60,7 +61,8 @@ class WarpWorlds:
         self.mjd = mujoco.MjData(m)
         with wp.ScopedDevice(device):
             self.m = mjw.put_model(m)
-            # one indenter-pad pair: a box-box contact has at most 8 points, 3 rows each (elliptic, condim 3)
+            # one indenter-pad pair: a box-box contact has at most 8 points, 3 rows each (elliptic, condim 3),
+            # plus slack for the actuated joints' rows
             self.d = mjw.put_data(m, self.mjd, nworld=n_worlds, nconmax=8, njmax=8 * 3 + 2 * m.nu)
             self.counter = wp.zeros(2, dtype=wp.int32)
 
