@@ -174,11 +174,23 @@ def test_experiment_velostat_tiny(tmp_path):
 
     assert "velostat" in EXPERIMENTS
     out = tmp_path / "exp"
-    m = get_experiment("velostat").run(out, mode="tiny", models=["raw_bp", "paper_cluster", "literal_unit"], progress=False,
-                                       log=lambda s: None)
+    m = get_experiment("velostat").run(out, mode="tiny", models=["raw_bp", "paper_cluster", "literal_unit", "tcn"],
+                                       progress=False, log=lambda s: None)
     j = json.loads((out / "metrics.json").read_text())
     assert set(j) >= {"creep", "clustering", "bp_search", "models", "paper", "findings", "datasets", "split"}
-    assert set(j["models"]) == {"mean", "raw_bp", "paper_cluster", "literal_unit"}
+    assert set(j["models"]) == {"mean", "raw_bp", "paper_cluster", "literal_unit", "tcn"}
+    # ours: a seed ensemble (tiny: 2 members), each member reported on the same test; it beats the trivial mean
+    T = j["models"]["tcn"]
+    assert T["hparams"]["member"] == "tcn" and T["hparams"]["n_members"] == 2
+    assert [mm["seed"] for mm in T["members"]] == [0, 1]
+    assert T["test"]["rmse"] < j["models"]["mean"]["test"]["rmse"]
+    assert T["test"]["rmse"] <= sum(mm["test"]["rmse"] for mm in T["members"]) / 2 + 1e-9
+    F = j["findings"]
+    assert set(F["ours_vs_every_paper_model"]["rmse"]) == {"raw_bp", "paper_cluster", "literal_unit"}
+    assert isinstance(F["ours_beats_every_paper_model_on_every_metric"], bool)
+    from learn.checkpoint import load_checkpoint
+    ck = load_checkpoint(out / "checkpoints" / "tcn")
+    assert ck.kind == "ensemble" and len(ck.members) == 2
     assert j["bp_search"]["paper_cluster"]["inputs"] == {"r_input": "log", "encoding": "onehot"}
     assert j["bp_search"]["literal_unit"]["inputs"] == {"r_input": "ohm", "encoding": "index"}
     assert {"silhouette", "bounds", "centres", "gj", "r_drift_raw_mean", "r_drift_comp_mean"} <= set(j["creep"])
