@@ -219,12 +219,15 @@ def test_experiment_velostat_quick(tmp_path):
     # the calibration sweep: every unit has a training calibration to 15 N, so B (unit 35) is no extrapolation
     assert len(m["clustering"]["units_with_data"]) == 36
     assert R["paper_unit"]["ae"]["per_site_max_n"]["B"] < 2.0 and R["tcn"]["ae"]["per_site_max_n"]["B"] < 2.0
-    # ours beats the best paper chain (and BP without compensation) on the held-out RMSE and the hold error; the
-    # worst A-E point is not asserted: the TCN's moves 1.1-2.6 N with the training seed alone (README, velostat)
-    for k in ("raw_bp", "paper_unit", "paper_cluster", "literal_unit", "literal_cluster"):
-        assert R["tcn"]["test"]["rmse"] < R[k]["test"]["rmse"], k
+    # ours (a 3-seed TCN ensemble) beats every paper model, BP without compensation included, on the held-out
+    # RMSE, the hold error, the worst A-E point and the share of A-E points under 1 N (one TCN alone missed the
+    # worst A-E point: it moved 1.1-2.6 N with the training seed; README, velostat)
+    assert R["tcn"]["hparams"]["n_members"] == 3 and len(R["tcn"]["members"]) == 3
+    V = m["findings"]["ours_vs_every_paper_model"]
+    for met in ("rmse", "hold_max_err_mean", "ae_max", "ae_below_1n"):
+        assert all(V[met].values()), (met, V[met])
     F = m["findings"]["tcn_beats_best_paper"]
-    assert F["rmse"] and F["hold_max_err"]
+    assert F["rmse"] and F["hold_max_err"] and F["ae_max"]
 
 
 def test_calibration_sweep_covers_every_unit_and_split_keeps_the_first_round():
