@@ -21,6 +21,8 @@ TINY = {
     "gru": {"max_epochs": 15, "patience": 5, "hidden": [8], "window": 20, "train_stride": 3, "lr": 1e-2, "batch_size": 32},
     "lstm": {"max_epochs": 15, "patience": 5, "hidden": [16, 8], "window": 20, "train_stride": 3, "lr": 1e-2, "batch_size": 32},
     "tcn": {"max_epochs": 15, "patience": 5, "channels": 8, "dilations": [1, 2, 4, 8]},
+    "ensemble": {"member": "tcn", "n_members": 2,
+                 "member_hparams": {"max_epochs": 15, "patience": 5, "channels": 8, "dilations": [1, 2, 4, 8]}},
 }
 
 
@@ -96,6 +98,49 @@ def test_checkpoint_round_trip(fitted, kind, tmp_path):
     m2 = load_checkpoint(d)
     np.testing.assert_array_equal(m2.predict(x), m.predict(x))
     np.testing.assert_allclose(m2.stream().run(x[:40]), m.predict(x[:40]), rtol=1e-4, atol=1e-4)
+
+
+def test_ensemble_is_the_mean_of_its_seeded_members(fitted, tmp_path):
+    models, test = fitted
+    ens, tcn, x = models["ensemble"], models["tcn"], test[0].x
+    assert [m.seed for m in ens.members] == [3, 4] and ens.history["member_seeds"] == [3, 4]
+    # member 0 is the plain model fitted with the ensemble's seed; member 1 differs only by its seed
+    np.testing.assert_array_equal(ens.members[0].predict(x), tcn.predict(x))
+    p0, p1 = ens.predict_members(x)
+    assert not np.array_equal(p0, p1)
+    np.testing.assert_array_equal(ens.predict(x), np.mean([p0, p1], axis=0))
+    assert ens.context == tcn.context and ens.temporal
+    # streaming: every member stepped, averaged
+    np.testing.assert_allclose(ens.stream().run(x), np.mean([m.stream().run(x) for m in ens.members], axis=0),
+                               rtol=1e-12, atol=1e-12)
+    # checkpoint: every member's tensors (and norms) under its prefix, nothing pickled
+    d = save_checkpoint(ens, tmp_path / "ens")
+    cfg = json.loads((d / "config.json").read_text())
+    assert cfg["hyper_parameters"]["member"] == "tcn" and cfg["hyper_parameters"]["n_members"] == 2
+    names = set(cfg["tensors"])
+    assert {n.split(".", 1)[0] for n in names} == {"member0", "member1"}
+    assert {f"member{k}.{n}" for k in (0, 1) for n in tcn.state_tensors()} <= names
+    assert "member1.norm.y_std" in names
+    back = load_checkpoint(d)
+    for a, b in zip(back.members, ens.members):
+        np.testing.assert_array_equal(a.predict(x), b.predict(x))
+    assert [m.seed for m in back.members] == [3, 4]
+    # the ensemble beats its trivial baseline and is no worse than its average member
+    assert _rmse(ens, test) < 0.5 * _rmse(models["mean"], test)
+    assert _rmse(ens, test) <= np.mean([_rmse(m, test) for m in ens.members]) + 1e-12
+
+
+def test_ensemble_errors():
+    with pytest.raises(ValueError, match="member must be"):
+        make_model("ensemble", member="nope")
+    with pytest.raises(ValueError, match="member must be"):
+        make_model("ensemble", member="ensemble")
+    with pytest.raises(ValueError, match="n_members"):
+        make_model("ensemble", n_members=0)
+    with pytest.raises(ValueError, match="unknown hyper-parameters"):
+        make_model("ensemble", member_hparams={"chanels": 3})
+    with pytest.raises(RuntimeError, match="not fitted"):
+        make_model("ensemble").predict(np.zeros((5, 1)))
 
 
 def test_training_is_seeded():

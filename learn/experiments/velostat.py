@@ -14,7 +14,8 @@ and our TCN, on the same held-out recordings; the paper's numbers beside ours.
   paper    CreepTracker (delta, K-means + G_J, silhouette, memberships, eq. 2) fitted on the training
            recordings without labels; per-hold compensated R of the calibration episodes -> per-unit R(F)
            curves -> Ward linkage, elbow -> BP (unit + R and cluster + R -> F), hidden nodes 3..12.
-  ours     tcn over (conductance, decoded position, touch) history; mean = trivial baseline.
+  ours     a seed ensemble of TCNs (learn.models.ensemble, members trained with seeds seed..seed+n-1, estimates
+           averaged) over (conductance, decoded position, touch) history; mean = trivial baseline.
   report   report.md, metrics.json, delta_clusters.png, units.png, creep.png, ae_error.png, checkpoints/.
 """
 
@@ -48,7 +49,7 @@ LABELS = {"mean": "Mean (trivial)", "raw_bp": "BP (unit one-hot + ln R), no cree
           "paper_cluster": "Creep comp. + BP (cluster one-hot + ln R)",
           "literal_unit": "Creep comp. + BP, paper's literal inputs (unit index + R ohm)",
           "literal_cluster": "Creep comp. + BP, paper's literal inputs (cluster index + R ohm)",
-          "tcn": "TCN (ours)"}
+          "tcn": "TCN seed ensemble (ours)"}
 MODEL_KEYS = ("mean", "raw_bp", "paper_unit", "paper_cluster", "literal_unit", "literal_cluster", "tcn")
 BP_LITERAL = {"r_input": "ohm", "encoding": "index"}  # eq. 24 on (unit, R): the paper as printed
 BP_OURS = {"r_input": "log", "encoding": "onehot"}  # our default: ln R, ids one-hot (see the report)
@@ -62,7 +63,8 @@ class Mode:
     ae: list[str]
     bp: dict[str, Any]
     hidden: list[int]
-    tcn: dict[str, Any]
+    tcn: dict[str, Any]  # hyper-parameters of each TCN member
+    tcn_members: int  # members of ours (seed ensemble), chosen on the validation recordings
     # the paper's membership band (eqs. 8-9) drives the compensation; our K-means band is fitted and reported
     tracker: dict[str, Any] = field(default_factory=lambda: {"smooth": 5, "lag": 5, "domain": "conductance",
                                                              "bounds": tuple(PAPER["bounds"])})
@@ -86,14 +88,14 @@ TCN_BASE = {"channels": 32, "dilations": [1, 2, 4, 8, 16, 32, 64], "chunk": 128}
 MODES = {
     "full": Mode("full", _gen(144, 24, 150), CAL + _gen(216, 24, 150), AE + _gen(30, 15, 120),
                  {"max_epochs": 500, "patience": 60}, list(range(3, 13)),
-                 {**TCN_BASE, "max_epochs": 200, "patience": 15}),
+                 {**TCN_BASE, "max_epochs": 200, "patience": 15}, 3),
     "quick": Mode("quick", _gen(36, 18, 120), CAL + _gen(40, 20, 100), AE + _gen(10, 10, 110),
                   {"max_epochs": 150, "patience": 25, "batch_size": 64}, list(range(3, 13)),
-                  {**TCN_BASE, "max_epochs": 40, "patience": 8, "max_batches_per_epoch": 40}),
+                  {**TCN_BASE, "max_epochs": 40, "patience": 8, "max_batches_per_epoch": 40}, 3),
     "tiny": Mode("tiny", _gen(4, 4, 40), CAL + _gen(4, 4, 50), AE + _gen(2, 2, 40),
                  {"max_epochs": 30, "patience": 10}, [4],
                  {"channels": 8, "dilations": [1, 2, 4, 8], "chunk": 64, "max_epochs": 4, "patience": 3,
-                  "max_batches_per_epoch": 10}),
+                  "max_batches_per_epoch": 10}, 2),
 }
 
 
@@ -385,14 +387,14 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
 
     comps: dict[str, Any] = {}
     if want("tcn"):
-        tcn = make_model("tcn", **md.tcn)
+        tcn = make_model("ensemble", member="tcn", n_members=md.tcn_members, member_hparams=md.tcn)
         t0 = time.perf_counter()
         tcn.fit([tcn_features(s) for s in tr], [s.y for s in tr], valid=([tcn_features(s) for s in va], [s.y for s in va]),
                 seed=seed, progress=progress, inputs=["conductance_ms", "x_mm", "y_mm", "touch"], targets=TARGETS,
                 units={"conductance_ms": "mS", "x_mm": "mm", "y_mm": "mm", "touch": "1", "force": "N"})
         save_checkpoint(tcn, ckd / "tcn", dataset=fps["mix"], extra={"experiment": KEY, "mode": mode})
         comps["tcn"] = (tcn, time.perf_counter() - t0)
-        log(f"TCN: {comps['tcn'][1]:.0f} s")
+        log(f"TCN ensemble ({md.tcn_members} members): {comps['tcn'][1]:.0f} s")
     mean_f = float(np.mean(np.concatenate([s.y[:, 0] for s in tr])))
 
     def predictor(kind):
@@ -413,9 +415,26 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
              "holds": hold_errors(te, preds[kind], rate), "ae": ae_errors(te_ae, p_ae, rate)}
         r["test"]["n_samples"] = int(len(ref))
         if kind == "tcn":
-            r["fit_seconds"], r["hparams"] = comps["tcn"][1], comps["tcn"][0].hparams
+            ens = comps["tcn"][0]
+            r["fit_seconds"], r["hparams"] = comps["tcn"][1], ens.hparams
+            # each member alone on the same test (reported as the seed spread; nothing is selected on it)
+            r["members"] = []
+            for k, mem in enumerate(ens.members):
+                with torch.inference_mode():
+                    pm = [mem.predict(tcn_features(s))[:, 0] for s in te]
+                r["members"].append({"seed": mem.seed, "fit_seconds": mem.history.get("seconds"),
+                                     "test": M.regression_metrics(ref, np.concatenate(pm)),
+                                     "holds": {k2: v for k2, v in hold_errors(te, pm, rate).items()
+                                               if k2 in ("max_err_mean", "max_err_max", "drift_mean")},
+                                     "ae": {k2: v for k2, v in ae_errors(te_ae, pm[len(te_mix):], rate).items()
+                                            if k2 != "points"}})
         results[kind] = r
         h, a = r["holds"], r["ae"]
+        if kind == "tcn":
+            for mm in r["members"]:
+                log(f"  member seed {mm['seed']}: RMSE {mm['test']['rmse']:.3f} N  hold max err "
+                    f"{mm['holds']['max_err_mean']:.2f} N  A-E max {mm['ae'].get('max_abs_n', float('nan')):.2f} N, "
+                    f"<1 N {100 * mm['ae'].get('frac_below_1n', float('nan')):.0f} %")
         log(f"{kind:13s} RMSE {r['test']['rmse']:.3f} N  hold max err {h['max_err_mean']:.2f} N (drift {h['drift_mean']:.2f})"
             f"  A-E max {a.get('max_abs_n', float('nan')):.2f} N, <1 N {100 * a.get('frac_below_1n', float('nan')):.0f} %")
 
@@ -440,6 +459,19 @@ def md_models(md: Mode) -> list[str]:
     return list(MODEL_KEYS)
 
 
+PAPER_KEYS = ("raw_bp", "paper_unit", "paper_cluster", "literal_unit", "literal_cluster")
+_lower, _higher = (lambda a, b: a < b), (lambda a, b: a > b)
+COMPARED = {  # every column of the report's model table: (value, ours better than theirs)
+    "mae": (lambda r: r["test"]["mae"], _lower), "rmse": (lambda r: r["test"]["rmse"], _lower),
+    "r2": (lambda r: r["test"]["r2"], _higher),
+    "hold_max_err_mean": (lambda r: r["holds"]["max_err_mean"], _lower),
+    "hold_max_err_worst": (lambda r: r["holds"]["max_err_max"], _lower),
+    "hold_drift": (lambda r: r["holds"]["drift_mean"], _lower),
+    "ae_max": (lambda r: r["ae"].get("max_abs_n"), _lower),
+    "ae_below_1n": (lambda r: r["ae"].get("frac_below_1n"), _higher),
+}
+
+
 def findings(R: dict, creep: dict, cl: dict) -> dict[str, Any]:
     out: dict[str, Any] = {}
     if "raw_bp" in R and "paper_unit" in R:
@@ -454,6 +486,14 @@ def findings(R: dict, creep: dict, cl: dict) -> dict[str, Any]:
         out["tcn_beats_best_paper"] = {"rmse": bool(R["tcn"]["test"]["rmse"] < R[best]["test"]["rmse"]),
                                        "hold_max_err": bool(R["tcn"]["holds"]["max_err_mean"] < R[best]["holds"]["max_err_mean"]),
                                        "ae_max": bool(R["tcn"]["ae"].get("max_abs_n", np.inf) < R[best]["ae"].get("max_abs_n", np.inf))}
+    every = [k for k in PAPER_KEYS if k in R]
+    if every and "tcn" in R:
+        cmp = {}
+        for name, (get, better) in COMPARED.items():
+            o = get(R["tcn"])
+            cmp[name] = {k: bool(o is not None and get(R[k]) is not None and better(o, get(R[k]))) for k in every}
+        out["ours_vs_every_paper_model"] = cmp
+        out["ours_beats_every_paper_model_on_every_metric"] = all(all(v.values()) for v in cmp.values())
     out["all_beat_mean"] = {k: bool(R[k]["test"]["rmse"] < R["mean"]["test"]["rmse"]) for k in R if k != "mean"}
     out["clusters"] = cl["k_elbow"]
     return out
@@ -592,8 +632,27 @@ def report(m: dict[str, Any]) -> str:
                  f"and {100 * F['r_drift_removed_frac']:.0f} % of the resistance drift; hold error reduced: "
                  f"**{'yes' if F['creep_comp_reduces_hold_error'] else 'no'}**.")
     if "tcn_beats_best_paper" in F:
-        L.append(f"- TCN (ours) vs the best paper chain ({F['best_paper_model']}): "
+        L.append(f"- {LABELS['tcn']} vs the best paper chain ({F['best_paper_model']}): "
                  + ", ".join(f"{k} {'better' if v else 'not better'}" for k, v in F["tcn_beats_best_paper"].items()) + ".")
+    if "ours_vs_every_paper_model" in F:
+        lost = [f"{met} vs {k}" for met, d in F["ours_vs_every_paper_model"].items() for k, v in d.items() if not v]
+        L.append(f"- Ours beats every paper model (BP with and without creep compensation, all inputs) on every column "
+                 f"of the table above: **{'yes' if F['ours_beats_every_paper_model_on_every_metric'] else 'no'}**"
+                 + (f" (not better: {', '.join(lost)})." if lost else "."))
+    if "tcn" in R and R["tcn"].get("members"):
+        L.append(f"- The ensemble's {len(R['tcn']['members'])} members alone (training seeds "
+                 + ", ".join(str(mm["seed"]) for mm in R["tcn"]["members"]) + "): RMSE "
+                 + " / ".join(f"{mm['test']['rmse']:.2f}" for mm in R["tcn"]["members"]) + " N, worst A-E point "
+                 + " / ".join(f"{mm['ae'].get('max_abs_n', float('nan')):.2f}" for mm in R["tcn"]["members"])
+                 + " N, hold max err " + " / ".join(f"{mm['holds']['max_err_mean']:.2f}" for mm in R["tcn"]["members"])
+                 + " N (the seed spread the ensemble averages out; reported, not selected). Member 0 alone is "
+                 "ours before the ensemble (one TCN, the experiment's seed): before -> after, RMSE "
+                 f"{R['tcn']['members'][0]['test']['rmse']:.2f} -> {R['tcn']['test']['rmse']:.2f} N, worst A-E point "
+                 f"{R['tcn']['members'][0]['ae'].get('max_abs_n', float('nan')):.2f} -> "
+                 f"{R['tcn']['ae'].get('max_abs_n', float('nan')):.2f} N, A-E < 1 N "
+                 f"{100 * R['tcn']['members'][0]['ae'].get('frac_below_1n', float('nan')):.0f} -> "
+                 f"{100 * R['tcn']['ae'].get('frac_below_1n', float('nan')):.0f} %, hold max err "
+                 f"{R['tcn']['members'][0]['holds']['max_err_mean']:.2f} -> {R['tcn']['holds']['max_err_mean']:.2f} N.")
     L.append("- Every model beats the trivial mean (RMSE): " + ", ".join(f"{k} {v}" for k, v in F["all_beat_mean"].items()) + ".")
     L += ["", "![delta](delta_clusters.png)", "", "![units](units.png)", "", "![creep](creep.png)", "",
           "![A-E](ae_error.png)", "", "## Where we differ from the paper, and why", "", DIFFERENCES.strip(), ""]
@@ -644,4 +703,7 @@ DIFFERENCES = """
   row (`raw_bp`) has its own net trained on measured R. Adam, lr 0.01, mini-batches, early stopping on held-out
   recordings; "about 500 iterations" is read as <= 500 epochs (150 in the quick run).
 - **Ours** (TCN) sees 25 s of conductance and decoded position history and learns creep and calibration jointly.
+  It is a seed ensemble (`learn.models.ensemble`): members with the same budget and training seeds seed,
+  seed+1, ..., estimates averaged. One TCN's worst A-E point moved by ~1.5 N with the training seed alone; the
+  member count was chosen on the validation recordings (`MODES`), not on the test set.
 """
