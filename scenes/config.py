@@ -211,6 +211,9 @@ class ElectronicsConfig(Strict):
         return v
 
 
+TAXEL_AMP_GAIN = 50.0  # estimate: cnt_pdms taxel readout, bridge -0.16 V for a held 160 um press -> 8.1 V of 10 V
+
+
 class CntPdmsSensorConfig(Strict):
     family: Literal["cnt_pdms"] = "cnt_pdms"
     mechanics: MechanicsConfig = Field(default_factory=MechanicsConfig)
@@ -220,6 +223,14 @@ class CntPdmsSensorConfig(Strict):
     # "pad": one bridge over the whole pad, all taxel columns in parallel (cnt_pdms sect. 2);
     # "taxel": a tactile array, one bridge + ADC channel per taxel (isolated rows/columns)  # estimate
     readout: Literal["pad", "taxel"] = "pad"
+
+    @model_validator(mode="after")
+    def _taxel_gain(self) -> "CntPdmsSensorConfig":
+        # one taxel under the indenter changes ~5x more (relatively) than the whole pad: the pad's default
+        # gain would clip the ADC, so a taxel readout defaults to ~75 % of the range at F_max  # estimate
+        if self.readout == "taxel" and "amp_gain" not in self.electronics.model_fields_set:
+            self.electronics = self.electronics.model_copy(update={"amp_gain": TAXEL_AMP_GAIN})
+        return self
 
 
 from scenes.fabric_config import FabricSensorConfig  # noqa: E402  (needs Strict above)

@@ -118,3 +118,16 @@ def test_load_field_warp_equals_numpy(shape):
     for x, y, name in zip(a, b, ("deformation", "pressure", "shear")):
         np.testing.assert_allclose(y, x, rtol=1e-9, atol=1e-12 * float(np.abs(x).max()), err_msg=name)
     assert (a[1][0, :5].sum(-1) > 0).all()  # the fallback frames did carry load
+
+
+def test_taxel_readout_gain_keeps_a_full_press_inside_the_adc_range():
+    """A taxel readout gets its own default gain (the pad's would clip); an explicit gain is kept."""
+    from sensors.cnt_pdms import CntPdmsSensor
+
+    cfg = load_scene("cnt_pdms", ["pad.taxels_x=6", "pad.taxels_y=6", "sensor.readout=taxel"])
+    assert load_scene("cnt_pdms", ["sensor.readout=taxel", "sensor.electronics.amp_gain=100"]).sensor.electronics.amp_gain == 100
+    drive = np.zeros((1, 400, 36), np.float32)
+    drive[0, 100:, 14] = 160e-6 / cfg.pad.thickness_m  # the preset's full-scale press, under one taxel
+    adc = CntPdmsSensor(cfg, backend="numpy").run(drive, [0])["adc"][0, :, 14].astype(int)
+    full = 2 ** (cfg.sensor.electronics.adc_bits - 1)
+    assert 0.5 * full < np.abs(adc[-50:]).max() < 0.95 * full  # well resolved, not clipped
