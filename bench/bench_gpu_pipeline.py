@@ -196,6 +196,38 @@ def stages(device: str, batch: int) -> dict:
             "seconds": t, "serial_samples_per_s": samples / total}
 
 
+def writer_vs_episode_length(lengths: list[int], total_samples: int) -> dict:
+    """HDF5 writer alone (no physics): MB/s of the compact 36-taxel record against episode length, and the raw
+    write of the same bytes to the same disk. The per-episode cost (groups, datasets, attributes) is fixed."""
+    from sensors.recording import Channel, RecordingWriter
+
+    rng = np.random.default_rng(0)
+    out = {}
+    with tempfile.TemporaryDirectory(dir=os.environ.get("BENCH_DIR")) as tmp:
+        for T in lengths:
+            ch = {"time": Channel(np.arange(T) / 100.0, "s", ("time",), "sample time"),
+                  "target": Channel(rng.random(T).astype(np.float32), "m", ("time",), "target"),
+                  "position": Channel(rng.random((T, 3)).astype(np.float32), "m", ("time", "xyz"), "position"),
+                  "contact_force": Channel(rng.random((T, 3)).astype(np.float32), "N", ("time", "xyz"), "force"),
+                  "force_taxel": Channel(rng.random((T, 36)).astype(np.float32), "N", ("time", "taxel"), "force"),
+                  "adc": Channel(rng.integers(-8192, 8191, (T, 36)).astype(np.int16), "counts", ("time", "channel"), "adc")}
+            n_ep = max(1, total_samples // T)
+            nbytes = n_ep * sum(c.data.nbytes for c in ch.values())
+            t0 = time.perf_counter()
+            with RecordingWriter(Path(tmp) / f"w{T}.h5", source="sim", config_json="{}", root_seed=0, shard_index=0,
+                                 sensor_attrs={"family": "cnt_pdms"}, compression="none") as w:
+                for j in range(n_ep):
+                    w.add_episode(f"ep-{j:06d}", ch, {"seed": j, "n_samples": T})
+            dt = time.perf_counter() - t0
+            raw = raw_write(Path(tmp), nbytes)
+            out[T] = {"episodes": n_ep, "MB_per_s": nbytes / dt / 1e6, "raw_MB_per_s": raw,
+                      "fraction_of_raw": nbytes / dt / 1e6 / raw, "ms_per_episode": 1e3 * dt / n_ep,
+                      "samples_per_s": n_ep * T / dt}
+            print(f"HDF5 writer, {T:6d}-sample episodes: {nbytes / dt / 1e6:7.0f} MB/s = {out[T]['fraction_of_raw']:.0%} of raw "
+                  f"({raw:.0f} MB/s), {1e3 * dt / n_ep:.2f} ms/episode, {n_ep * T / dt:.3g} samples/s")
+    return out
+
+
 def raw_write(folder: Path, nbytes: int) -> float:
     """MB/s of writing nbytes to a plain file in 64 MiB blocks, fsync at the end."""
     block = np.random.default_rng(0).integers(0, 255, 64 * 2**20, dtype=np.uint8).tobytes()
@@ -268,6 +300,8 @@ def main() -> None:
         res["physics_multi_gpu"] = physics_multi_gpu(int(a.worlds.split(",")[-1]), a.physics_samples)
     if "equivalence" in parts:
         res["equivalence"] = equivalence(a.device)
+    if "writer" in parts:
+        res["writer"] = writer_vs_episode_length([620, 3020, 12000, 60000], 3_000_000)
     if "stages" in parts:
         res["stages"] = stages(a.device, a.stage_batch)
     if "e2e" in parts:
