@@ -184,6 +184,12 @@ def _silhouette_1d(x: np.ndarray, labels: np.ndarray) -> np.ndarray:
         below = x * m - cs[m]
         above = (cs[-1] - cs[m]) - x * (len(v) - m)
         D[:, j] = below + above
+    return _silhouette_from_sums(D, labels, ks)
+
+
+def _silhouette_from_sums(D: np.ndarray, labels: np.ndarray, ks: np.ndarray) -> np.ndarray:
+    """s(i) from D[i, j] = sum of distances from sample i to the members of cluster ks[j]."""
+    n = len(labels)
     cnt = np.array([np.sum(labels == k) for k in ks], float)
     own = np.searchsorted(ks, labels)
     a_den = cnt[own] - 1
@@ -211,15 +217,7 @@ def silhouette_samples(X, labels) -> np.ndarray:
         d = np.linalg.norm(X[i0:i0 + 512, None, :] - X[None], axis=-1)
         for j, k in enumerate(ks):
             D[i0:i0 + 512, j] = d[:, labels == k].sum(1)
-    cnt = np.array([np.sum(labels == k) for k in ks], float)
-    own = np.searchsorted(ks, labels)
-    a_den = cnt[own] - 1
-    a = np.where(a_den > 0, D[np.arange(n), own] / np.maximum(a_den, 1), 0.0)
-    Dm = D / cnt[None]
-    Dm[np.arange(n), own] = np.inf
-    b = Dm.min(axis=1)
-    s = (b - a) / np.maximum(np.maximum(a, b), 1e-300)
-    return np.where(a_den > 0, s, 0.0)
+    return _silhouette_from_sums(D, labels, ks)
 
 
 def silhouette_score(X, labels) -> float:
