@@ -36,6 +36,10 @@ class LoadBatch:
     taxel_xy_m: (N, 2) taxel centres, flat index n = iy * taxels_x + ix.
     taxel_area_m2: area of one taxel cell.
     control: "displacement" | "force".
+
+    On the GPU path (`simulate.contact.iter_load_batches(device_fields=...)`) deformation_m, pressure_pa and
+    shear_pa may instead be Warp arrays on the sensor's device, flat over frames: (E T, N), (E T, N, 2);
+    only a sensor with `device_load = True` is given those; `on_host()` makes the numpy form.
     """
 
     time_s: np.ndarray
@@ -49,6 +53,21 @@ class LoadBatch:
     taxel_xy_m: np.ndarray
     taxel_area_m2: float
     control: str
+
+    @property
+    def fields_on_device(self) -> bool:
+        return not isinstance(self.deformation_m, np.ndarray)
+
+    def on_host(self) -> "LoadBatch":
+        """This batch with the taxel fields as numpy arrays (E, T, N) / (E, T, N, 2) (a no-op on the host)."""
+        if not self.fields_on_device:
+            return self
+        from dataclasses import replace
+
+        E, T = self.target.shape
+        return replace(self, deformation_m=self.deformation_m.numpy().reshape(E, T, -1),
+                       pressure_pa=self.pressure_pa.numpy().reshape(E, T, -1),
+                       shear_pa=self.shear_pa.numpy().reshape(E, T, -1, 2))
 
 
 class SensorModel(Protocol):

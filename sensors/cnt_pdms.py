@@ -36,6 +36,7 @@ class CntPdmsSensor:
 
     family = "cnt_pdms"
     outputs = OUTPUTS
+    device_load = True  # run_load takes taxel fields left on the device (LoadBatch, GPU path)
 
     def __init__(self, cfg: SceneConfig, backend: str = "warp", device: str = "cpu"):
         device = resolve_backend(backend, device)
@@ -55,15 +56,26 @@ class CntPdmsSensor:
         return np.ascontiguousarray(deformation_m / self.cfg.pad.thickness_m, np.float32)
 
     def run_load(self, load: LoadBatch, seeds: list[int]) -> dict[str, np.ndarray]:
+        if load.fields_on_device and self.backend == "warp":
+            from sensors.taxel_warp import drive_on_device
+
+            E, T = load.target.shape
+            if self.mode == MODE_FORCE:
+                drive = drive_on_device(load.pressure_pa, 1.0)
+            else:
+                drive = drive_on_device(load.deformation_m, self.cfg.pad.thickness_m)
+            return self.run(drive, seeds, shape=(E, T, self.n_taxels))
+        load = load.on_host()
         return self.run(self.drive_from_load(load.deformation_m, load.pressure_pa), seeds)
 
     def noise(self, seeds: list[int], n_steps: int) -> np.ndarray:
         e = self.cfg.sensor.electronics
         return el.readout_noise_batch(seeds, n_steps, self.n_channels, e.white_noise_v, e.pink_noise_v)
 
-    def run(self, drive: np.ndarray, seeds: list[int]) -> dict[str, np.ndarray]:
-        """drive [E,T,N] float32 -> dict of outputs (see OUTPUTS; with generation.record, only those), each [E, T, ...]."""
-        E, T, N = drive.shape
+    def run(self, drive, seeds: list[int], shape: tuple[int, int, int] | None = None) -> dict[str, np.ndarray]:
+        """drive [E,T,N] float32 (numpy, or a flat Warp array on this device with shape=(E, T, N)) -> dict of
+        outputs (see OUTPUTS; with generation.record, only those), each [E, T, ...] numpy."""
+        E, T, N = shape or drive.shape
         if N != self.n_taxels:
             raise ValueError(f"drive has {N} taxels; the pad has {self.n_taxels}")
         if len(seeds) != E:
@@ -82,7 +94,7 @@ class CntPdmsSensor:
             from sensors.taxel_warp import TaxelChainWarp
 
             chain = TaxelChainWarp(self.tp, E, N, self.device)
-            d = wp.array(np.ascontiguousarray(drive, np.float32).reshape(-1), dtype=wp.float32, device=self.device)
+            d = drive if isinstance(drive, wp.array) else wp.array(np.ascontiguousarray(drive, np.float32).reshape(-1), dtype=wp.float32, device=self.device)
             s_d, st_d, c_d = chain.run_device(d, T, self.mode)
             g_d, f_d = el.sum_channels_warp(
                 c_d, st_d, self.taxel_channel, self.n_channels, self.tp.taxel_area_m2, (E, T, N), self.device

@@ -186,3 +186,17 @@ class TaxelChainWarp:
         dev = wp.array(np.ascontiguousarray(drive, dtype=np.float32).reshape(-1), dtype=wp.float32, device=self.device)
         outs = self.run_device(dev, T, mode)
         return tuple(o.numpy().reshape(E, T, N) for o in outs)  # type: ignore[return-value]
+
+
+@wp.kernel
+def _divided_f32(field: wp.array2d(dtype=wp.float64), divisor: wp.float64, out: wp.array(dtype=wp.float32)):
+    f, n = wp.tid()
+    out[f * field.shape[1] + n] = wp.float32(field[f, n] / divisor)
+
+
+def drive_on_device(field: wp.array, divisor: float) -> wp.array:
+    """A float64 load field on the device, flat (E T, N) -> the chain's float32 drive [E*T*N] = field / divisor
+    (the rounding of numpy's (field / divisor).astype(float32): strain = deformation / thickness)."""
+    out = wp.empty(field.shape[0] * field.shape[1], dtype=wp.float32, device=field.device)
+    wp.launch(_divided_f32, dim=field.shape, inputs=[field, wp.float64(divisor), out], device=field.device)
+    return out

@@ -16,6 +16,8 @@ The taxel fields are then computed in vectorised numpy:
 
 from __future__ import annotations
 
+from typing import Iterator
+
 import mujoco
 import mujoco.rollout
 import numpy as np
@@ -44,9 +46,12 @@ def build_model(cfg: SceneConfig) -> mujoco.MjModel:
     return mujoco.MjModel.from_xml_string(build_mjcf(cfg))
 
 
-def episode_controls(cfg: SceneConfig, protocols: list[EpisodeProtocol], nstep: int) -> tuple[np.ndarray, np.ndarray]:
+def episode_controls(
+    cfg: SceneConfig, protocols: list[EpisodeProtocol], nstep: int, steps: slice | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """(E, nstep, 3) actuator controls for steps i = 0..nstep-1 (evaluated at t = (i + 1) dt) and the
-    (E, nstep) commanded target at those times.
+    (E, nstep) commanded target at those times; with `steps` (i0:i1), only those rows, equal to the same
+    rows of the whole arrays (so the GPU path can make them chunk by chunk while the worlds step).
 
     Displacement control: the z servo gets ctrl = q* + (kv / kp) dq*/dt with q* = -d (1 + k_pad / kp):
     velocity feed-forward (no servo lag) and static feed-forward of the servo deflection under the
@@ -54,21 +59,29 @@ def episode_controls(cfg: SceneConfig, protocols: list[EpisodeProtocol], nstep: 
     """
     des = contact_design(cfg)
     dt = cfg.sampling.physics_timestep_s
-    t = (np.arange(nstep) + 1.0) * dt
+    i0, i1 = (0, nstep) if steps is None else (steps.start, steps.stop)
+    a, b = max(0, i0 - 1), min(nstep, i1 + 1)  # one step of margin: the same central differences as the whole
+    t = (np.arange(a, b) + 1.0) * dt
     E = len(protocols)
-    ctrl = np.zeros((E, nstep, 3))
-    target = np.zeros((E, nstep))
+    ctrl = np.zeros((E, b - a, 3))
+    target = np.zeros((E, b - a))
     for e, p in enumerate(protocols):
         target[e] = target_waveform(p, cfg, t)
         ctrl[e, :, :2] = xy_waveform(p, cfg, t)
     if cfg.protocol.control == "displacement":
         kp, kv = des.servo_kp_n_per_m, des.servo_kv_n_s_per_m
         q = -target * (1.0 + des.pad_stiffness_n_per_m / kp)
-        dq = np.gradient(q, dt, axis=1) if nstep > 1 else np.zeros_like(q)
+        dq = np.gradient(q, dt, axis=1) if b - a > 1 else np.zeros_like(q)
         ctrl[:, :, 2] = q + (kv / kp) * dq
     else:
         ctrl[:, :, 2] = -target
-    return ctrl, target
+    return ctrl[:, i0 - a : i1 - a], target[:, i0 - a : i1 - a]
+
+
+def sample_targets(cfg: SceneConfig, protocols: list[EpisodeProtocol], n: int) -> np.ndarray:
+    """(E, n) commanded target at the sample times k * substeps * dt (the rows the sensors are read at)."""
+    t = (np.arange(n) * cfg.sampling.substeps).astype(float) * cfg.sampling.physics_timestep_s
+    return np.stack([target_waveform(p, cfg, t) for p in protocols])
 
 
 def _initial_states(m: mujoco.MjModel, cfg: SceneConfig, protocols: list[EpisodeProtocol], ctrl0: np.ndarray):
@@ -127,16 +140,18 @@ def simulate_sensors(
     sub = cfg.sampling.substeps
     nstep = (n - 1) * sub
     m = build_model(cfg)
-    ctrl, tgt_steps = episode_controls(cfg, protocols, nstep)
-    states0, sens0 = _initial_states(m, cfg, protocols, ctrl[:, 0])
     E = len(protocols)
-    rows = np.arange(1, n) * sub - 1
     if engine == "mujoco_warp":
         from simulate.contact_mjw import WarpWorlds
 
+        # controls are made chunk by chunk on a host thread while the worlds step (no (E, nstep, 3) array)
+        states0, sens0 = _initial_states(m, cfg, protocols, episode_controls(cfg, protocols, nstep, slice(0, 1))[0][:, 0])
         qpos0 = states0[:, 1 : 1 + m.nq]  # full-physics state = (time, qpos, qvel, ...)
-        out = WarpWorlds(m, E, device).run(qpos0, ctrl, sens0, sub, n)
+        out = WarpWorlds(m, E, device).run(qpos0, lambda sl: episode_controls(cfg, protocols, nstep, sl)[0], sens0, sub, n)
     else:
+        ctrl, _ = episode_controls(cfg, protocols, nstep)
+        states0, sens0 = _initial_states(m, cfg, protocols, ctrl[:, 0])
+        rows = np.arange(1, n) * sub - 1
         out = np.zeros((E, n, m.nsensordata))
         out[:, 0] = sens0
         datas = [mujoco.MjData(m) for _ in range(max(1, threads))]
@@ -146,10 +161,7 @@ def simulate_sensors(
             b = min(E, a + chunk)
             _, sd = mujoco.rollout.rollout(m, data_arg, states0[a:b], ctrl[a:b], nstep=nstep)
             out[a:b, 1:] = sd[:, rows]
-    target = np.zeros((E, n))
-    target[:, 1:] = tgt_steps[:, rows]
-    target[:, 0] = [target_waveform(p, cfg, np.zeros(1))[0] for p in protocols]
-    return out, target
+    return out, sample_targets(cfg, protocols, n)
 
 
 def load_field(cfg: SceneConfig, pos_rel_m: np.ndarray, force_n: np.ndarray):
@@ -206,12 +218,38 @@ CONTACT_STAGES: dict[str, str] = {
 
 def run_episodes(cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1) -> LoadBatch:
     """Simulate E episodes (same n_samples) in one batched rollout and return their load fields."""
+    return next(iter_load_batches(cfg, protocols, threads))[1]
+
+
+def iter_load_batches(
+    cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1, slice_episodes: int | None = None,
+    device_fields: str | None = None,
+) -> Iterator[tuple[slice, LoadBatch]]:
+    """Simulate E episodes (same n_samples) in one batch of worlds, then yield their load fields in slices
+    of at most `slice_episodes` episodes (default all): (slice of protocols, LoadBatch).
+
+    The physics wants many worlds at once; the load field and the sensor chain after it need device memory
+    per episode, so they go slice by slice. device_fields: on the MuJoCo Warp path, leave deformation,
+    pressure and shear as Warp arrays on this device (see LoadBatch) for a sensor chain that runs there.
+    """
     if cfg.protocol.kind in CONTACT_STAGES:
         import importlib
 
         module, fn = CONTACT_STAGES[cfg.protocol.kind].split(":")
-        return getattr(importlib.import_module(module), fn)(cfg, protocols, threads)
+        yield slice(0, len(protocols)), getattr(importlib.import_module(module), fn)(cfg, protocols, threads)
+        return
     sens, target = simulate_sensors(cfg, protocols, threads)
+    E = len(protocols)
+    step = E if slice_episodes is None else max(1, slice_episodes)
+    for a in range(0, E, step):
+        sl = slice(a, min(E, a + step))
+        yield sl, load_batch(cfg, sens[sl], target[sl], device_fields)
+
+
+def load_batch(cfg: SceneConfig, sens: np.ndarray, target: np.ndarray, device_fields: str | None = None) -> LoadBatch:
+    """LoadBatch of episodes from their sensordata (E, T, nsensordata) and target (E, T): pose and net force
+    from the MJCF sensors, the taxel fields by `load_field` (numpy) or, on the MuJoCo Warp path, by Warp
+    kernels on the physics device (kept there as flat Warp arrays when device_fields names that device)."""
     top = cfg.pad.thickness_m
     q = sens[..., _POS]
     pos_world = q + np.array([0.0, 0.0, top])
@@ -221,7 +259,7 @@ def run_episodes(cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: in
     if engine == "mujoco_warp":  # the GPU path: the numpy field would be the host's largest cost
         from simulate.load_field_warp import load_field_warp
 
-        deform, pressure, shear = load_field_warp(cfg, q, force, device)
+        deform, pressure, shear = load_field_warp(cfg, q, force, device, to_host=device_fields != device)
     else:
         deform, pressure, shear = load_field(cfg, q, force)
     n = sens.shape[1]

@@ -77,18 +77,33 @@ class WarpWorlds:
         wp.launch(_record, dim=(E, ns), inputs=[self.d.sensordata, self.counter, out])
         wp.launch(_advance, dim=1, inputs=[self.counter, 1])
 
-    def run(self, qpos0: np.ndarray, ctrl: np.ndarray, sens0: np.ndarray, substeps: int, n_samples: int) -> np.ndarray:
-        """Reset the worlds to qpos0 (E, nq) at rest and replay ctrl; sensors at samples 1..n-1 after
-        each substeps-th step (sample 0 = sens0, computed by the caller with mj_forward)."""
+    def run(self, qpos0: np.ndarray, ctrl, sens0: np.ndarray, substeps: int, n_samples: int) -> np.ndarray:
+        """Reset the worlds to qpos0 (E, nq) at rest and replay the controls; sensors at samples 1..n-1 after
+        each substeps-th step (sample 0 = sens0, computed by the caller with mj_forward).
+
+        ctrl: (E, nstep, nu) array, or a function of a slice of steps returning those rows; a function is
+        called for the next chunk on a host thread while the device runs the current one.
+        """
         import mujoco_warp as mjw
+        from concurrent.futures import ThreadPoolExecutor
 
         E, nu, ns = self.E, self.mjm.nu, self.mjm.nsensordata
+        ctrl_rows = ctrl if callable(ctrl) else (lambda sl: ctrl[:, sl])
         out = np.zeros((E, n_samples, ns))
         out[:, 0] = sens0
         per_sample = E * (substeps * nu + ns) * 4
         chunk = int(max(1, min(n_samples - 1, CHUNK_BYTES // per_sample)))
+        starts = list(range(1, n_samples, chunk))
+
+        def host_chunk(a: int) -> np.ndarray:  # controls of samples a .. a + chunk - 1, zero-padded, float32
+            k = min(chunk, n_samples - a)
+            host = np.zeros((E, chunk * substeps, nu), np.float32)
+            host[:, : k * substeps] = ctrl_rows(slice((a - 1) * substeps, (a - 1 + k) * substeps))
+            return host
+
         cuda = wp.get_device(self.device).is_cuda
-        with wp.ScopedDevice(self.device):
+        with wp.ScopedDevice(self.device), ThreadPoolExecutor(1, thread_name_prefix="controls") as pool:
+            nxt = pool.submit(host_chunk, starts[0])
             seq = wp.zeros((E, chunk * substeps, nu), dtype=wp.float32)
             rec = wp.zeros((E, chunk, ns), dtype=wp.float32)
             if cuda:  # load (compile) every kernel before a graph capture
@@ -97,11 +112,11 @@ class WarpWorlds:
             mjw.reset_data(self.m, self.d)
             self.d.qpos.assign(np.ascontiguousarray(qpos0, np.float32))
             graph = None
-            for a in range(1, n_samples, chunk):
+            for i, a in enumerate(starts):
                 k = min(chunk, n_samples - a)
-                host = np.zeros((E, chunk * substeps, nu), np.float32)
-                host[:, : k * substeps] = ctrl[:, (a - 1) * substeps : (a - 1 + k) * substeps]
-                seq.assign(host)
+                seq.assign(nxt.result())
+                if i + 1 < len(starts):
+                    nxt = pool.submit(host_chunk, starts[i + 1])
                 self.counter.zero_()
                 if cuda:
                     if graph is None:  # captured once (recorded, not run): its buffers are refilled in place
@@ -115,4 +130,3 @@ class WarpWorlds:
                         self._step_sample(seq, rec, substeps)
                 out[:, a : a + k] = rec.numpy()[:, :k]
         return out
-

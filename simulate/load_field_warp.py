@@ -113,9 +113,10 @@ def _distribute(deform: wp.array2d(dtype=wp.float64), pos: wp.array2d(dtype=wp.f
         shear[f, n, 1] = share * force[f, 1]
 
 
-def load_field_warp(cfg: SceneConfig, pos_rel_m: np.ndarray, force_n: np.ndarray, device: str):
+def load_field_warp(cfg: SceneConfig, pos_rel_m: np.ndarray, force_n: np.ndarray, device: str, to_host: bool = True):
     """Same contract as simulate.contact.load_field (shapes (E, T, 3) in; deformation_m, pressure_pa
-    (E, T, N) and shear_pa (E, T, N, 2) out, float64), computed by Warp kernels on `device`."""
+    (E, T, N) and shear_pa (E, T, N, 2) out, float64), computed by Warp kernels on `device`.
+    to_host=False: the outputs stay on the device as Warp arrays, flat over frames: (E T, N), (E T, N, 2)."""
     pad, ind = cfg.pad, cfg.indenter
     E, T, _ = pos_rel_m.shape
     F, nx, ny = E * T, pad.taxels_x, pad.taxels_y
@@ -144,4 +145,6 @@ def load_field_warp(cfg: SceneConfig, pos_rel_m: np.ndarray, force_n: np.ndarray
         pressure, shear = wp.empty((F, N), dtype=f64), wp.empty((F, N, 2), dtype=f64)
         wp.launch(_distribute, dim=F, inputs=[deform, pos, force, arr(taxel_xy_m(cfg)), f64(taxel_area_m2(cfg)),
                                               f64(pad.spread_length_m), pressure, shear])
+        if not to_host:
+            return deform, pressure, shear
         return deform.numpy().reshape(E, T, N), pressure.numpy().reshape(E, T, N), shear.numpy().reshape(E, T, N, 2)

@@ -131,3 +131,30 @@ def test_taxel_readout_gain_keeps_a_full_press_inside_the_adc_range():
     adc = CntPdmsSensor(cfg, backend="numpy").run(drive, [0])["adc"][0, :, 14].astype(int)
     full = 2 ** (cfg.sensor.electronics.adc_bits - 1)
     assert 0.5 * full < np.abs(adc[-50:]).max() < 0.95 * full  # well resolved, not clipped
+
+
+@needs_mjw
+@pytest.mark.gpu
+def test_gpu_generation_keeps_fields_on_device_and_slices_the_sensor_stage(gpu_device, monkeypatch):
+    """The GPU path (taxel fields left on the device for cnt_pdms, sensor stage in slices after one physics
+    batch) records the same channels as the same worlds with the fields copied to the host in one pass."""
+    from sensors.registry import make_sensor
+    from simulate import contact, run
+
+    dev = "cpu" if gpu_device == "cpu" else "cuda"
+    rec = "generation.record=[target,position,contact_force,force_taxel,adc]"
+    cfg = load_scene("cnt_pdms", SHORT + ["sensor.readout=taxel", "generation.physics=mujoco_warp", f"generation.device={dev}", rec])
+    sensor = make_sensor(cfg, "warp", physics_engine(cfg)[1])
+    seeds, ids = list(range(10, 17)), [f"ep-{k}" for k in range(7)]
+    physics, real = [], contact.simulate_sensors  # one physics run for both (GPU atomics need not repeat bit for bit)
+    monkeypatch.setattr(contact, "simulate_sensors", lambda *a: physics[0] if physics else physics.append(real(*a)) or physics[0])
+    monkeypatch.setattr(run, "SENSOR_SLICE", 3)
+    sliced = run.simulate_episodes(cfg, seeds, ids, sensor)
+    monkeypatch.setattr(run, "SENSOR_SLICE", 1000)
+    monkeypatch.setattr(type(sensor), "device_load", False)
+    whole = run.simulate_episodes(cfg, seeds, ids, sensor)
+    assert max(float(np.abs(r.channels["force_taxel"].data).max()) for r in whole) > 0.1  # they press
+    for a, b in zip(sliced, whole):
+        assert a.channels.keys() == b.channels.keys()
+        for k in a.channels:
+            np.testing.assert_array_equal(a.channels[k].data, b.channels[k].data, err_msg=f"{a.ep_id} {k}")

@@ -161,3 +161,68 @@ def test_load_field_distributes_tangential_force():
     np.testing.assert_allclose((shear[0, 0] * area).sum(0), [0.5, -0.25], rtol=1e-9)
     np.testing.assert_allclose(shear[0, 0, :, 0] / 0.5, pressure[0, 0] / 3.0, rtol=1e-9)
     assert np.all(deform[0, 1] == 0) and np.all(pressure[0, 1] == 0) and np.all(shear[0, 1] == 0)
+
+
+def test_controls_made_in_chunks_equal_the_whole():
+    """The GPU path makes controls chunk by chunk while the worlds step: every chunk equals those rows of the
+    whole arrays (incl. the velocity feed-forward's differences at chunk borders and at both ends)."""
+    from simulate.contact import episode_controls, sample_targets
+
+    cfg = load_scene("cnt_pdms", FAST)
+    protos = [make_episode_protocol(cfg, s) for s in range(3)]
+    n = protos[0].n_samples
+    nstep = (n - 1) * cfg.sampling.substeps
+    ctrl, tgt = episode_controls(cfg, protos, nstep)
+    for a, b in [(0, 1), (0, 37), (37, 401), (401, nstep), (nstep - 1, nstep)]:
+        c, t = episode_controls(cfg, protos, nstep, slice(a, b))
+        np.testing.assert_array_equal(c, ctrl[:, a:b])
+        np.testing.assert_array_equal(t, tgt[:, a:b])
+    # the target at the sample times is the step target of the step the sensors are read after
+    rows = np.arange(1, n) * cfg.sampling.substeps - 1
+    np.testing.assert_array_equal(sample_targets(cfg, protos, n)[:, 1:], tgt[:, rows])
+
+
+def test_load_batches_in_slices_equal_one_batch(disp):
+    """The sensor stage goes slice by slice after one physics batch: each slice equals those episodes."""
+    from simulate.contact import iter_load_batches
+
+    cfg, protos, whole = disp
+    parts = list(iter_load_batches(cfg, protos, slice_episodes=3))
+    assert [sl for sl, _ in parts] == [slice(0, 3), slice(3, 4)]
+    for sl, b in parts:
+        for name in ("target", "indenter_pos_m", "contact_force_n", "deformation_m", "pressure_pa", "shear_pa"):
+            np.testing.assert_array_equal(getattr(b, name), getattr(whole, name)[sl], err_msg=name)
+
+
+def test_sensor_chain_on_device_fields_equals_host_fields():
+    """cnt_pdms takes taxel fields left on the Warp device (GPU path) and gives the same outputs as from numpy."""
+    import dataclasses as dc
+
+    from sensors.cnt_pdms import CntPdmsSensor
+    from sensors.warp_setup import init_warp
+    from simulate.load_field_warp import load_field_warp
+
+    init_warp()
+    for control in ("displacement", "force"):
+        cfg = load_scene("cnt_pdms", FAST + ["pad.taxels_x=4", "pad.taxels_y=3", "sensor.readout=taxel",
+                                             f"protocol.control={control}"])
+        rng = np.random.default_rng(1)
+        E, T = 3, 60
+        pos = np.stack([rng.uniform(-0.01, 0.01, (E, T)), rng.uniform(-0.01, 0.01, (E, T)), rng.uniform(-2e-4, 1e-5, (E, T))], -1)
+        force = np.stack([rng.normal(0, 0.1, (E, T)), rng.normal(0, 0.1, (E, T)), rng.uniform(0, 4, (E, T))], -1)
+        host = load_field_warp(cfg, pos, force, "cpu")
+        dev = load_field_warp(cfg, pos, force, "cpu", to_host=False)
+        base = dict(time_s=np.arange(T) / 100.0, target=np.zeros((E, T)), indenter_pos_m=pos, contact_force_n=force,
+                    contact_points=np.zeros((E, T), np.int64), taxel_xy_m=np.zeros((12, 2)), taxel_area_m2=1e-5, control=control)
+        from sensors.base import LoadBatch
+
+        b_host = LoadBatch(deformation_m=host[0], pressure_pa=host[1], shear_pa=host[2], **base)
+        b_dev = LoadBatch(deformation_m=dev[0], pressure_pa=dev[1], shear_pa=dev[2], **base)
+        assert b_dev.fields_on_device and not b_host.fields_on_device
+        for name in ("deformation_m", "pressure_pa", "shear_pa"):
+            np.testing.assert_array_equal(getattr(b_dev.on_host(), name), getattr(b_host, name))
+        s = CntPdmsSensor(cfg, backend="warp", device="cpu")
+        a, b = s.run_load(b_host, [5, 6, 7]), s.run_load(b_dev, [5, 6, 7])
+        assert a.keys() == b.keys() and a["adc"].std() > 0
+        for k in a:
+            np.testing.assert_array_equal(b[k], a[k], err_msg=f"{control} {k}")
