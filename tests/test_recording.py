@@ -161,14 +161,14 @@ def test_killed_process_leaves_only_tmp(tmp_path):
         f"""
         import os, numpy as np
         from sensors import recording as rc
-        real = rc._write_channel
+        real = rc.RecordingWriter.add_episode
         n = [0]
         def die(*a, **k):
             n[0] += 1
-            if n[0] == 3:
+            if n[0] == 3:  # two episodes in the file
                 os._exit(9)
             return real(*a, **k)
-        rc._write_channel = die
+        rc.RecordingWriter.add_episode = die
         eps = {{"e%d" % i: {{"x": rc.Channel(np.ones((100, 4)), "V", ("time", "c"))}} for i in range(3)}}
         rc.write_recording({str(mf.shard_path(tmp_path, 1))!r}, eps, source="sim", config_json={CONFIG!r},
                            root_seed=1, shard_index=1, sensor_attrs={{}})
