@@ -69,6 +69,7 @@ class CntPdmsSensor:
         return self.run(self.drive_from_load(load.deformation_m, load.pressure_pa), seeds)
 
     def noise(self, seeds: list[int], n_steps: int) -> np.ndarray:
+        """Readout noise [E, T, C] (V): the numpy mirror of what the warp backend draws in its readout kernel."""
         e = self.cfg.sensor.electronics
         return el.readout_noise_batch(seeds, n_steps, self.n_channels, e.white_noise_v, e.pink_noise_v)
 
@@ -80,14 +81,13 @@ class CntPdmsSensor:
             raise ValueError(f"drive has {N} taxels; the pad has {self.n_taxels}")
         if len(seeds) != E:
             raise ValueError(f"need one seed per episode ({E}); got {len(seeds)}")
-        noise = self.noise(seeds, T)
         want = set(self.cfg.generation.record or OUTPUTS)  # outputs to return (and copy off the device)
         ro_names = {"resistance": "resistance", "bridge_v": "bridge_v", "adc": "adc", "voltage": "filtered_v",
                     "resistance_measured": "resistance_measured"}
         if self.backend == "numpy":
             strain, stress, cond, _ = taxel_chain_numpy(drive, self.mode, self.tp, TaxelState.zeros(E * N, self.tp))
             g, force = el.sum_channels_numpy(cond, stress, self.taxel_channel, self.n_channels, self.tp.taxel_area_m2)
-            ro, _ = el.readout_numpy(g, noise, self.ep)
+            ro, _ = el.readout_numpy(g, self.noise(seeds, T), self.ep)
         else:
             import warp as wp
 
@@ -100,6 +100,8 @@ class CntPdmsSensor:
                 c_d, st_d, self.taxel_channel, self.n_channels, self.tp.taxel_area_m2, (E, T, N), self.device
             )
             keep_ro = {ro_names[k] for k in want if k in ro_names}
+            e = self.cfg.sensor.electronics
+            noise = el.NoiseSeeds(seeds, e.white_noise_v, e.pink_noise_v)  # drawn in the readout kernel
             ro, _ = el.readout_warp(g_d, (E, T, self.n_channels), noise, self.ep, None, self.device, keep=keep_ro)
             force = f_d.numpy().reshape(E, T) if "force" in want else None
             strain = s_d.numpy().reshape(E, T, N) if "strain" in want else None

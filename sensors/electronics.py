@@ -3,6 +3,8 @@
 Source: cnt_pdms sect. 2.2 (bridge + in-amp, 14-bit NI USB-6009 at 100 Hz, 4th-order 10 Hz Butterworth);
 bridge in exact form V = V_ex (R_s / (R_s + R_b) - 1/2) (Horowitz & Hill, The Art of Electronics, 3rd ed.).
 Numpy reference and Warp kernels side by side; the electronics run in float64 on both so ADC codes agree.
+Readout noise (white + 1/f) is drawn per step inside the readout kernel from the episode seeds, by a
+counter-based RNG that its numpy mirror `readout_noise_batch` reproduces (construction below).
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import warp as wp
+from scipy.signal import lfilter
 
 from sensors.params import ElectronicsParams
 
@@ -21,57 +24,130 @@ vec_zi = wp.types.vector(length=2 * MAX_SECTIONS, dtype=wp.float64)
 
 @dataclass
 class ElectronicsState:
-    """Filter state per (episode, channel): [B, 2*MAX_SECTIONS] float64, and whether it was primed."""
+    """Per (episode, channel): Butterworth state [B, 2*MAX_SECTIONS] and pink-filter state [B, PINK_STATES]
+    (float64), and whether the first sample was seen (filter primed at it, pink state drawn) [B] int32."""
 
     filt: np.ndarray
-    primed: np.ndarray  # [B] int32
+    primed: np.ndarray
+    pink: np.ndarray
 
     @classmethod
     def zeros(cls, n: int) -> "ElectronicsState":
-        return cls(np.zeros((n, 2 * MAX_SECTIONS)), np.zeros(n, np.int32))
+        return cls(np.zeros((n, 2 * MAX_SECTIONS)), np.zeros(n, np.int32), np.zeros((n, PINK_STATES)))
 
 
-def pink_noise(rng: np.random.Generator, shape: tuple[int, ...], rms: float) -> np.ndarray:
-    """1/f (pink) noise along the last axis by spectral shaping of white noise, scaled to `rms` (float64)."""
-    n = shape[-1]
-    if rms == 0.0 or n < 2:
-        return np.zeros(shape)
-    spec = np.fft.rfft(rng.standard_normal(shape), axis=-1)
-    f = np.arange(spec.shape[-1], dtype=float)
-    f[0] = 1.0
-    spec /= np.sqrt(f)
-    spec[..., 0] = 0.0
-    x = np.fft.irfft(spec, n=n, axis=-1)
-    x /= max(float(x.std()), 1e-30)
-    return x * rms
+@dataclass(frozen=True)
+class NoiseSeeds:
+    """Readout noise drawn inside the readout kernel from the episodes' seeds (uint64 as Python ints, one per
+    episode) instead of an uploaded [E,T,C] array; the same values as `readout_noise_batch(seeds, ...)`."""
+
+    seeds: list[int]
+    white_v: float  # rms of the white component (V)
+    pink_v: float  # rms of the 1/f component (V)
 
 
-def readout_noise_v(seed: int, n_steps: int, n_channels: int, white_v: float, pink_v: float) -> np.ndarray:
-    """Noise at the ADC input for one episode, [T, C] float64, from the episode's own seed (stream 1)."""
-    rng = np.random.default_rng([seed, 1])
-    white = rng.standard_normal((n_channels, n_steps)) * white_v
-    return (white + pink_noise(rng, (n_channels, n_steps), pink_v)).T
+# ----------------------------------------------------------------------------------------- readout noise
+#
+# Counter-based normals, computed the same way in numpy and in the Warp kernel (uint64 wraps modulo 2^64):
+#   mix(z)           splitmix64 finalizer: z ^= z >> 30; z *= M1; z ^= z >> 27; z *= M2; z ^= z >> 31
+#   key(seed, c, j)  mix(seed ^ mix(N_STREAMS * c + j + 1)), channel c, stream j (white, pink drive, pink init)
+#   u(key, n)        ((mix(key + GAMMA * (n + 1)) >> 11) + 1) * 2^-53 in (0, 1]: the top 53 bits of output n
+#                    of SplitMix64 seeded with key (Steele, Lea & Flood, OOPSLA 2014)
+#   z(key, k)        sqrt(-2 ln u(key, 2k)) * cos(2 pi u(key, 2k + 1)), Box-Muller in float64
+# Step k (absolute, from the episode's start) uses normal k of the white and of the pink-drive stream; the
+# pink filter's initial state uses normals 0..6 of the init stream.
+
+MIX_M1, MIX_M2, GAMMA = 0xBF58476D1CE4E5B9, 0x94D049BB133111EB, 0x9E3779B97F4A7C15
+N_STREAMS = 3
+STREAM_WHITE, STREAM_PINK, STREAM_INIT = 0, 1, 2
+UNIT_53, TWO_PI = 2.0**-53, 2.0 * np.pi
+
+# Pink (1/f) noise: Kellet's refined filter, a bank of first-order sections driven by one white input
+# (music-dsp 1999; sums of first-order filters as 1/f approximations: Kasdin, Proc. IEEE 83(5), 1995),
+# +-0.05 dB of 1/f over ~9 octaves above fs/4800. Per step: b_i = A_i b_i + C_i w (i < 6);
+# pink = b_0 + ... + b_5 + b_6 + E w; then b_6 = D w.
+PINK_A = np.array([0.99886, 0.99332, 0.96900, 0.86650, 0.55000, -0.7616])
+PINK_C = np.array([0.0555179, 0.0750759, 0.1538520, 0.3104856, 0.5329522, -0.0168980])
+PINK_D, PINK_E = 0.115926, 0.5362
+PINK_STATES = 7  # b_0 .. b_6
+
+
+def _pink_stationary() -> tuple[np.ndarray, float]:
+    """Stationary covariance of the state (b_0..b_6) under unit white input -> (its Cholesky factor, std of pink)."""
+    p = np.empty((PINK_STATES, PINK_STATES))
+    p[:6, :6] = np.outer(PINK_C, PINK_C) / (1.0 - np.outer(PINK_A, PINK_A))
+    p[:6, 6] = p[6, :6] = PINK_C * PINK_D
+    p[6, 6] = PINK_D**2
+    g = np.append(PINK_A, 1.0)  # pink = g . (state before the step) + (sum C + E) w
+    return np.linalg.cholesky(p), float(np.sqrt(g @ p @ g + (PINK_C.sum() + PINK_E) ** 2))
+
+
+PINK_CHOL, PINK_STD = _pink_stationary()
+
+
+def _mix(z: np.ndarray) -> np.ndarray:
+    """splitmix64 finalizer, in place on a uint64 array (wraps modulo 2^64)."""
+    z ^= z >> np.uint64(30)
+    z *= np.uint64(MIX_M1)
+    z ^= z >> np.uint64(27)
+    z *= np.uint64(MIX_M2)
+    z ^= z >> np.uint64(31)
+    return z
+
+
+def _uniform(key: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """u(key, n) for keys [R, 1] and counters n [K] (uint64) -> [R, K] float64 in (0, 1]."""
+    h = _mix(key + np.uint64(GAMMA) * (n + np.uint64(1)))
+    h >>= np.uint64(11)
+    h += np.uint64(1)
+    return h * UNIT_53
+
+
+def _normals(key: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """z(key, k) for keys [R, 1] and steps k [K] (uint64) -> [R, K] float64."""
+    r = np.log(_uniform(key, np.uint64(2) * k))
+    r *= -2.0
+    np.sqrt(r, out=r)
+    c = _uniform(key, np.uint64(2) * k + np.uint64(1))
+    c *= TWO_PI
+    np.cos(c, out=c)
+    r *= c
+    return r
 
 
 def readout_noise_batch(seeds: list[int], n_steps: int, n_channels: int, white_v: float, pink_v: float) -> np.ndarray:
-    """[E, T, C] float64: `readout_noise_v` of every episode (same values), drawn on a thread pool for large
-    batches (numpy's generators and FFT release the GIL; each episode has its own generator)."""
-    import os
-    from concurrent.futures import ThreadPoolExecutor
+    """Noise at the ADC input, [E, T, C] float64: white + 1/f per (episode, channel) from the episode's seed.
+    The numpy mirror of what `readout_warp` adds with `NoiseSeeds` (construction above): the pink filter starts
+    in its stationary state (PINK_CHOL times 7 normals of the init stream) and is scaled by pink_v / PINK_STD.
+    Runs in blocks of (episode, channel) rows small enough to stay in cache."""
+    seed = np.repeat(np.asarray(seeds, dtype=np.uint64), n_channels)[:, None]  # one row per (episode, channel)
+    chan = np.tile(np.arange(n_channels, dtype=np.uint64), len(seeds))[:, None]
+    steps = np.arange(n_steps, dtype=np.uint64)
+    out = np.empty((len(seed), n_steps))
+    rows = max(1, 32768 // max(n_steps, 1))
+    with np.errstate(over="ignore"):
+        keys = [_mix(seed ^ _mix(np.uint64(N_STREAMS) * chan + np.uint64(j + 1))) for j in range(N_STREAMS)]
+        for r0 in range(0, len(seed), rows):
+            kw, kp, ki = (k[r0 : r0 + rows] for k in keys)
+            w = _normals(kp, steps)  # pink drive [R, T]
+            z = _normals(ki, np.arange(PINK_STATES, dtype=np.uint64))
+            b = sum(z[:, j, None] * PINK_CHOL[:, j] for j in range(PINK_STATES))  # initial state [R, 7], L z
+            pink = lfilter([PINK_C[0]], [1.0, -PINK_A[0]], w, zi=PINK_A[0] * b[:, :1])[0]
+            for i in range(1, 6):  # y[k] = A y[k-1] + C w[k] per section, summed in the kernel's order
+                pink += lfilter([PINK_C[i]], [1.0, -PINK_A[i]], w, zi=PINK_A[i] * b[:, i : i + 1])[0]
+            pink[:, 0] += b[:, 6]
+            pink[:, 1:] += w[:, :-1] * PINK_D
+            pink += w * PINK_E
+            pink *= pink_v / PINK_STD
+            white = _normals(kw, steps)
+            white *= white_v
+            np.add(white, pink, out=out[r0 : r0 + rows])
+    return np.ascontiguousarray(out.reshape(len(seeds), n_channels, n_steps).transpose(0, 2, 1))
 
-    out = np.empty((len(seeds), n_steps, n_channels))
 
-    def fill(i: int) -> None:
-        out[i] = readout_noise_v(seeds[i], n_steps, n_channels, white_v, pink_v)
-
-    workers = min(8, os.cpu_count() or 1)
-    if len(seeds) * n_steps * n_channels < 2_000_000 or workers == 1:
-        for i in range(len(seeds)):
-            fill(i)
-    else:
-        with ThreadPoolExecutor(workers, thread_name_prefix="noise") as pool:
-            list(pool.map(fill, range(len(seeds))))
-    return out
+def readout_noise_v(seed: int, n_steps: int, n_channels: int, white_v: float, pink_v: float) -> np.ndarray:
+    """Noise at the ADC input for one episode, [T, C] float64 (`readout_noise_batch` of one seed)."""
+    return readout_noise_batch([seed], n_steps, n_channels, white_v, pink_v)[0]
 
 
 def _sos_vectors(ep: ElectronicsParams) -> tuple[np.ndarray, np.ndarray, int]:
@@ -132,7 +208,7 @@ def readout_numpy(g_s: np.ndarray, noise_v: np.ndarray, ep: ElectronicsParams, s
     ratio = (y_all - ep.amp_offset_v) / ep.amp_gain / ep.excitation_v + 0.5
     r_meas = ep.bridge_resistance_ohm * ratio / (1.0 - ratio)
     out = {"resistance": r_s, "bridge_v": vb, "adc": code.astype(np.int32), "filtered_v": y_all, "resistance_measured": r_meas}
-    return out, ElectronicsState(z.reshape(E * C, -1), primed.reshape(-1))
+    return out, ElectronicsState(z.reshape(E * C, -1), primed.reshape(-1), st.pink.copy())
 
 
 # ------------------------------------------------------------------------------------------------ warp
@@ -173,10 +249,46 @@ def sum_channels_kernel(
             g_out[et * n_channels + c] = wp.tile_extract(gt, 0)
 
 
+vec_pink = wp.types.vector(length=PINK_STATES, dtype=wp.float64)
+vec_pink_ar = wp.types.vector(length=6, dtype=wp.float64)
+mat_pink = wp.types.matrix(shape=(PINK_STATES, PINK_STATES), dtype=wp.float64)
+_M1, _M2, _GAMMA = (wp.constant(wp.uint64(v)) for v in (MIX_M1, MIX_M2, GAMMA))
+
+
+@wp.func
+def _mix_wp(z: wp.uint64) -> wp.uint64:
+    z = (z ^ (z >> wp.uint64(30))) * _M1
+    z = (z ^ (z >> wp.uint64(27))) * _M2
+    return z ^ (z >> wp.uint64(31))
+
+
+@wp.func
+def _stream_key_wp(seed: wp.uint64, c: int, j: int) -> wp.uint64:
+    return _mix_wp(seed ^ _mix_wp(wp.uint64(N_STREAMS) * wp.uint64(c) + wp.uint64(j + 1)))
+
+
+@wp.func
+def _normal_wp(key: wp.uint64, k: int) -> wp.float64:
+    n1 = wp.uint64(2) * wp.uint64(k) + wp.uint64(1)
+    u1 = wp.float64((_mix_wp(key + _GAMMA * n1) >> wp.uint64(11)) + wp.uint64(1)) * wp.float64(UNIT_53)
+    u2 = wp.float64((_mix_wp(key + _GAMMA * (n1 + wp.uint64(1))) >> wp.uint64(11)) + wp.uint64(1)) * wp.float64(UNIT_53)
+    return wp.sqrt(wp.float64(-2.0) * wp.log(u1)) * wp.cos(wp.float64(TWO_PI) * u2)
+
+
 @wp.kernel
 def readout_kernel(
     g: wp.array(dtype=wp.float64),  # [E*T*C]
-    noise: wp.array(dtype=wp.float64),  # [E*T*C]
+    noise: wp.array(dtype=wp.float64),  # [E*T*C] explicit noise (V), read when seeded == 0
+    seeded: int,  # 1: draw the noise here from seeds (see the construction above)
+    seeds: wp.array(dtype=wp.uint64),  # [E]
+    t0: int,  # absolute step of the first sample (counter offset)
+    white_v: wp.float64,
+    pink_scale: wp.float64,  # pink_v / PINK_STD
+    pink_a: vec_pink_ar,
+    pink_c: vec_pink_ar,
+    pink_d: wp.float64,
+    pink_e: wp.float64,
+    pink_chol: mat_pink,
     n_steps: int,
     n_channels: int,
     n_sections: int,
@@ -191,6 +303,7 @@ def readout_kernel(
     code_max: wp.float64,
     st_filt: wp.array(dtype=vec_zi),  # [E*C]
     st_primed: wp.array(dtype=wp.int32),
+    st_pink: wp.array(dtype=vec_pink),
     out_r: wp.array(dtype=wp.float64),
     out_vb: wp.array(dtype=wp.float64),
     out_code: wp.array(dtype=wp.int32),
@@ -202,13 +315,35 @@ def readout_kernel(
     c = tid - ep * n_channels
     z = st_filt[tid]
     primed = st_primed[tid]
+    b = st_pink[tid]
     half = wp.float64(0.5)
     one = wp.float64(1.0)
+    key_white = wp.uint64(0)
+    key_pink = wp.uint64(0)
+    if seeded != 0:
+        key_white = _stream_key_wp(seeds[ep], c, STREAM_WHITE)
+        key_pink = _stream_key_wp(seeds[ep], c, STREAM_PINK)
+        if primed == 0:  # episode start: the pink filter's state from its stationary distribution
+            key_init = _stream_key_wp(seeds[ep], c, STREAM_INIT)
+            n = vec_pink()
+            for j in range(PINK_STATES):
+                n[j] = _normal_wp(key_init, j)
+            b = pink_chol * n
     for k in range(n_steps):
         idx = (ep * n_steps + k) * n_channels + c
+        nv = wp.float64(0.0)
+        if seeded != 0:
+            w = _normal_wp(key_pink, t0 + k)
+            for i in range(6):
+                b[i] = pink_a[i] * b[i] + w * pink_c[i]
+            pink = b[0] + b[1] + b[2] + b[3] + b[4] + b[5] + b[6] + w * pink_e
+            b[6] = w * pink_d
+            nv = white_v * _normal_wp(key_white, t0 + k) + pink_scale * pink
+        else:
+            nv = noise[idx]
         r_s = one / g[idx]
         vb = v_ex * (r_s / (r_s + r_b) - half)
-        v = gain * vb + offset + noise[idx]
+        v = gain * vb + offset + nv
         code = wp.min(wp.max(wp.round(v / lsb), code_min), code_max)
         x = code * lsb
         if primed == 0:
@@ -229,6 +364,7 @@ def readout_kernel(
         out_rm[idx] = r_b * ratio / (one - ratio)
     st_filt[tid] = z
     st_primed[tid] = primed
+    st_pink[tid] = b
 
 
 def sum_channels_warp(
@@ -248,31 +384,42 @@ def sum_channels_warp(
 
 
 def readout_warp(
-    g: wp.array, shape: tuple[int, int, int], noise_v: np.ndarray, ep: ElectronicsParams,
-    state: ElectronicsState | None, device: str, keep=None,
+    g: wp.array, shape: tuple[int, int, int], noise: np.ndarray | NoiseSeeds, ep: ElectronicsParams,
+    state: ElectronicsState | None, device: str, keep=None, t0: int = 0,
 ):
     """Channel conductance on the device (flat [E*T*C]) -> (dict of numpy [E,T,C] outputs, state).
-    keep: names of the outputs to copy back to the host (default all: resistance, bridge_v, adc,
-    filtered_v, resistance_measured)."""
+    noise: [E,T,C] noise at the ADC input (V, uploaded), or NoiseSeeds: drawn in the kernel, no host work;
+    t0: absolute step of the first sample (with NoiseSeeds, run in time chunks by passing the returned state
+    and t0 = samples done: the same noise as one call). keep: names of the outputs to copy back to the host
+    (default all: resistance, bridge_v, adc, filtered_v, resistance_measured)."""
     E, T, C = shape
     d = device
     st = state or ElectronicsState.zeros(E * C)
     sos, zi, ns = _sos_vectors(ep)
     filt = wp.array(st.filt, dtype=vec_zi, device=d)
     primed = wp.array(st.primed, dtype=wp.int32, device=d)
+    pink = wp.array(st.pink, dtype=vec_pink, device=d)
     outs = [wp.empty(E * T * C, dtype=t, device=d) for t in (wp.float64, wp.float64, wp.int32, wp.float64, wp.float64)]
-    noise = wp.array(np.ascontiguousarray(noise_v, np.float64).reshape(-1), dtype=wp.float64, device=d)
     f64 = wp.float64
+    if isinstance(noise, NoiseSeeds):
+        if len(noise.seeds) != E:
+            raise ValueError(f"need one seed per episode ({E}); got {len(noise.seeds)}")
+        seeds = wp.array(np.asarray(noise.seeds, dtype=np.uint64), dtype=wp.uint64, device=d)
+        noise_in = [wp.empty(0, dtype=wp.float64, device=d), 1, seeds, t0, f64(noise.white_v), f64(noise.pink_v / PINK_STD)]
+    else:
+        arr = wp.array(np.ascontiguousarray(noise, np.float64).reshape(-1), dtype=wp.float64, device=d)
+        noise_in = [arr, 0, wp.empty(0, dtype=wp.uint64, device=d), t0, f64(0.0), f64(0.0)]
     wp.launch(
         readout_kernel,
         dim=E * C,
         inputs=[
-            g, noise, T, C, ns, vec_sos(*sos), vec_zi(*zi), f64(ep.excitation_v), f64(ep.bridge_resistance_ohm),
+            g, *noise_in, vec_pink_ar(*PINK_A), vec_pink_ar(*PINK_C), f64(PINK_D), f64(PINK_E), mat_pink(*PINK_CHOL.ravel()),
+            T, C, ns, vec_sos(*sos), vec_zi(*zi), f64(ep.excitation_v), f64(ep.bridge_resistance_ohm),
             f64(ep.amp_gain), f64(ep.amp_offset_v), f64(ep.lsb_v), f64(ep.code_min), f64(ep.code_max),
-            filt, primed, *outs,
+            filt, primed, pink, *outs,
         ],
         device=d,
     )
     names = ["resistance", "bridge_v", "adc", "filtered_v", "resistance_measured"]
     result = {n: o.numpy().reshape(E, T, C) for n, o in zip(names, outs) if keep is None or n in keep}
-    return result, ElectronicsState(filt.numpy(), primed.numpy())
+    return result, ElectronicsState(filt.numpy(), primed.numpy(), pink.numpy())
