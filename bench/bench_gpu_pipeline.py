@@ -141,13 +141,15 @@ def equivalence(device: str, n: int = 16) -> dict:
 
 
 def stages(device: str, batch: int) -> dict:
-    """Seconds per stage for one batch of `batch` episodes in this process (after a warm-up)."""
+    """Seconds per stage for one batch of `batch` episodes in this process (after a warm-up), along the path
+    `generate` takes: physics for the whole batch, then load field and sensor chain per SENSOR_SLICE on the
+    device (fields left there for the chain), channels, HDF5."""
     from sensors.manifest import episode_seed
     from sensors.recording import RecordingWriter
     from sensors.registry import make_sensor
     from simulate import contact
     from simulate.protocols import make_episode_protocol
-    from simulate.run import _channels, _episode_attrs, EpisodeResult
+    from simulate.run import SENSOR_SLICE, EpisodeResult, _channels, _episode_attrs
 
     cfg = _cfg([], device)
     sensor = make_sensor(cfg, "warp", device)
@@ -159,26 +161,26 @@ def stages(device: str, batch: int) -> dict:
     t["protocols"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     contact.episode_controls(cfg, protos, (n - 1) * cfg.sampling.substeps)
-    t["controls (inside physics)"] = time.perf_counter() - t0
-    contact.run_episodes(cfg, protos[:8])  # warm-up: compile, capture
-    sensor.run_load(contact.run_episodes(cfg, protos[:8]), seeds[:8])
+    t["controls (inside physics, on a thread)"] = time.perf_counter() - t0
+    warm = contact.simulate_sensors(cfg, protos[:8])  # warm-up: compile, capture
+    sensor.run_load(contact.load_batch(cfg, *warm, device_fields=device), seeds[:8])
     t0 = time.perf_counter()
     sens, target = contact.simulate_sensors(cfg, protos)
     t["physics (MuJoCo Warp)"] = time.perf_counter() - t0
-    real = contact.simulate_sensors
-    contact.simulate_sensors = lambda *a, **k: (sens, target)
-    try:
+    t["load field (Warp)"] = t["sensor chain (Warp)"] = t["channels"] = 0.0
+    res = []
+    for a in range(0, batch, SENSOR_SLICE):
+        sl = slice(a, min(batch, a + SENSOR_SLICE))
         t0 = time.perf_counter()
-        batch_ = contact.run_episodes(cfg, protos)
-        t["load field (Warp)"] = time.perf_counter() - t0
-    finally:
-        contact.simulate_sensors = real
-    t0 = time.perf_counter()
-    out = sensor.run_load(batch_, seeds)
-    t["sensor chain (Warp)"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    res = [EpisodeResult(f"ep-{j}", s, p, _channels(batch_, out, j, cfg, sensor)) for j, (s, p) in enumerate(zip(seeds, protos))]
-    t["channels"] = time.perf_counter() - t0
+        lb = contact.load_batch(cfg, sens[sl], target[sl], device_fields=device)
+        t["load field (Warp)"] += time.perf_counter() - t0
+        t0 = time.perf_counter()
+        out = sensor.run_load(lb, seeds[sl])
+        t["sensor chain (Warp)"] += time.perf_counter() - t0
+        t0 = time.perf_counter()
+        res += [EpisodeResult(f"ep-{a + j}", seeds[a + j], protos[a + j], _channels(lb, out, j, cfg, sensor))
+                for j in range(sl.stop - a)]
+        t["channels"] += time.perf_counter() - t0
     nbytes = sum(c.data.nbytes for r in res for c in r.channels.values())
     with tempfile.TemporaryDirectory(dir=os.environ.get("BENCH_DIR")) as tmp:
         t0 = time.perf_counter()
@@ -191,7 +193,7 @@ def stages(device: str, batch: int) -> dict:
     total = sum(v for k, v in t.items() if "inside" not in k)
     print(f"stages for {batch} episodes x {n} samples ({nbytes / samples:.0f} B/sample):")
     for k, v in t.items():
-        print(f"  {k:28s} {v:7.3f} s  {v / total:5.1%}  ({samples / v:.3g} samples/s)")
+        print(f"  {k:40s} {v:7.3f} s  {v / total:5.1%}  ({samples / v:.3g} samples/s)")
     return {"episodes": batch, "samples": samples, "bytes_per_sample": nbytes / samples,
             "seconds": t, "serial_samples_per_s": samples / total}
 
