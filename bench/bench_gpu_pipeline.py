@@ -149,7 +149,7 @@ def stages(device: str, batch: int) -> dict:
     from sensors.registry import make_sensor
     from simulate import contact
     from simulate.protocols import make_episode_protocol
-    from simulate.run import SENSOR_SLICE, EpisodeResult, _channels, _episode_attrs
+    from simulate.run import SENSOR_SLICE, EpisodeResult, _episode_attrs, channel_arrays, episode_channels
 
     cfg = _cfg([], device)
     sensor = make_sensor(cfg, "warp", device)
@@ -178,7 +178,8 @@ def stages(device: str, batch: int) -> dict:
         out = sensor.run_load(lb, seeds[sl])
         t["sensor chain (Warp)"] += time.perf_counter() - t0
         t0 = time.perf_counter()
-        res += [EpisodeResult(f"ep-{a + j}", seeds[a + j], protos[a + j], _channels(lb, out, j, cfg, sensor))
+        arrays = channel_arrays(lb, out, cfg, sensor)
+        res += [EpisodeResult(f"ep-{a + j}", seeds[a + j], protos[a + j], episode_channels(arrays, j))
                 for j in range(sl.stop - a)]
         t["channels"] += time.perf_counter() - t0
     nbytes = sum(c.data.nbytes for r in res for c in r.channels.values())

@@ -34,7 +34,7 @@ def main() -> None:
     from sensors.warp_setup import init_warp
     from simulate.contact import run_episodes
     from simulate.protocols import make_episode_protocol
-    from simulate.run import _channels
+    from simulate.run import channel_arrays, episode_channels
 
     init_warp()
     cfg = load_scene("cnt_pdms", [f"protocol.frequencies_hz=[{a.frequency}]"])
@@ -60,7 +60,8 @@ def main() -> None:
         sens[backend] = time.perf_counter() - t0
     res["sensor"] = {k: {"seconds": v, "samples_per_s": samples / v} for k, v in sens.items()}
 
-    eps = {f"ep-{j}": _channels(batch, out, j, cfg, s) for j in range(a.episodes)}
+    arrays = channel_arrays(batch, out, cfg, s)
+    eps = {f"ep-{j}": episode_channels(arrays, j) for j in range(a.episodes)}
     raw = sum(c.data.nbytes for e in eps.values() for c in e.values())
     with tempfile.TemporaryDirectory() as tmp:
         times = {}

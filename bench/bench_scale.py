@@ -49,7 +49,7 @@ def stage_profile(batch: int, threads: int = 1) -> dict:
     from sensors.warp_setup import init_warp
     from simulate import contact
     from simulate.protocols import make_episode_protocol
-    from simulate.run import _channels
+    from simulate.run import channel_arrays, episode_channels
 
     init_warp()
     cfg = _cfg(batch, batch)
@@ -75,7 +75,8 @@ def stage_profile(batch: int, threads: int = 1) -> dict:
             out = sensor.run_load(batch_ld, seeds)
             t["sensor_chain"] = time.perf_counter() - t0
             t0 = time.perf_counter()
-            eps = {f"ep-{j}": _channels(batch_ld, out, j, cfg, sensor) for j in range(batch)}
+            arrays = channel_arrays(batch_ld, out, cfg, sensor)
+            eps = {f"ep-{j}": episode_channels(arrays, j) for j in range(batch)}
             t["assemble_channels"] = time.perf_counter() - t0
             t0 = time.perf_counter()
             p = write_recording(Path(tmp) / "s.h5", eps, source="sim", config_json=config_json(cfg), root_seed=0,

@@ -18,8 +18,11 @@ Executors (`generate(..., executor=...)`):
   optional extra (``pip install 'piezotwin[ray]'``). On a real cluster every node needs piezotwin
   installed and ``out_dir`` on storage all nodes share.
 
-GPUs: with a CUDA device and several GPUs visible, the local pool pins worker k to GPU k mod n (through
-CUDA_VISIBLE_DEVICES, set before the worker imports Warp), so W workers spread over all GPUs of the host.
+GPUs: with one GPU and the contact stage on MuJoCo Warp there, ``"local"`` with ``workers > 1`` runs the GPU
+feed (`simulate.feed`): this process steps the episodes of several shards as one big batch of worlds and W
+writer processes write the shards (same files; ``feed=False`` forces the per-shard workers). With several
+GPUs the local pool pins worker k to GPU k mod n (through CUDA_VISIBLE_DEVICES, set before the worker imports
+Warp), so W workers spread over all GPUs of the host.
 
 MuJoCo rollout threads per worker: ``threads`` (default ``generation.threads // workers``, at least 1);
 they do not change the output (each rollout trajectory is deterministic on its own).
@@ -112,11 +115,13 @@ def generate(
     threads: int | None = None,
     max_retries: int = DEFAULT_MAX_RETRIES,
     on_shard: Callable[[int, int, bool], None] | None = None,
+    feed: bool | None = None,
 ) -> Path:
     """Generate the dataset of `cfg` into `out_dir` with the chosen executor; returns the manifest path.
 
     on_shard(shard_index, n_episodes, skipped) is called in the driver as each shard finishes (skipped
-    shards first), in completion order.
+    shards first), in completion order. feed: simulate here and write in `workers` processes (default: with
+    MuJoCo Warp on a single GPU; see the module docstring).
     """
     from simulate import run
 
@@ -142,11 +147,23 @@ def generate(
         threads = max(1, cfg.generation.threads // workers) if executor == "local" else 1
     if todo:
         kw = dict(backend=backend, device=device, threads=threads)
-        if executor == "local":
+        if executor == "local" and (feed if feed is not None else _feed_by_default(cfg)):
+            from simulate.feed import generate_feed
+
+            generate_feed(cfg, out, todo, workers, max_retries=max_retries, on_shard=on_shard, **kw)
+        elif executor == "local":
             _run_local(cfg, out, todo, workers, max_retries, on_shard, kw)
         else:
             _run_ray(cfg, out, todo, workers, address, max_retries, on_shard, kw)
     return run.write_dataset_manifest(cfg, out)
+
+
+def _feed_by_default(cfg: SceneConfig) -> bool:
+    """The GPU feed pays off where the contact stage runs on MuJoCo Warp on the only GPU."""
+    from simulate.contact import physics_engine
+
+    engine, device = physics_engine(cfg)
+    return engine == "mujoco_warp" and device.startswith("cuda") and _cuda_device_count() == 1
 
 
 def _cuda_device_count() -> int:

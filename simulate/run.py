@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -50,22 +50,42 @@ def simulate_episodes(
 ) -> list[EpisodeResult]:
     """Simulate episodes (any mix of lengths: grouped by length into batched rollouts). indices: the
     episodes' global indices (seeds[i] = episode_seed(root_seed, indices[i])), for kinds that sweep."""
-    protos = [make_episode_protocol(cfg, s, None if indices is None else indices[i]) for i, s in enumerate(seeds)]
     results: dict[int, EpisodeResult] = {}
-    lengths = sorted({p.n_samples for p in protos})
+    for pos, protos, arrays in simulate_slices(cfg, seeds, sensor, threads, indices):
+        for j, i in enumerate(pos):
+            results[i] = EpisodeResult(ids[i], seeds[i], protos[j], episode_channels(arrays, j))
+    return [results[i] for i in range(len(seeds))]
+
+
+@dataclass
+class ChannelArray:
+    """One recorded channel of a slice of episodes: data (E, T, ...) (per_episode) or (T, ...) shared by all."""
+
+    data: np.ndarray
+    units: str
+    dims: tuple[str, ...]
+    description: str
+    per_episode: bool = True
+
+
+def simulate_slices(
+    cfg: SceneConfig, seeds: list[int], sensor: SensorModel, threads: int = 1, indices: list[int] | None = None,
+) -> Iterator[tuple[list[int], list[EpisodeProtocol], dict[str, ChannelArray]]]:
+    """Simulate the episodes of `seeds` and yield their recorded channels slice by slice: (positions in
+    seeds, their protocols, channel name -> ChannelArray). Episodes of one length run as one batch of worlds
+    (MuJoCo Warp) or one rollout (C MuJoCo); on the GPU the load field and sensor chain then go per
+    SENSOR_SLICE episodes, with the taxel fields left on the device for a sensor that takes them."""
+    protos = [make_episode_protocol(cfg, s, None if indices is None else indices[i]) for i, s in enumerate(seeds)]
     engine, engine_device = physics_engine(cfg)
     gpu = engine == "mujoco_warp"
-    # a sensor chain on the physics device takes the taxel fields where they are made (no host round trip)
     on_device = engine_device if gpu and getattr(sensor, "device_load", False) and sensor.device == engine_device else None
-    for n in lengths:
+    for n in sorted({p.n_samples for p in protos}):
         idx = [i for i, p in enumerate(protos) if p.n_samples == n]
         for sl, batch in iter_load_batches(cfg, [protos[i] for i in idx], threads, SENSOR_SLICE if gpu else None, on_device):
             part = idx[sl]
             out = sensor.run_load(batch if on_device else batch.on_host(), [seeds[i] for i in part])
             batch = batch.on_host() if _records_fields(cfg) else batch
-            for j, i in enumerate(part):
-                results[i] = EpisodeResult(ids[i], seeds[i], protos[i], _channels(batch, out, j, cfg, sensor))
-    return [results[i] for i in range(len(protos))]
+            yield part, [protos[i] for i in part], channel_arrays(batch, out, cfg, sensor)
 
 
 def _records_fields(cfg: SceneConfig) -> bool:
@@ -73,18 +93,18 @@ def _records_fields(cfg: SceneConfig) -> bool:
     return keep is None or bool({"deformation", "pressure", "shear"} & set(keep))
 
 
-def _channels(
-    batch: LoadBatch, out: dict[str, np.ndarray], j: int, cfg: SceneConfig, sensor: SensorModel
-) -> dict[str, Channel]:
+def channel_arrays(batch: LoadBatch, out: dict[str, np.ndarray], cfg: SceneConfig, sensor: SensorModel) -> dict[str, ChannelArray]:
+    """The recorded channels of a batch (generation.record, default all), in file order: load channels, then
+    the sensor's outputs; float32 except time (float64) and the sensor's own dtypes."""
     f32 = np.float32
     arrays = {  # made only for the channels kept (the taxel fields may still be on the device otherwise)
         "time": lambda: batch.time_s.astype(np.float64),
-        "target": lambda: batch.target[j].astype(f32),
-        "position": lambda: batch.indenter_pos_m[j].astype(f32),
-        "contact_force": lambda: batch.contact_force_n[j].astype(f32),
-        "deformation": lambda: batch.deformation_m[j].astype(f32),
-        "pressure": lambda: batch.pressure_pa[j].astype(f32),
-        "shear": lambda: batch.shear_pa[j].astype(f32),
+        "target": lambda: batch.target.astype(f32),
+        "position": lambda: batch.indenter_pos_m.astype(f32),
+        "contact_force": lambda: batch.contact_force_n.astype(f32),
+        "deformation": lambda: batch.deformation_m.astype(f32),
+        "pressure": lambda: batch.pressure_pa.astype(f32),
+        "shear": lambda: batch.shear_pa.astype(f32),
     }
     keep = cfg.generation.record
     ch = {}
@@ -94,11 +114,16 @@ def _channels(
         units, dims, desc = LOAD_CHANNELS[name]
         if name == "target" and cfg.protocol.control == "force":
             units = "N"
-        ch[name] = Channel(make(), units, dims, desc)
+        ch[name] = ChannelArray(make(), units, dims, desc, per_episode=name != "time")
     for name, spec in sensor.outputs.items():
         if keep is None or name in keep:
-            ch[name] = Channel(out[name][j], spec.units, spec.dims, spec.description)
+            ch[name] = ChannelArray(out[name], spec.units, spec.dims, spec.description)
     return ch
+
+
+def episode_channels(arrays: dict[str, ChannelArray], j: int) -> dict[str, Channel]:
+    """Episode j's channels (views) of a slice's channel arrays."""
+    return {name: Channel(c.data[j] if c.per_episode else c.data, c.units, c.dims, c.description) for name, c in arrays.items()}
 
 
 def check_record(cfg: SceneConfig) -> None:
@@ -142,16 +167,21 @@ def shard_batches(n_episodes: int, max_batch: int | None = None) -> list[slice]:
 
 
 def _episode_attrs(r: EpisodeResult, k: int) -> dict:
+    return episode_attrs(r.seed, r.protocol, k)
+
+
+def episode_attrs(seed: int, protocol: EpisodeProtocol, k: int) -> dict:
+    """/episodes/<id> attrs of episode k (global index)."""
     return {
-        "seed": r.seed,
+        "seed": seed,
         "global_index": k,
-        "frequency_hz": r.protocol.frequency_hz,
-        "amplitude": r.protocol.amplitude,
-        "amplitude_units": "N" if r.protocol.control == "force" else "m",
-        "offset_xy_m": np.asarray(r.protocol.offset_xy_m),
-        "n_samples": r.protocol.n_samples,
-        "control": r.protocol.control,
-        "kind": r.protocol.kind,
+        "frequency_hz": protocol.frequency_hz,
+        "amplitude": protocol.amplitude,
+        "amplitude_units": "N" if protocol.control == "force" else "m",
+        "offset_xy_m": np.asarray(protocol.offset_xy_m),
+        "n_samples": protocol.n_samples,
+        "control": protocol.control,
+        "kind": protocol.kind,
     }
 
 
@@ -172,22 +202,8 @@ def write_shard(
     gids = episode_ids_of_shard(cfg, shard)
     seeds = [episode_seed(g.root_seed, k) for k in gids]
     ids = [f"ep-{k:06d}" for k in gids]
-    sensor_attrs = dict(sensor.attrs())
-    sensor_attrs["taxel_xy_m"] = _taxel_xy(cfg)
-    engine, engine_device = physics_engine(cfg)
-    writer = RecordingWriter(
-        shard_path(out_dir, shard),
-        source="sim",
-        config_json=config_json(cfg),
-        root_seed=g.root_seed,
-        shard_index=shard,
-        sensor_attrs=sensor_attrs,
-        mjcf=mjcf,
-        compression=g.compression,
-        # the contact engine that ran (generation.physics may say "auto"); MuJoCo Warp on a GPU is float32 and
-        # may sum with GPU atomics, so its shards are not guaranteed bit-reproducible (C MuJoCo's are)
-        extra_attrs={"physics_engine": engine, "physics_device": engine_device},
-    )
+    engine, _ = physics_engine(cfg)
+    writer = shard_writer(cfg, out_dir, shard, shard_sensor_attrs(cfg, sensor), mjcf)
 
     def write(results: list[EpisodeResult], ks: list[int]) -> None:
         for r, k in zip(results, ks):
@@ -215,10 +231,30 @@ def write_shard(
     return writer.path
 
 
-def _taxel_xy(cfg: SceneConfig) -> np.ndarray:
+def shard_sensor_attrs(cfg: SceneConfig, sensor: SensorModel) -> dict:
+    """/sensor attrs of a shard: the sensor's own plus the taxel positions (m)."""
     from simulate.taxels import taxel_xy_m
 
-    return taxel_xy_m(cfg)
+    return {**sensor.attrs(), "taxel_xy_m": taxel_xy_m(cfg)}
+
+
+def shard_writer(cfg: SceneConfig, out_dir: Path, shard: int, sensor_attrs: dict, mjcf: str) -> RecordingWriter:
+    """The (atomic) RecordingWriter of one shard, with its provenance attributes."""
+    g = cfg.generation
+    engine, engine_device = physics_engine(cfg)
+    return RecordingWriter(
+        shard_path(out_dir, shard),
+        source="sim",
+        config_json=config_json(cfg),
+        root_seed=g.root_seed,
+        shard_index=shard,
+        sensor_attrs=sensor_attrs,
+        mjcf=mjcf,
+        compression=g.compression,
+        # the contact engine that ran (generation.physics may say "auto"); MuJoCo Warp on a GPU is float32 and
+        # may sum with GPU atomics, so its shards are not guaranteed bit-reproducible (C MuJoCo's are)
+        extra_attrs={"physics_engine": engine, "physics_device": engine_device},
+    )
 
 
 def config_sha256(cfg: SceneConfig) -> str:

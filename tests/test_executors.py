@@ -3,6 +3,8 @@ a killed worker's shard is retried, exhausted retries give a clear error and a r
 
 import importlib.util
 
+import numpy as np
+
 import pytest
 
 import simulate.run as run
@@ -116,3 +118,36 @@ def test_episode_channels_do_not_depend_on_shard_size_or_batching(serial, tmp_pa
     for ep in ref:
         for ch in ref[ep]:
             assert one[ep][ch].tobytes() == ref[ep][ch].tobytes(), (ep, ch)
+
+
+def test_gpu_feed_equals_serial_and_retries_a_killed_writer(tmp_path, monkeypatch):
+    """The GPU feed (simulate.feed: episodes of several shards as one batch here, shards written by writer
+    processes), forced on the CPU engine: mixed episode lengths, batches of 2 shards, a writer dies once ->
+    the same files as the serial loop."""
+    from simulate import feed
+
+    mixed = load_scene("cnt_pdms", ["protocol.frequencies_hz=[2.0,4.0]", "protocol.cycles=1", "pad.taxels_x=3",
+                                    "pad.taxels_y=2", "generation.episodes=7", "generation.episodes_per_shard=2",
+                                    "generation.root_seed=5"])
+    ref = tmp_path / "serial"
+    run.generate(mixed, ref)
+    monkeypatch.setattr(feed, "FEED_WORLDS", 3)  # shards [0, 1], [2, 3]: two batches of worlds
+    assert feed._groups(mixed, [0, 1, 2, 3], 3) == [[0, 1], [2, 3]]
+    packs = feed.produce(mixed, [0, 1], run.make_sensor(mixed, "warp", "cpu"))
+    assert max(len(pk.pieces) for pk in packs) == 2  # a shard with both episode lengths: one piece per length
+    marker = _inject(monkeypatch, tmp_path, 1, "exit")
+    seen = []
+    out = tmp_path / "feed"
+    executors.generate(mixed, out, workers=2, feed=True, on_shard=lambda s, n, skip: seen.append((s, n)))
+    assert marker.is_file() and sorted(seen) == [(0, 2), (1, 2), (2, 2), (3, 1)]
+    a, b = _episodes(ref, 4), _episodes(out, 4)
+    assert list(a) == list(b) and len(a) == 7
+    for ep in a:
+        assert list(a[ep]) == list(b[ep])
+        for ch in a[ep]:
+            assert a[ep][ch].dtype == b[ep][ch].dtype and a[ep][ch].tobytes() == b[ep][ch].tobytes(), (ep, ch)
+    for i in range(4):
+        with Recording(shard_path(ref, i)) as ra, Recording(shard_path(out, i)) as rb:
+            for ep in ra.episode_ids:
+                np.testing.assert_equal(rb.episode_attrs(ep), ra.episode_attrs(ep))
+            assert ra.sensor_attrs.keys() == rb.sensor_attrs.keys()

@@ -1,0 +1,174 @@
+"""GPU feed: one process owns the GPU and steps big batches of worlds; a pool of writer processes writes the shards.
+
+Why (bench/README.md): MuJoCo Warp runs near its peak only with 16k-32k worlds per batch, and HDF5 at that rate
+needs several host cores; worker processes that each simulate their own shard time-slice the GPU with smaller
+batches. Here the driver simulates the episodes of several shards as one batch of worlds (FEED_WORLDS), then
+hands each shard's recorded channels, stacked per slice, to a writer process (spawned; one shard per task)
+while it simulates the next batch. The files are those of `simulate.run.write_shard`: an episode's channels do
+not depend on the batch it ran in. A writer that dies is replaced and its shard resubmitted (up to
+max_retries); finished shards stay, so a rerun resumes at the missing ones.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from scenes import SceneConfig
+
+FEED_WORLDS = 32768  # episodes per batch of worlds: 1.6e7 world-steps/s on an H100 (bench/results/gpu-pipeline-h100-physics.json)
+MAX_PENDING_BATCHES = 2  # batches handed to the writers and not yet written (bounds host memory)
+
+
+@dataclass
+class PackedShard:
+    """One shard's recorded channels, as the producer made them: pieces of stacked episodes (one per simulated
+    slice), and for each episode in file order its id, attrs and (piece, row)."""
+
+    shard: int
+    specs: dict[str, tuple[str, tuple[str, ...], str, bool]] = field(default_factory=dict)  # name -> units, dims, desc, per_episode
+    pieces: list[dict[str, np.ndarray]] = field(default_factory=list)
+    episodes: list[tuple[str, dict, int, int]] = field(default_factory=list)  # (id, attrs, piece, row), in global order
+
+    @property
+    def n_episodes(self) -> int:
+        return len(self.episodes)
+
+
+def write_packed_shard(cfg: SceneConfig, out_dir: str, packed: PackedShard, sensor_attrs: dict, mjcf: str) -> tuple[int, int]:
+    """Writer task: write one packed shard atomically (what write_shard would write); returns (shard, episodes)."""
+    from sensors.recording import Channel
+    from simulate.executors import _maybe_inject_fault
+    from simulate.run import shard_writer
+
+    _maybe_inject_fault(packed.shard)
+    with shard_writer(cfg, Path(out_dir), packed.shard, sensor_attrs, mjcf) as w:
+        for ep_id, attrs, piece, row in packed.episodes:
+            arrays = packed.pieces[piece]
+            ch = {name: Channel(arrays[name][row] if per_ep else arrays[name], units, dims, desc)
+                  for name, (units, dims, desc, per_ep) in packed.specs.items()}
+            w.add_episode(ep_id, ch, attrs)
+    return packed.shard, packed.n_episodes
+
+
+def _groups(cfg: SceneConfig, todo: list[int], worlds: int) -> list[list[int]]:
+    """Consecutive runs of the shards to make, each with >= `worlds` episodes where the shards allow."""
+    from simulate.run import episode_ids_of_shard
+
+    groups: list[list[int]] = [[]]
+    n = 0
+    for s in todo:
+        if n >= worlds:
+            groups.append([])
+            n = 0
+        groups[-1].append(s)
+        n += len(episode_ids_of_shard(cfg, s))
+    return [g for g in groups if g]
+
+
+def produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1) -> list[PackedShard]:
+    """Simulate the episodes of `shards` as one batch and pack each shard's recorded channels."""
+    from sensors.manifest import episode_seed
+    from simulate.run import episode_attrs, episode_ids_of_shard, simulate_slices
+
+    gids = [k for s in shards for k in episode_ids_of_shard(cfg, s)]
+    owner = {k: s for s in shards for k in episode_ids_of_shard(cfg, s)}
+    seeds = [episode_seed(cfg.generation.root_seed, k) for k in gids]
+    packs = {s: PackedShard(s) for s in shards}
+    placed: dict[int, tuple[str, dict, int, int]] = {}
+    for pos, protos, arrays in simulate_slices(cfg, seeds, sensor, threads, gids):
+        runs: dict[int, list[int]] = {}
+        for j, i in enumerate(pos):
+            runs.setdefault(owner[gids[i]], []).append(j)
+        for s, rows in runs.items():
+            p = packs[s]
+            p.specs = {n: (c.units, c.dims, c.description, c.per_episode) for n, c in arrays.items()}
+            take = slice(rows[0], rows[-1] + 1) if rows[-1] - rows[0] + 1 == len(rows) else rows
+            p.pieces.append({n: (c.data[take] if c.per_episode else c.data) for n, c in arrays.items()})
+            for r, j in enumerate(rows):
+                i = pos[j]
+                placed[gids[i]] = (f"ep-{gids[i]:06d}", episode_attrs(seeds[i], protos[j], gids[i]), len(p.pieces) - 1, r)
+    for k in gids:
+        packs[owner[k]].episodes.append(placed[k])
+    return [packs[s] for s in shards]
+
+
+def generate_feed(
+    cfg: SceneConfig, out: Path, todo: list[int], writers: int, *, backend: str = "warp", device: str = "cpu",
+    threads: int = 1, max_retries: int = 3, on_shard: Callable[[int, int, bool], None] | None = None,
+    worlds: int | None = None,
+) -> None:
+    """Make the shards `todo` of cfg's dataset in `out`: simulate here, write in `writers` processes."""
+    import multiprocessing as mp
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures.process import BrokenProcessPool
+
+    from sensors.registry import make_sensor
+    from sensors.warp_setup import init_warp
+    from simulate.executors import ShardFailedError, _check_written
+    from simulate.mjcf import build_mjcf
+    from simulate.run import config_sha256, shard_sensor_attrs
+
+    if backend == "warp":
+        init_warp()
+    sensor = make_sensor(cfg, backend, device)
+    mjcf, sha = build_mjcf(cfg), config_sha256(cfg)
+    sensor_attrs = shard_sensor_attrs(cfg, sensor)
+    ctx = mp.get_context("spawn")
+    pool = ProcessPoolExecutor(writers, mp_context=ctx)
+    pending: dict = {}  # future -> packed shard (kept until its file is checked, for a resubmit)
+    batch_of: dict[int, int] = {}
+    attempts: dict[int, int] = {}
+
+    def submit(p: PackedShard) -> None:
+        attempts[p.shard] = attempts.get(p.shard, 0) + 1
+        pending[pool.submit(write_packed_shard, cfg, str(out), p, sensor_attrs, mjcf)] = p
+
+    def collect(block_until_batch: int | None) -> None:
+        """Handle finished writes; wait until no shard of a batch <= block_until_batch is pending."""
+        nonlocal pool
+        while pending:
+            waiting = block_until_batch is not None and any(batch_of[p.shard] <= block_until_batch for p in pending.values())
+            done, _ = wait(list(pending), timeout=None if waiting else 0, return_when=FIRST_COMPLETED)
+            if not done:
+                return
+            broken = []
+            for f in done:
+                p = pending.pop(f)
+                try:
+                    f.result()
+                    _check_written(out, p.shard, sha)
+                except BrokenProcessPool:
+                    broken.append(p)
+                    continue
+                except Exception as exc:  # noqa: BLE001 - retried, then reported
+                    if attempts[p.shard] > max_retries:
+                        raise ShardFailedError(f"shard {p.shard}: failed {attempts[p.shard]} time(s); last error: "
+                                               f"{type(exc).__name__}: {exc} (complete shards are kept: rerun to resume)") from exc
+                    submit(p)
+                    continue
+                if on_shard:
+                    on_shard(p.shard, p.n_episodes, False)
+            if broken:  # a writer died: every write still in the pool is lost with it
+                broken += list(pending.values())
+                pending.clear()
+                pool.shutdown(wait=False, cancel_futures=True)
+                pool = ProcessPoolExecutor(writers, mp_context=ctx)
+                for p in sorted(broken, key=lambda p: p.shard):
+                    if attempts[p.shard] > max_retries:
+                        raise ShardFailedError(f"shard {p.shard}: failed {attempts[p.shard]} time(s); last error: the "
+                                               "writer process died (complete shards are kept: rerun to resume)")
+                    submit(p)
+
+    try:
+        for b, group in enumerate(_groups(cfg, todo, worlds or FEED_WORLDS)):
+            collect(b - MAX_PENDING_BATCHES)  # bounded memory: at most MAX_PENDING_BATCHES batches not yet written
+            for p in produce(cfg, group, sensor, threads):
+                batch_of[p.shard] = b
+                submit(p)
+        collect(len(todo))
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
