@@ -6,7 +6,14 @@ header and payload), after the magic line ``PZTRAWLOG1``. The log is flushed and
 ``flush_s`` (<= 1 s), so a crash or an unplugged cable loses at most that much; a torn last record is
 dropped on reading and cut off before appending. A restart appends a new SESSION record instead of
 overwriting. Records: SESSION (JSON: streams, host/unix start times), RAW (bytes read), POLL (the host
-wrote a poll), EVENT (JSON: disconnect, reconnect, stop reason).
+wrote a poll), EVENT (JSON: disconnect, reconnect, stop reason), TIMEOUT (the host gave up waiting for
+the reply to its last poll).
+
+Poll protocol: the reply to a poll is what arrives within ``reply_timeout_s`` of it; after a timeout
+the host writes TIMEOUT and, before polling again, waits up to ``late_reply_s`` for the rest of the late
+reply. Bytes read after a TIMEOUT are kept in the raw log but never decoded as a reply, and whatever is
+waiting when the host is about to poll is read before the POLL record (discarded as an overlong reply),
+so a late reply is not taken for the next poll's (only one later than both windows can be).
 
 The recording ``<out>`` (HDF5, source="real", sensors.recording schema) is built from the log by
 decoding it again (so a parser fix can re-decode an old capture: ``build_recording``). It is written
@@ -40,7 +47,7 @@ import numpy as np
 from sensors.serial_codec import PROTOCOLS, make_decoder
 
 MAGIC = b"PZTRAWLOG1\n"
-SESSION, RAW, POLL, EVENT = 1, 2, 3, 4
+SESSION, RAW, POLL, EVENT, TIMEOUT = 1, 2, 3, 4, 5
 _REC = struct.Struct("<BBHIq")
 _CRC = struct.Struct("<I")
 MAX_RECORD = 1 << 24
@@ -70,7 +77,8 @@ class StreamSpec:
     n_values: int | None = None  # poll: values per reply (default 1)
     units: str = "raw"
     poll_hz: float | None = None  # poll: cap on the polling rate (None = as fast as replies come)
-    reply_timeout_s: float = 0.1
+    reply_timeout_s: float = 0.1  # poll: a reply not complete by then is dropped
+    late_reply_s: float = 1.0  # poll: after a timeout, wait up to this long for the late reply before polling again
 
     def __post_init__(self) -> None:
         if self.protocol not in PROTOCOLS:
@@ -185,6 +193,8 @@ class _Replayer:
         sd, dec = sess.streams[stream], self._dec[stream]
         if typ == POLL:
             dec.poll()
+        elif typ == TIMEOUT:
+            dec.timeout()
         elif typ == RAW:
             if self.keep:
                 sd.raw += payload
@@ -198,7 +208,7 @@ class _Replayer:
             ev = json.loads(payload)
             ev["host_ns"] = host_ns
             sess.events.append(ev)
-        if self.keep and typ in (RAW, POLL):
+        if self.keep and typ in (RAW, POLL, TIMEOUT):
             sd.reads.append((host_ns, len(sd.raw), typ))
         sd.stats = dec.stats()
 
@@ -286,7 +296,7 @@ def build_recording(log: str | os.PathLike, out: str | os.PathLike) -> Path:
             ch[f"{name}_raw"] = Channel(np.frombuffer(bytes(sd.raw), np.uint8), "byte", (f"{name}_byte",), "raw bytes as read")
             reads = np.asarray(sd.reads, np.int64).reshape(-1, 3)
             ch[f"{name}_raw_reads"] = Channel(
-                reads, "1", (f"{name}_read", "field"), "per read: host_ns, end offset into _raw, kind (2 read, 3 poll)"
+                reads, "1", (f"{name}_read", "field"), "per read: host_ns, end offset into _raw, kind (2 read, 3 poll, 5 reply timeout)"
             )
             st = dict(sd.stats) or {"frames": 0, "crc_errors": 0, "frames_dropped": 0, "garbage_bytes": 0, "bytes": 0}
             per = {"port": sd.spec["url"], "baudrate": sd.spec["baudrate"], "protocol": sd.spec["protocol"],
@@ -326,6 +336,20 @@ def open_port(spec: StreamSpec, timeout: float = 0.05):
         raise CaptureError(f"cannot open port '{spec.url}': {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
 
 
+def _read_reply(i: int, ser, size: int, timeout_s: float, q: queue.Queue, stop: threading.Event) -> int:
+    """Read up to ``size`` bytes for at most ``timeout_s`` (what is already there is read even when the
+    thread wakes late); each read goes to the queue. Returns the number of bytes read."""
+    got, deadline = 0, time.monotonic() + timeout_s
+    while got < size and not stop.is_set():
+        b = ser.read(size - got)
+        if b:
+            got += len(b)
+            q.put((RAW, i, time.monotonic_ns(), b))
+        if time.monotonic() >= deadline:
+            break
+    return got
+
+
 def _reader(i: int, spec: StreamSpec, ser, q: queue.Queue, stop: threading.Event) -> None:
     """Reads one port into the queue as (type, stream, host_ns, payload); ('gone', i, ns, msg) on loss."""
     import serial
@@ -341,14 +365,19 @@ def _reader(i: int, spec: StreamSpec, ser, q: queue.Queue, stop: threading.Event
                     if now < next_t:
                         time.sleep(next_t - now)
                     next_t = max(next_t + period, time.monotonic() - period)
+                stale = bytearray()  # an overlong or very late reply: logged before the poll, so not its reply
+                while n := ser.in_waiting:
+                    stale += ser.read(n)
+                if stale:
+                    q.put((RAW, i, time.monotonic_ns(), bytes(stale)))
                 q.put((POLL, i, time.monotonic_ns(), b""))
                 ser.write(b"\n")
-                got, deadline = 0, time.monotonic() + spec.reply_timeout_s
-                while got < size and time.monotonic() < deadline and not stop.is_set():
-                    b = ser.read(size - got)
-                    if b:
-                        got += len(b)
-                        q.put((RAW, i, time.monotonic_ns(), b))
+                got = _read_reply(i, ser, size, spec.reply_timeout_s, q, stop)
+                if got < size and not stop.is_set():
+                    # no reply in time: the poll is dropped; its late reply, if it comes, is logged after
+                    # TIMEOUT (never decoded) and waited for, so that it is not read as the next poll's
+                    q.put((TIMEOUT, i, time.monotonic_ns(), b""))
+                    _read_reply(i, ser, size - got, spec.late_reply_s, q, stop)
         else:
             while not stop.is_set():
                 b = ser.read(max(1, min(ser.in_waiting, 65536)))

@@ -7,8 +7,11 @@ Three framings (DESIGN.md section 4):
            differs from the first good line, is counted in ``crc_errors`` ("bad lines").
 ``poll``   poll-and-reply binary: the host writes ``\\n``, the board answers with N little-endian
            float32. There is no framing in-band; a reply boundary is marked by the host calling
-           ``poll()`` before it polls again, which discards (and counts) a short reply. A reply with a
-           non-finite value is counted as bad.
+           ``poll()`` before it polls again, which discards (and counts) a short or overlong reply: one
+           poll, at most one reply. A reply with a non-finite value is counted as bad. ``timeout()``
+           (the host gave up waiting) counts the poll as dropped and discards everything up to the
+           next ``poll()`` as late bytes (``late_bytes``): a late reply is never taken for the next
+           poll's.
 ``frames`` piezotwin frames: COBS(``version u8 | seq u16 | t_device_us u32 | payload | crc16``) + 0x00,
            all little-endian, payload = N float32, version 1. CRC-16/CCITT-FALSE (poly 0x1021, init
            0xFFFF, no reflection, xorout 0; check value 0x29B1 for b"123456789") over the bytes
@@ -179,6 +182,9 @@ class _Decoder:
     def poll(self) -> None:
         """The host is about to poll (only meaningful for ``poll``)."""
 
+    def timeout(self) -> None:
+        """The host gave up waiting for the reply to its last poll (only meaningful for ``poll``)."""
+
 
 _SPLIT = re.compile(rb"[,;\s]+")
 
@@ -249,7 +255,13 @@ class PollDecoder(_Decoder):
         self._fmt = struct.Struct(f"<{n_values}f")
         self._buf = bytearray()
         self._polls = 0
-        self._answered = True
+        self._answered = True  # this poll got a good reply
+        self._replied = False  # this poll's reply (good or bad) has been read: more bytes are overlong
+        self._late = False  # the host gave up on this poll: bytes until the next poll are late
+        self.late_bytes = 0
+
+    def stats(self) -> dict[str, int]:
+        return {**super().stats(), "late_bytes": self.late_bytes}
 
     def poll(self) -> None:
         if self._buf:  # a short or overlong reply
@@ -259,15 +271,31 @@ class PollDecoder(_Decoder):
         if not self._answered:
             self.frames_dropped += 1
         self._polls += 1
-        self._answered = False
+        self._answered = self._replied = self._late = False
+
+    def timeout(self) -> None:
+        if self._late or self._replied or not self._polls:
+            return
+        self.frames_dropped += 1
+        self._answered = self._late = True
+        self._discard_late(len(self._buf))
+        self._buf.clear()
+
+    def _discard_late(self, n: int) -> None:
+        self.late_bytes += n
+        self.garbage_bytes += n
 
     def feed(self, data: bytes) -> list[Frame]:
         self.bytes_in += len(data)
+        if self._late:
+            self._discard_late(len(data))
+            return []
         self._buf += data
         out: list[Frame] = []
-        while len(self._buf) >= self._size:
+        while len(self._buf) >= self._size and not (self._replied and self._polls):
             vals = self._fmt.unpack_from(self._buf)
             del self._buf[: self._size]
+            self._replied = True
             if all(math.isfinite(v) for v in vals):
                 out.append(Frame(vals))
                 self.frames += 1

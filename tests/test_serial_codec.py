@@ -219,3 +219,16 @@ def test_fuzz_poll_split_reads(rows, step):
 def test_unknown_protocol():
     with pytest.raises(ValueError, match="unknown protocol 'xml'"):
         make_decoder("xml")
+
+
+def test_poll_late_reply_discarded_and_one_reply_per_poll():
+    d = PollDecoder(2)
+    d.poll()
+    assert d.feed(encode_poll_reply([1.0, 2.0])[:3]) == []
+    d.timeout()  # the host gave up waiting: the rest of this reply is late, never a reply
+    assert d.feed(encode_poll_reply([1.0, 2.0])[3:]) == [] and d.frames_dropped == 1
+    d.poll()
+    assert [f.values for f in d.feed(encode_poll_reply([3.0, 4.0]) * 2)] == [(3.0, 4.0)]  # overlong: one reply
+    d.poll()
+    s = d.stats()
+    assert (s["late_bytes"], s["crc_errors"], s["frames_dropped"], s["frames"]) == (8, 1, 1, 1)
