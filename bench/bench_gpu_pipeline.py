@@ -266,10 +266,13 @@ def end_to_end(device: str, per_shard: int, workers: int, shards_per_worker: int
     samples = episodes * make_episode_protocol(cfg, 0).n_samples
     raw = raw_write(root, nbytes)
     shutil.rmtree(root, ignore_errors=True)
-    r = {"workers": workers, "episodes": episodes, "shards": -(-episodes // per_shard), "seconds": dt,
+    from simulate.executors import _feed_by_default
+
+    mode = "gpu feed (this process simulates, workers write)" if workers > 1 and _feed_by_default(cfg) else "shard workers"
+    r = {"workers": workers, "mode": mode, "episodes": episodes, "shards": -(-episodes // per_shard), "seconds": dt,
          "samples_per_s": samples / dt, "disk_MB_per_s": nbytes / dt / 1e6, "raw_write_MB_per_s_same_bytes": raw,
          "fraction_of_raw_write": nbytes / dt / 1e6 / raw, "bytes": nbytes}
-    print(f"end to end, {workers} worker(s), {episodes} episodes ({per_shard} per shard): {samples / dt:.3g} samples/s, "
+    print(f"end to end, {workers} worker(s), {mode}, {episodes} episodes ({per_shard} per shard): {samples / dt:.3g} samples/s, "
           f"{nbytes / dt / 1e6:.0f} MB/s on disk = {r['fraction_of_raw_write']:.0%} of raw write ({raw:.0f} MB/s), incl. start-up")
     return r
 
@@ -308,9 +311,10 @@ def main() -> None:
     if "stages" in parts:
         res["stages"] = stages(a.device, a.stage_batch)
     if "e2e" in parts:
-        from simulate.run import GPU_BATCH
+        from simulate.feed import FEED_WORLDS
+        from simulate.run import GPU_BATCH, SENSOR_SLICE
 
-        res["gpu_batch"] = GPU_BATCH
+        res["gpu_batch"], res["feed_worlds"], res["sensor_slice"] = GPU_BATCH, FEED_WORLDS, SENSOR_SLICE
         res["end_to_end"] = [end_to_end(a.device, a.shard_episodes, int(w), a.shards_per_worker) for w in a.workers.split(",")]
         r1 = res["end_to_end"][0]
         for r in res["end_to_end"]:

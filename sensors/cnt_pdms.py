@@ -91,7 +91,7 @@ class CntPdmsSensor:
         else:
             import warp as wp
 
-            from sensors.taxel_warp import TaxelChainWarp
+            from sensors.taxel_warp import TaxelChainWarp, scaled_on_device
 
             chain = TaxelChainWarp(self.tp, E, N, self.device)
             d = drive if isinstance(drive, wp.array) else wp.array(np.ascontiguousarray(drive, np.float32).reshape(-1), dtype=wp.float32, device=self.device)
@@ -105,11 +105,13 @@ class CntPdmsSensor:
             ro, _ = el.readout_warp(g_d, (E, T, self.n_channels), noise, self.ep, None, self.device, keep=keep_ro)
             force = f_d.numpy().reshape(E, T) if "force" in want else None
             strain = s_d.numpy().reshape(E, T, N) if "strain" in want else None
-            stress = st_d.numpy().reshape(E, T, N) if "force_taxel" in want else None
+            stress = None
+            if "force_taxel" in want:  # stress x area on the device: one float32 multiply, as in numpy
+                force_taxel = scaled_on_device(st_d, self.tp.taxel_area_m2).numpy().reshape(E, T, N)
         adc_dtype = np.int16 if self.ep.adc_bits <= 16 else np.int32
         make = {
             "strain": lambda: strain,
-            "force_taxel": lambda: (stress * np.float32(self.tp.taxel_area_m2)).astype(np.float32),
+            "force_taxel": lambda: force_taxel if stress is None else (stress * np.float32(self.tp.taxel_area_m2)).astype(np.float32),
             "force": lambda: force.astype(np.float32),
             "adc": lambda: ro["adc"].astype(adc_dtype),
             **{k: (lambda r=r: ro[r].astype(np.float32)) for k, r in ro_names.items() if k != "adc"},

@@ -200,3 +200,16 @@ def drive_on_device(field: wp.array, divisor: float) -> wp.array:
     out = wp.empty(field.shape[0] * field.shape[1], dtype=wp.float32, device=field.device)
     wp.launch(_divided_f32, dim=field.shape, inputs=[field, wp.float64(divisor), out], device=field.device)
     return out
+
+
+@wp.kernel
+def _scaled(x: wp.array(dtype=wp.float32), scale: wp.float32, out: wp.array(dtype=wp.float32)):
+    i = wp.tid()
+    out[i] = x[i] * scale
+
+
+def scaled_on_device(x: wp.array, scale: float) -> wp.array:
+    """x * float32(scale) for a flat float32 device array (numpy's x * np.float32(scale), bit for bit)."""
+    out = wp.empty_like(x)
+    wp.launch(_scaled, dim=x.shape[0], inputs=[x, wp.float32(scale), out], device=x.device)
+    return out
