@@ -25,7 +25,7 @@ import numpy as np
 from scenes.config import SceneConfig
 from sensors.base import LoadBatch
 from simulate.mjcf import build_mjcf, contact_design
-from simulate.protocols import EpisodeProtocol, target_waveform, xy_waveform
+from simulate.protocols import EpisodeProtocol, target_waveforms, xy_waveforms
 from simulate.taxels import (
     interval_coverage,
     spread_matrix,
@@ -64,10 +64,8 @@ def episode_controls(
     t = (np.arange(a, b) + 1.0) * dt
     E = len(protocols)
     ctrl = np.zeros((E, b - a, 3))
-    target = np.zeros((E, b - a))
-    for e, p in enumerate(protocols):
-        target[e] = target_waveform(p, cfg, t)
-        ctrl[e, :, :2] = xy_waveform(p, cfg, t)
+    target = target_waveforms(protocols, cfg, t)
+    ctrl[:, :, :2] = xy_waveforms(protocols, cfg, t)
     if cfg.protocol.control == "displacement":
         kp, kv = des.servo_kp_n_per_m, des.servo_kv_n_s_per_m
         q = -target * (1.0 + des.pad_stiffness_n_per_m / kp)
@@ -81,7 +79,7 @@ def episode_controls(
 def sample_targets(cfg: SceneConfig, protocols: list[EpisodeProtocol], n: int) -> np.ndarray:
     """(E, n) commanded target at the sample times k * substeps * dt (the rows the sensors are read at)."""
     t = (np.arange(n) * cfg.sampling.substeps).astype(float) * cfg.sampling.physics_timestep_s
-    return np.stack([target_waveform(p, cfg, t) for p in protocols])
+    return target_waveforms(protocols, cfg, t)
 
 
 def _initial_states(m: mujoco.MjModel, cfg: SceneConfig, protocols: list[EpisodeProtocol], ctrl0: np.ndarray):
@@ -147,7 +145,7 @@ def simulate_sensors(
         # controls are made chunk by chunk on a host thread while the worlds step (no (E, nstep, 3) array)
         states0, sens0 = _initial_states(m, cfg, protocols, episode_controls(cfg, protocols, nstep, slice(0, 1))[0][:, 0])
         qpos0 = states0[:, 1 : 1 + m.nq]  # full-physics state = (time, qpos, qvel, ...)
-        out = WarpWorlds(m, E, device).run(qpos0, lambda sl: episode_controls(cfg, protocols, nstep, sl)[0], sens0, sub, n)
+        out = WarpWorlds(m, E, device).run(qpos0, lambda sl, eps: episode_controls(cfg, protocols[eps], nstep, sl)[0], sens0, sub, n)
     else:
         ctrl, _ = episode_controls(cfg, protocols, nstep)
         states0, sens0 = _initial_states(m, cfg, protocols, ctrl[:, 0])

@@ -21,6 +21,9 @@ from scenes import SceneConfig
 
 FEED_WORLDS = 32768  # episodes per batch of worlds: 1.6e7 world-steps/s on an H100 (bench/results/gpu-pipeline-h100-physics.json)
 MAX_PENDING_BATCHES = 2  # batches handed to the writers and not yet written (bounds host memory)
+# where the driver's time went in the last generate_feed of this process (for bench/): "simulate" (protocols,
+# physics, load field, sensor chain, channel arrays), "pack", "wait for writers"
+LAST_RUN_SECONDS: dict[str, float] = {}
 
 
 @dataclass
@@ -69,8 +72,11 @@ def _groups(cfg: SceneConfig, todo: list[int], worlds: int) -> list[list[int]]:
     return [g for g in groups if g]
 
 
-def produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1) -> list[PackedShard]:
-    """Simulate the episodes of `shards` as one batch and pack each shard's recorded channels."""
+def produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, seconds: dict | None = None) -> list[PackedShard]:
+    """Simulate the episodes of `shards` as one batch and pack each shard's recorded channels (seconds: adds
+    the time spent simulating and packing)."""
+    import time
+
     from sensors.manifest import episode_seed
     from simulate.run import episode_attrs, episode_ids_of_shard, simulate_slices
 
@@ -79,7 +85,11 @@ def produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1) -> li
     seeds = [episode_seed(cfg.generation.root_seed, k) for k in gids]
     packs = {s: PackedShard(s) for s in shards}
     placed: dict[int, tuple[str, dict, int, int]] = {}
+    seconds = {} if seconds is None else seconds
+    t0 = time.perf_counter()
     for pos, protos, arrays in simulate_slices(cfg, seeds, sensor, threads, gids):
+        t1 = time.perf_counter()
+        seconds["simulate"] = seconds.get("simulate", 0.0) + t1 - t0
         runs: dict[int, list[int]] = {}
         for j, i in enumerate(pos):
             runs.setdefault(owner[gids[i]], []).append(j)
@@ -91,6 +101,8 @@ def produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1) -> li
             for r, j in enumerate(rows):
                 i = pos[j]
                 placed[gids[i]] = (f"ep-{gids[i]:06d}", episode_attrs(seeds[i], protos[j], gids[i]), len(p.pieces) - 1, r)
+        t0 = time.perf_counter()
+        seconds["pack"] = seconds.get("pack", 0.0) + t0 - t1
     for k in gids:
         packs[owner[k]].episodes.append(placed[k])
     return [packs[s] for s in shards]
@@ -163,12 +175,19 @@ def generate_feed(
                                                "writer process died (complete shards are kept: rerun to resume)")
                     submit(p)
 
+    import time
+
+    LAST_RUN_SECONDS.clear()
     try:
         for b, group in enumerate(_groups(cfg, todo, worlds or FEED_WORLDS)):
+            t0 = time.perf_counter()
             collect(b - MAX_PENDING_BATCHES)  # bounded memory: at most MAX_PENDING_BATCHES batches not yet written
-            for p in produce(cfg, group, sensor, threads):
+            LAST_RUN_SECONDS["wait for writers"] = LAST_RUN_SECONDS.get("wait for writers", 0.0) + time.perf_counter() - t0
+            for p in produce(cfg, group, sensor, threads, LAST_RUN_SECONDS):
                 batch_of[p.shard] = b
                 submit(p)
+        t0 = time.perf_counter()
         collect(len(todo))
+        LAST_RUN_SECONDS["wait for writers"] = LAST_RUN_SECONDS.get("wait for writers", 0.0) + time.perf_counter() - t0
     finally:
         pool.shutdown(wait=True, cancel_futures=True)

@@ -238,6 +238,42 @@ def target_waveform(proto: EpisodeProtocol, cfg: SceneConfig, t_s: np.ndarray) -
     return WAVEFORMS[proto.kind](proto, cfg, t - cfg.protocol.settle_s)
 
 
+def _sinusoid_batch(amp: np.ndarray, f: np.ndarray, cfg: SceneConfig, tau: np.ndarray) -> np.ndarray:
+    on = (tau >= 0.0) & (tau <= cfg.protocol.cycles / f)
+    return np.where(on, amp * 0.5 * (1.0 - np.cos(2.0 * np.pi * f * tau)), 0.0)
+
+
+def _hold_batch(amp: np.ndarray, f: np.ndarray, cfg: SceneConfig, tau: np.ndarray) -> np.ndarray:
+    u = np.clip(tau / cfg.protocol.ramp_s, 0.0, 1.0)
+    return amp * 0.5 * (1.0 - np.cos(np.pi * u))
+
+
+# kinds whose waveform depends only on (amplitude, frequency): the same expressions over (E, 1) columns, so
+# a batch of episodes is one array expression, equal bit for bit to the per-episode WAVEFORMS
+BATCH_WAVEFORMS = {"sinusoid": _sinusoid_batch, "hold": _hold_batch}
+
+
+def target_waveforms(protos: list[EpisodeProtocol], cfg: SceneConfig, t_s: np.ndarray) -> np.ndarray:
+    """(E, len(t_s)) `target_waveform` of every protocol at the times t_s (1-D); one array expression for
+    the kinds in BATCH_WAVEFORMS (the GPU path makes controls for 32k episodes at a time)."""
+    t = np.asarray(t_s, dtype=float)
+    kinds = {p.kind for p in protos}
+    if len(kinds) == 1 and (kind := kinds.pop()) in BATCH_WAVEFORMS:
+        amp = np.array([p.amplitude for p in protos])[:, None]
+        f = np.array([p.frequency_hz for p in protos])[:, None]
+        return BATCH_WAVEFORMS[kind](amp, f, cfg, t[None, :] - cfg.protocol.settle_s)
+    return np.stack([target_waveform(p, cfg, t) for p in protos]) if protos else np.zeros((0, t.size))
+
+
+def xy_waveforms(protos: list[EpisodeProtocol], cfg: SceneConfig, t_s: np.ndarray) -> np.ndarray:
+    """(E, len(t_s), 2) `xy_waveform` of every protocol (a broadcast offset where none has a stroke)."""
+    t = np.asarray(t_s, dtype=float)
+    if any("stroke_xy_m" in p.params for p in protos):
+        return np.stack([xy_waveform(p, cfg, t) for p in protos])
+    off = np.array([np.asarray(p.offset_xy_m, float) for p in protos]).reshape(len(protos), 1, 2)
+    return np.broadcast_to(off, (len(protos), t.size, 2))
+
+
 def xy_waveform(proto: EpisodeProtocol, cfg: SceneConfig, t_s: np.ndarray) -> np.ndarray:
     """Commanded indenter x/y (m) at times t_s: shape t_s.shape + (2,). A protocol with a tangential
     stroke puts `stroke_xy_m` (the displacement at the end, (2,)) and `stroke_start_s`/`stroke_end_s` in

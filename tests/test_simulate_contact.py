@@ -226,3 +226,18 @@ def test_sensor_chain_on_device_fields_equals_host_fields():
         assert a.keys() == b.keys() and a["adc"].std() > 0
         for k in a:
             np.testing.assert_array_equal(b[k], a[k], err_msg=f"{control} {k}")
+
+
+@pytest.mark.parametrize("kind", ["sinusoid", "hold", "staircase"])
+def test_batched_waveforms_equal_per_episode(kind):
+    """The controls of a batch are one array expression for sinusoid/hold (32k episodes on the GPU path):
+    bit for bit the per-episode waveforms; other kinds go episode by episode."""
+    from simulate.protocols import target_waveform, target_waveforms, xy_waveform, xy_waveforms
+
+    extra = {"hold": ["protocol.kind=hold", "protocol.control=force"], "staircase": []}.get(kind, [])
+    cfg = load_scene("fabric_1" if kind == "staircase" else "cnt_pdms", FAST + extra if kind != "staircase" else [])
+    protos = [make_episode_protocol(cfg, s) for s in range(5)]
+    assert {p.kind for p in protos} == {kind}
+    t = np.linspace(-0.1, 3.0, 701)
+    np.testing.assert_array_equal(target_waveforms(protos, cfg, t), np.stack([target_waveform(p, cfg, t) for p in protos]))
+    np.testing.assert_array_equal(xy_waveforms(protos, cfg, t), np.stack([xy_waveform(p, cfg, t) for p in protos]))
