@@ -199,6 +199,68 @@ def stages(device: str, batch: int) -> dict:
             "seconds": t, "serial_samples_per_s": samples / total}
 
 
+def chain_profile(device: str, episodes: int) -> dict:
+    """Seconds of each step of the sensor stage for one slice of `episodes` (synchronized after each), on
+    a synthetic load: the per-taxel channel sum as C tile reductions vs the per-row kernel, the kernels,
+    and the copies back."""
+    import warp as wp
+
+    from sensors import electronics as el
+    from sensors.registry import make_sensor
+    from sensors.taxel_warp import TaxelChainWarp, drive_on_device, scaled_on_device
+    from simulate.load_field_warp import load_field_warp
+
+    cfg = _cfg([], device)
+    s = make_sensor(cfg, "warp", device)
+    T, N = 620, cfg.pad.n_taxels
+    rng = np.random.default_rng(0)
+    tt = np.arange(T) / 100.0
+    depth = 1e-4 * np.sin(np.pi * tt)[None, :] * rng.uniform(0.5, 1.0, (episodes, 1))
+    pos = np.stack([np.zeros((episodes, T)), np.zeros((episodes, T)), -depth], -1)
+    force = np.stack([np.zeros((episodes, T)), np.zeros((episodes, T)), 5e4 * depth], -1)
+    t: dict[str, float] = {}
+
+    def step(name, fn):
+        wp.synchronize_device(device)
+        t0 = time.perf_counter()
+        r = fn()
+        wp.synchronize_device(device)
+        t[name] = t.get(name, 0.0) + time.perf_counter() - t0
+        return r
+
+    for rep in range(2):  # the first pass compiles; the second is timed
+        t.clear()
+        deform, _, _ = step("load field (upload + kernels)", lambda: load_field_warp(cfg, pos, force, device, to_host=False))
+        d = step("drive (kernel)", lambda: drive_on_device(deform, cfg.pad.thickness_m))
+        chain = step("taxel chain: set-up", lambda: TaxelChainWarp(s.tp, episodes, N, device))
+        _, st_d, c_d = step("taxel chain: kernel", lambda: chain.run_device(d, T, s.mode))
+        tc = np.arange(N)
+        step("channel sum: C tile reductions per row", lambda: _tiled(el, c_d, st_d, tc, N, (episodes, T, N), device))
+        g_d, _ = step("channel sum: per-row kernel", lambda: el.sum_channels_warp(c_d, st_d, tc, N, 1e-6, (episodes, T, N), device))
+        e = cfg.sensor.electronics
+        noise = el.NoiseSeeds(list(range(episodes)), e.white_noise_v, e.pink_noise_v)
+        ro = step("readout (kernel + adc copy back)", lambda: el.readout_warp(g_d, (episodes, T, N), noise, s.ep, None, device, keep={"adc"}))
+        step("force_taxel (kernel + copy back)", lambda: scaled_on_device(st_d, s.tp.taxel_area_m2).numpy())
+        step("adc int32 -> int16 (host)", lambda: ro[0]["adc"].astype(np.int16))
+    print(f"sensor stage, one slice of {episodes} episodes x {T} samples x {N} taxels:")
+    for k, v in t.items():
+        print(f"  {k:42s} {v:7.3f} s")
+    return {"episodes": episodes, "samples": episodes * T, "seconds": dict(t)}
+
+
+def _tiled(el, c_d, st_d, tc, N, shape, device):
+    """The general channel sum (C tile reductions per row), forced for a per-taxel map."""
+    import warp as wp
+
+    E, T, _ = shape
+    g = wp.empty(E * T * N, dtype=wp.float64, device=device)
+    force = wp.empty(E * T, dtype=wp.float64, device=device)
+    tcd = wp.array(np.asarray(tc, np.int32), dtype=wp.int32, device=device)
+    wp.launch_tiled(el.sum_channels_kernel, dim=[E * T], inputs=[c_d, st_d, tcd, N, N, 1e-6, g, force],
+                    block_dim=el.REDUCE_BLOCK if device.startswith("cuda") else 1, device=device)
+    return g, force
+
+
 def writer_vs_episode_length(lengths: list[int], total_samples: int) -> dict:
     """HDF5 writer alone (no physics): MB/s of the compact 36-taxel record against episode length, and the raw
     write of the same bytes to the same disk. The per-episode cost (groups, datasets, attributes) is fixed."""
@@ -311,6 +373,8 @@ def main() -> None:
         res["equivalence"] = equivalence(a.device)
     if "writer" in parts:
         res["writer"] = writer_vs_episode_length([620, 3020, 12000, 60000], 3_000_000)
+    if "chain" in parts:
+        res["chain_profile"] = chain_profile(a.device, a.stage_batch)
     if "stages" in parts:
         res["stages"] = stages(a.device, a.stage_batch)
     if "e2e" in parts:

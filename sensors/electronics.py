@@ -367,14 +367,39 @@ def readout_kernel(
     st_pink[tid] = b
 
 
+@wp.kernel
+def taxel_channels_kernel(
+    cond: wp.array(dtype=wp.float32),  # [E*T*N]
+    stress: wp.array(dtype=wp.float32),  # [E*T*N]
+    n_taxels: int,
+    area: float,
+    g_out: wp.array(dtype=wp.float64),  # [E*T*N]: channel n = taxel n
+    force_out: wp.array(dtype=wp.float64),  # [E*T]
+):
+    # one bridge per taxel (sensor.readout = taxel): the channel conductance is the taxel's; one thread per
+    # (episode, step) row sums the force in taxel order (the same order on every device)
+    et = wp.tid()
+    base = et * n_taxels
+    f = wp.float64(0.0)
+    for j in range(n_taxels):
+        f += wp.float64(stress[base + j])
+        g_out[base + j] = wp.float64(cond[base + j])
+    force_out[et] = f * wp.float64(area)
+
+
 def sum_channels_warp(
     cond: wp.array, stress: wp.array, taxel_channel: np.ndarray, n_channels: int, area_m2: float,
     shape: tuple[int, int, int], device: str,
 ):
-    """Flat [E*T*N] taxel conductance and stress on the device -> channel conductance [E*T*C] and force [E*T]."""
+    """Flat [E*T*N] taxel conductance and stress on the device -> channel conductance [E*T*C] and force [E*T].
+    One channel per taxel (C = N, channel n = taxel n) takes a plain per-row kernel instead of C tile
+    reductions per row (bench_gpu_pipeline.py --parts chain times both)."""
     E, T, N = shape
     g = wp.empty(E * T * n_channels, dtype=wp.float64, device=device)
     force = wp.empty(E * T, dtype=wp.float64, device=device)
+    if n_channels == N and np.array_equal(taxel_channel, np.arange(N)):
+        wp.launch(taxel_channels_kernel, dim=E * T, inputs=[cond, stress, N, float(area_m2), g, force], device=device)
+        return g, force
     tc = wp.array(np.asarray(taxel_channel, np.int32), dtype=wp.int32, device=device)
     wp.launch_tiled(
         sum_channels_kernel, dim=[E * T], inputs=[cond, stress, tc, N, n_channels, float(area_m2), g, force],

@@ -3,8 +3,8 @@
 Why (bench/README.md): MuJoCo Warp runs near its peak only with 16k-32k worlds per batch, and HDF5 at that rate
 needs several host cores; worker processes that each simulate their own shard time-slice the GPU with smaller
 batches. Here the driver simulates the episodes of several shards as one batch of worlds (FEED_WORLDS), then
-hands each shard's recorded channels, stacked per slice, to a writer process (spawned; one shard per task)
-while it simulates the next batch. The files are those of `simulate.run.write_shard`: an episode's channels do
+hands each shard's recorded channels, stacked per slice and copied once into shared memory, to a writer process
+(spawned; one shard per task) while it simulates the next batch. The files are those of `simulate.run.write_shard`: an episode's channels do
 not depend on the batch it ran in. A writer that dies is replaced and its shard resubmitted (up to
 max_retries); finished shards stay, so a rerun resumes at the missing ones.
 """
@@ -29,16 +29,51 @@ LAST_RUN_SECONDS: dict[str, float] = {}
 @dataclass
 class PackedShard:
     """One shard's recorded channels, as the producer made them: pieces of stacked episodes (one per simulated
-    slice), and for each episode in file order its id, attrs and (piece, row)."""
+    slice), and for each episode in file order its id, attrs and (piece, row). `share()` moves the stacked
+    arrays into one shared-memory block (what crosses to the writer is then only this metadata)."""
 
     shard: int
     specs: dict[str, tuple[str, tuple[str, ...], str, bool]] = field(default_factory=dict)  # name -> units, dims, desc, per_episode
     pieces: list[dict[str, np.ndarray]] = field(default_factory=list)
     episodes: list[tuple[str, dict, int, int]] = field(default_factory=list)  # (id, attrs, piece, row), in global order
+    shm_name: str | None = None
+    layout: list[dict[str, tuple[int, str, tuple[int, ...]]]] = field(default_factory=list)  # piece -> name -> (offset, dtype, shape)
 
     @property
     def n_episodes(self) -> int:
         return len(self.episodes)
+
+    def share(self):
+        """Copy the per-episode arrays into a new shared-memory block; returns the block (the caller unlinks
+        it), or None where /dev/shm has no room for it (the arrays then travel pickled, as they are)."""
+        import shutil
+        from multiprocessing import shared_memory
+
+        per_ep = [n for n, spec in self.specs.items() if spec[3]]
+        size = sum(piece[n].nbytes for piece in self.pieces for n in per_ep)
+        try:
+            free = shutil.disk_usage("/dev/shm").free
+        except OSError:
+            free = 0
+        if free < 2 * size:  # a full tmpfs would kill this process with SIGBUS on the copy
+            return None
+        shm = shared_memory.SharedMemory(create=True, size=max(1, size))
+        offset = 0
+        for piece in self.pieces:
+            where = {}
+            for n in per_ep:
+                a = piece.pop(n)
+                np.ndarray(a.shape, a.dtype, buffer=shm.buf, offset=offset)[...] = a
+                where[n] = (offset, a.dtype.str, a.shape)
+                offset += a.nbytes
+            self.layout.append(where)
+        self.shm_name = shm.name
+        return shm
+
+    def arrays(self, buf) -> list[dict[str, np.ndarray]]:
+        """The pieces with their shared arrays as views of `buf` (the attached block)."""
+        return [{**piece, **{n: np.ndarray(shape, np.dtype(dt), buffer=buf, offset=off) for n, (off, dt, shape) in where.items()}}
+                for piece, where in zip(self.pieces, self.layout or [{}] * len(self.pieces))]
 
 
 def write_packed_shard(cfg: SceneConfig, out_dir: str, packed: PackedShard, sensor_attrs: dict, mjcf: str) -> tuple[int, int]:
@@ -48,12 +83,28 @@ def write_packed_shard(cfg: SceneConfig, out_dir: str, packed: PackedShard, sens
     from simulate.run import shard_writer
 
     _maybe_inject_fault(packed.shard)
-    with shard_writer(cfg, Path(out_dir), packed.shard, sensor_attrs, mjcf) as w:
-        for ep_id, attrs, piece, row in packed.episodes:
-            arrays = packed.pieces[piece]
-            ch = {name: Channel(arrays[name][row] if per_ep else arrays[name], units, dims, desc)
-                  for name, (units, dims, desc, per_ep) in packed.specs.items()}
-            w.add_episode(ep_id, ch, attrs)
+    shm = None
+    if packed.shm_name is not None:
+        from multiprocessing import resource_tracker, shared_memory
+
+        shm = shared_memory.SharedMemory(name=packed.shm_name)
+        # the driver owns the block: without this the tracker of this process would unlink it at exit
+        resource_tracker.unregister(shm._name, "shared_memory")  # noqa: SLF001 - Python < 3.13 has no track=False
+    try:
+        pieces = packed.arrays(shm.buf) if shm is not None else packed.pieces
+        with shard_writer(cfg, Path(out_dir), packed.shard, sensor_attrs, mjcf) as w:
+            for ep_id, attrs, piece, row in packed.episodes:
+                arrays = pieces[piece]
+                ch = {name: Channel(arrays[name][row] if per_ep else arrays[name], units, dims, desc)
+                      for name, (units, dims, desc, per_ep) in packed.specs.items()}
+                w.add_episode(ep_id, ch, attrs)
+        pieces = arrays = ch = None  # drop the views before the block is closed
+    finally:
+        if shm is not None:
+            try:
+                shm.close()
+            except BufferError:  # views still held by a failing write's frames: the process cleans up
+                pass
     return packed.shard, packed.n_episodes
 
 
@@ -132,10 +183,19 @@ def generate_feed(
     ctx = mp.get_context("spawn")
     pool = ProcessPoolExecutor(writers, mp_context=ctx)
     pending: dict = {}  # future -> packed shard (kept until its file is checked, for a resubmit)
+    blocks: dict = {}  # shard -> its shared-memory block (unlinked once the shard is written)
     batch_of: dict[int, int] = {}
     attempts: dict[int, int] = {}
 
+    def release(p: PackedShard) -> None:
+        shm = blocks.pop(p.shard, None)
+        if shm:
+            shm.close()
+            shm.unlink()
+
     def submit(p: PackedShard) -> None:
+        if p.shard not in blocks:
+            blocks[p.shard] = p.share()
         attempts[p.shard] = attempts.get(p.shard, 0) + 1
         pending[pool.submit(write_packed_shard, cfg, str(out), p, sensor_attrs, mjcf)] = p
 
@@ -162,6 +222,7 @@ def generate_feed(
                                                f"{type(exc).__name__}: {exc} (complete shards are kept: rerun to resume)") from exc
                     submit(p)
                     continue
+                release(p)
                 if on_shard:
                     on_shard(p.shard, p.n_episodes, False)
             if broken:  # a writer died: every write still in the pool is lost with it
@@ -191,3 +252,5 @@ def generate_feed(
         LAST_RUN_SECONDS["wait for writers"] = LAST_RUN_SECONDS.get("wait for writers", 0.0) + time.perf_counter() - t0
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+        for shard in list(blocks):
+            release(PackedShard(shard))

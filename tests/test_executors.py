@@ -2,6 +2,7 @@
 a killed worker's shard is retried, exhausted retries give a clear error and a rerun resumes."""
 
 import importlib.util
+from pathlib import Path
 
 import numpy as np
 
@@ -138,8 +139,11 @@ def test_gpu_feed_equals_serial_and_retries_a_killed_writer(tmp_path, monkeypatc
     marker = _inject(monkeypatch, tmp_path, 1, "exit")
     seen = []
     out = tmp_path / "feed"
+    shm = Path("/dev/shm")
+    before = set(shm.glob("psm_*")) if shm.is_dir() else set()
     executors.generate(mixed, out, workers=2, feed=True, on_shard=lambda s, n, skip: seen.append((s, n)))
     assert marker.is_file() and sorted(seen) == [(0, 2), (1, 2), (2, 2), (3, 1)]
+    assert (set(shm.glob("psm_*")) if shm.is_dir() else set()) == before  # every shared block was unlinked
     a, b = _episodes(ref, 4), _episodes(out, 4)
     assert list(a) == list(b) and len(a) == 7
     for ep in a:
