@@ -326,6 +326,8 @@ def end_to_end(device: str, per_shard: int, workers: int, shards_per_worker: int
     from simulate.protocols import make_episode_protocol
 
     samples = episodes * make_episode_protocol(cfg, 0).n_samples
+    shutil.rmtree(root, ignore_errors=True)  # the disk holds the dataset or the raw file, not both
+    root.mkdir(parents=True)
     raw = raw_write(root, nbytes)
     shutil.rmtree(root, ignore_errors=True)
     from simulate.executors import _feed_by_default

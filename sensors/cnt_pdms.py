@@ -82,6 +82,7 @@ class CntPdmsSensor:
         if len(seeds) != E:
             raise ValueError(f"need one seed per episode ({E}); got {len(seeds)}")
         want = set(self.cfg.generation.record or OUTPUTS)  # outputs to return (and copy off the device)
+        adc_dtype = np.int16 if self.ep.adc_bits <= 16 else np.int32
         ro_names = {"resistance": "resistance", "bridge_v": "bridge_v", "adc": "adc", "voltage": "filtered_v",
                     "resistance_measured": "resistance_measured"}
         if self.backend == "numpy":
@@ -102,18 +103,18 @@ class CntPdmsSensor:
             keep_ro = {ro_names[k] for k in want if k in ro_names}
             e = self.cfg.sensor.electronics
             noise = el.NoiseSeeds(seeds, e.white_noise_v, e.pink_noise_v)  # drawn in the readout kernel
-            ro, _ = el.readout_warp(g_d, (E, T, self.n_channels), noise, self.ep, None, self.device, keep=keep_ro)
+            ro, _ = el.readout_warp(g_d, (E, T, self.n_channels), noise, self.ep, None, self.device, keep=keep_ro,
+                                    adc_dtype=adc_dtype)
             force = f_d.numpy().reshape(E, T) if "force" in want else None
             strain = s_d.numpy().reshape(E, T, N) if "strain" in want else None
             stress = None
             if "force_taxel" in want:  # stress x area on the device: one float32 multiply, as in numpy
                 force_taxel = scaled_on_device(st_d, self.tp.taxel_area_m2).numpy().reshape(E, T, N)
-        adc_dtype = np.int16 if self.ep.adc_bits <= 16 else np.int32
         make = {
             "strain": lambda: strain,
             "force_taxel": lambda: force_taxel if stress is None else (stress * np.float32(self.tp.taxel_area_m2)).astype(np.float32),
             "force": lambda: force.astype(np.float32),
-            "adc": lambda: ro["adc"].astype(adc_dtype),
+            "adc": lambda: ro["adc"].astype(adc_dtype, copy=False),
             **{k: (lambda r=r: ro[r].astype(np.float32)) for k, r in ro_names.items() if k != "adc"},
         }
         return {k: make[k]() for k in OUTPUTS if k in want}

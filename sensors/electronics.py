@@ -387,6 +387,12 @@ def taxel_channels_kernel(
     force_out[et] = f * wp.float64(area)
 
 
+@wp.kernel
+def _codes_int16(src: wp.array(dtype=wp.int32), dst: wp.array(dtype=wp.int16)):
+    i = wp.tid()
+    dst[i] = wp.int16(src[i])
+
+
 def sum_channels_warp(
     cond: wp.array, stress: wp.array, taxel_channel: np.ndarray, n_channels: int, area_m2: float,
     shape: tuple[int, int, int], device: str,
@@ -410,13 +416,14 @@ def sum_channels_warp(
 
 def readout_warp(
     g: wp.array, shape: tuple[int, int, int], noise: np.ndarray | NoiseSeeds, ep: ElectronicsParams,
-    state: ElectronicsState | None, device: str, keep=None, t0: int = 0,
+    state: ElectronicsState | None, device: str, keep=None, t0: int = 0, adc_dtype=np.int32,
 ):
     """Channel conductance on the device (flat [E*T*C]) -> (dict of numpy [E,T,C] outputs, state).
     noise: [E,T,C] noise at the ADC input (V, uploaded), or NoiseSeeds: drawn in the kernel, no host work;
     t0: absolute step of the first sample (with NoiseSeeds, run in time chunks by passing the returned state
     and t0 = samples done: the same noise as one call). keep: names of the outputs to copy back to the host
-    (default all: resistance, bridge_v, adc, filtered_v, resistance_measured)."""
+    (default all: resistance, bridge_v, adc, filtered_v, resistance_measured); adc_dtype=int16 narrows the
+    codes on the device (an ADC of <= 16 bits), halving what crosses the bus."""
     E, T, C = shape
     d = device
     st = state or ElectronicsState.zeros(E * C)
@@ -446,5 +453,9 @@ def readout_warp(
         device=d,
     )
     names = ["resistance", "bridge_v", "adc", "filtered_v", "resistance_measured"]
+    if np.dtype(adc_dtype) == np.int16:  # narrow the codes on the device: half the bytes to copy back
+        codes = wp.empty(E * T * C, dtype=wp.int16, device=d)
+        wp.launch(_codes_int16, dim=E * T * C, inputs=[outs[2], codes], device=d)
+        outs[2] = codes
     result = {n: o.numpy().reshape(E, T, C) for n, o in zip(names, outs) if keep is None or n in keep}
     return result, ElectronicsState(filt.numpy(), primed.numpy(), pink.numpy())

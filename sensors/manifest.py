@@ -158,14 +158,24 @@ def describe_shard(path: str | os.PathLike, *, with_sha256: bool = True) -> dict
         seeds = [rec.episode_attrs(ep).get("seed") for ep in eps]
         sseed = rec.attrs.get("shard_seed")
         cfg = rec.config_sha256
+    return shard_entry(path, eps, seeds, cfg, sseed, with_sha256=with_sha256)
+
+
+def shard_entry(
+    path: str | os.PathLike, episodes: list[str], episode_seeds: list, config_sha256: str, shard_seed: int | None = None,
+    *, with_sha256: bool = True,
+) -> dict[str, Any]:
+    """Manifest entry of a shard whose episodes and seeds the caller knows (the process that just wrote it:
+    no need to read every episode back); `describe_shard` reads them from the file."""
+    path = Path(path)
     return {
         "file": path.name,
         "sha256": file_sha256(path) if with_sha256 else None,
         "bytes": path.stat().st_size,
-        "episodes": eps,
-        "episode_seeds": seeds,
-        "shard_seed": sseed,
-        "config_sha256": cfg,
+        "episodes": list(episodes),
+        "episode_seeds": list(episode_seeds),
+        "shard_seed": shard_seed,
+        "config_sha256": config_sha256,
     }
 
 
@@ -302,12 +312,21 @@ def build_manifest(
     split_seed: int | None = None,
     fractions: Sequence[float] = (0.8, 0.1, 0.1),
     extra: Mapping[str, Any] | None = None,
+    described: Mapping[int, dict[str, Any]] | None = None,
 ) -> Path:
-    """Describe shards 0..n_shards-1 (all must be complete), split their episodes, write manifest."""
+    """Describe shards 0..n_shards-1 (all must be complete), split their episodes, write manifest.
+    described: entries already made by the processes that wrote those shards (`shard_entry`), used where
+    the file still has the size they recorded."""
     missing = first_missing_shards(directory, n_shards, config_sha256)
     if missing:
         raise ValueError(f"{directory}: shards {missing[:10]} are missing or incomplete")
-    shards = [describe_shard(shard_path(directory, i)) for i in range(n_shards)]
+    described = described or {}
+
+    def entry(i: int) -> dict[str, Any]:
+        d, path = described.get(i), shard_path(directory, i)
+        return d if d is not None and d["bytes"] == path.stat().st_size else describe_shard(path)
+
+    shards = [entry(i) for i in range(n_shards)]
     ids = [episode_key(s["file"], ep) for s in shards for ep in s["episodes"]]
     seed = split_seed if split_seed is not None else (root_seed or 0)
     return write_manifest(

@@ -145,17 +145,18 @@ def generate(
             on_shard(s, len(run.episode_ids_of_shard(cfg, s)), True)
     if threads is None:
         threads = max(1, cfg.generation.threads // workers) if executor == "local" else 1
+    described = None
     if todo:
         kw = dict(backend=backend, device=device, threads=threads)
         if executor == "local" and (feed if feed is not None else _feed_by_default(cfg)):
             from simulate.feed import generate_feed
 
-            generate_feed(cfg, out, todo, workers, max_retries=max_retries, on_shard=on_shard, **kw)
+            described = generate_feed(cfg, out, todo, workers, max_retries=max_retries, on_shard=on_shard, **kw)
         elif executor == "local":
             _run_local(cfg, out, todo, workers, max_retries, on_shard, kw)
         else:
             _run_ray(cfg, out, todo, workers, address, max_retries, on_shard, kw)
-    return run.write_dataset_manifest(cfg, out)
+    return run.write_dataset_manifest(cfg, out, described)
 
 
 def _feed_by_default(cfg: SceneConfig) -> bool:

@@ -76,8 +76,11 @@ class PackedShard:
                 for piece, where in zip(self.pieces, self.layout or [{}] * len(self.pieces))]
 
 
-def write_packed_shard(cfg: SceneConfig, out_dir: str, packed: PackedShard, sensor_attrs: dict, mjcf: str) -> tuple[int, int]:
-    """Writer task: write one packed shard atomically (what write_shard would write); returns (shard, episodes)."""
+def write_packed_shard(cfg: SceneConfig, out_dir: str, packed: PackedShard, sensor_attrs: dict, mjcf: str) -> dict:
+    """Writer task: write one packed shard atomically (what write_shard would write); returns its manifest
+    entry (sha256 of the file just written, from the page cache), so the driver need not read it back."""
+    from sensors.manifest import shard_entry
+    from simulate.run import config_sha256
     from sensors.recording import Channel
     from simulate.executors import _maybe_inject_fault
     from simulate.run import shard_writer
@@ -105,7 +108,7 @@ def write_packed_shard(cfg: SceneConfig, out_dir: str, packed: PackedShard, sens
                 shm.close()
             except BufferError:  # views still held by a failing write's frames: the process cleans up
                 pass
-    return packed.shard, packed.n_episodes
+    return shard_entry(w.path, [e[0] for e in packed.episodes], [e[1]["seed"] for e in packed.episodes], config_sha256(cfg))
 
 
 def _groups(cfg: SceneConfig, todo: list[int], worlds: int) -> list[list[int]]:
@@ -163,8 +166,9 @@ def generate_feed(
     cfg: SceneConfig, out: Path, todo: list[int], writers: int, *, backend: str = "warp", device: str = "cpu",
     threads: int = 1, max_retries: int = 3, on_shard: Callable[[int, int, bool], None] | None = None,
     worlds: int | None = None,
-) -> None:
-    """Make the shards `todo` of cfg's dataset in `out`: simulate here, write in `writers` processes."""
+) -> dict[int, dict]:
+    """Make the shards `todo` of cfg's dataset in `out`: simulate here, write in `writers` processes.
+    Returns the writers' manifest entries by shard."""
     import multiprocessing as mp
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
@@ -185,6 +189,7 @@ def generate_feed(
     pending: dict = {}  # future -> packed shard (kept until its file is checked, for a resubmit)
     blocks: dict = {}  # shard -> its shared-memory block (unlinked once the shard is written)
     batch_of: dict[int, int] = {}
+    entries: dict[int, dict] = {}
     attempts: dict[int, int] = {}
 
     def release(p: PackedShard) -> None:
@@ -211,7 +216,7 @@ def generate_feed(
             for f in done:
                 p = pending.pop(f)
                 try:
-                    f.result()
+                    entries[p.shard] = f.result()
                     _check_written(out, p.shard, sha)
                 except BrokenProcessPool:
                     broken.append(p)
@@ -254,3 +259,4 @@ def generate_feed(
         pool.shutdown(wait=True, cancel_futures=True)
         for shard in list(blocks):
             release(PackedShard(shard))
+    return entries

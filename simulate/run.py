@@ -292,8 +292,9 @@ def generate(
     return write_dataset_manifest(cfg, out)
 
 
-def write_dataset_manifest(cfg: SceneConfig, out_dir: str | Path) -> Path:
-    """Describe the (complete) shards of cfg's dataset in out_dir and write manifest.json (the driver's job)."""
+def write_dataset_manifest(cfg: SceneConfig, out_dir: str | Path, described: dict[int, dict] | None = None) -> Path:
+    """Describe the (complete) shards of cfg's dataset in out_dir and write manifest.json (the driver's job);
+    described: manifest entries the writers already made (sensors.manifest.shard_entry)."""
     return build_manifest(
         Path(out_dir),
         name=cfg.name,
@@ -302,4 +303,5 @@ def write_dataset_manifest(cfg: SceneConfig, out_dir: str | Path) -> Path:
         config_sha256=config_sha256(cfg),
         root_seed=cfg.generation.root_seed,
         extra={"paper": cfg.paper, "family": cfg.sensor.family, "episodes": cfg.generation.episodes},
+        described=described,
     )

@@ -155,3 +155,10 @@ def test_gpu_feed_equals_serial_and_retries_a_killed_writer(tmp_path, monkeypatc
             for ep in ra.episode_ids:
                 np.testing.assert_equal(rb.episode_attrs(ep), ra.episode_attrs(ep))
             assert ra.sensor_attrs.keys() == rb.sensor_attrs.keys()
+    # the manifest entries the writers made equal what the driver reads back from the files
+    from sensors.manifest import describe_shard, verify_manifest
+
+    ma, mb = read_manifest(ref), read_manifest(out)
+    assert [s["episode_seeds"] for s in mb["shards"]] == [s["episode_seeds"] for s in ma["shards"]]
+    assert ma["splits"] == mb["splits"] and verify_manifest(out) == []
+    assert mb["shards"] == [describe_shard(shard_path(out, i)) for i in range(4)]
