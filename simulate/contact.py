@@ -221,10 +221,11 @@ def run_episodes(cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: in
 
 def iter_load_batches(
     cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1, slice_episodes: int | None = None,
-    device_fields: str | None = None,
+    device_fields: str | None = None, physics: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Iterator[tuple[slice, LoadBatch]]:
     """Simulate E episodes (same n_samples) in one batch of worlds, then yield their load fields in slices
-    of at most `slice_episodes` episodes (default all): (slice of protocols, LoadBatch).
+    of at most `slice_episodes` episodes (default all): (slice of protocols, LoadBatch). physics: their
+    (sensordata, target) from `simulate_sensors`, already run elsewhere (the GPU feed's physics process).
 
     The physics wants many worlds at once; the load field and the sensor chain after it need device memory
     per episode, so they go slice by slice. device_fields: on the MuJoCo Warp path, leave deformation,
@@ -236,7 +237,7 @@ def iter_load_batches(
         module, fn = CONTACT_STAGES[cfg.protocol.kind].split(":")
         yield slice(0, len(protocols)), getattr(importlib.import_module(module), fn)(cfg, protocols, threads)
         return
-    sens, target = simulate_sensors(cfg, protocols, threads)
+    sens, target = physics if physics is not None else simulate_sensors(cfg, protocols, threads)
     E = len(protocols)
     step = E if slice_episodes is None else max(1, slice_episodes)
     for a in range(0, E, step):

@@ -1,12 +1,18 @@
-"""GPU feed: one process owns the GPU and steps big batches of worlds; a pool of writer processes writes the shards.
+"""GPU feed: big batches of worlds on one GPU, a pool of writer processes for the shards.
 
 Why (bench/README.md): MuJoCo Warp runs near its peak only with 16k-32k worlds per batch, and HDF5 at that rate
 needs several host cores; worker processes that each simulate their own shard time-slice the GPU with smaller
-batches. Here the driver simulates the episodes of several shards as one batch of worlds (FEED_WORLDS), then
-hands each shard's recorded channels, stacked per slice and copied once into shared memory, to a writer process
-(spawned; one shard per task) while it simulates the next batch. The files are those of `simulate.run.write_shard`: an episode's channels do
-not depend on the batch it ran in. A writer that dies is replaced and its shard resubmitted (up to
-max_retries); finished shards stay, so a rerun resumes at the missing ones.
+batches. Here a three-stage pipeline runs over batches of several shards' episodes (FEED_WORLDS):
+
+1. a physics process steps batch b+1 (`step_worlds`: protocols, controls, MuJoCo Warp) and hands its
+   sensordata over in shared memory;
+2. the driver runs the load field and the sensor chain of batch b on the same GPU, slice by slice, and copies
+   each shard's recorded channels once into shared memory (`produce`);
+3. writer processes (spawned; one shard per task) write the shards and make their manifest entries.
+
+The files are those of `simulate.run.write_shard`: an episode's channels do not depend on the batch it ran in.
+A writer that dies is replaced and its shard resubmitted (up to max_retries); finished shards stay, so a
+rerun resumes at the missing ones. Where /dev/shm has no room, the arrays travel pickled instead.
 """
 
 from __future__ import annotations
@@ -24,6 +30,70 @@ MAX_PENDING_BATCHES = 2  # batches handed to the writers and not yet written (bo
 # where the driver's time went in the last generate_feed of this process (for bench/): "simulate" (protocols,
 # physics, load field, sensor chain, channel arrays), "pack", "wait for writers"
 LAST_RUN_SECONDS: dict[str, float] = {}
+
+
+def _shm_room(nbytes: int) -> bool:
+    """Whether /dev/shm can take a block of nbytes (a full tmpfs would kill the writer with SIGBUS)."""
+    import shutil
+
+    try:
+        return shutil.disk_usage("/dev/shm").free >= 2 * nbytes
+    except OSError:
+        return False
+
+
+def _attach(name: str):
+    """Attach a block another process owns (this process's resource tracker must not unlink it at exit)."""
+    from multiprocessing import resource_tracker, shared_memory
+
+    shm = shared_memory.SharedMemory(name=name)
+    resource_tracker.unregister(shm._name, "shared_memory")  # noqa: SLF001 - Python < 3.13 has no track=False
+    return shm
+
+
+def _share(arrays: list[np.ndarray]):
+    """Copy arrays into one new shared-memory block: (block, [(offset, dtype, shape)]), or (None, None) where
+    /dev/shm has no room (the caller then sends the arrays pickled)."""
+    from multiprocessing import shared_memory
+
+    size = sum(a.nbytes for a in arrays)
+    if not _shm_room(size):
+        return None, None
+    shm = shared_memory.SharedMemory(create=True, size=max(1, size))
+    where, offset = [], 0
+    for a in arrays:
+        np.ndarray(a.shape, a.dtype, buffer=shm.buf, offset=offset)[...] = a
+        where.append((offset, a.dtype.str, a.shape))
+        offset += a.nbytes
+    return shm, where
+
+
+def _views(buf, where: list[tuple[int, str, tuple[int, ...]]]) -> list[np.ndarray]:
+    return [np.ndarray(shape, np.dtype(dt), buffer=buf, offset=off) for off, dt, shape in where]
+
+
+def step_worlds(cfg: SceneConfig, gids: list[int], threads: int = 1) -> tuple[list, dict]:
+    """Physics task (in the feed's physics process): the protocols of episodes `gids` and, per length group,
+    their (sensordata, target) from `simulate_sensors`, handed over in a shared-memory block the receiver
+    unlinks: ({n_samples: (block name, layout)} or the arrays themselves where /dev/shm has no room)."""
+    from sensors.manifest import episode_seed
+    from simulate.contact import simulate_sensors
+    from simulate.run import episode_protocols, length_groups
+
+    protos = episode_protocols(cfg, [episode_seed(cfg.generation.root_seed, k) for k in gids], gids)
+    out = {}
+    for n, idx in length_groups(protos):
+        sens, target = simulate_sensors(cfg, [protos[i] for i in idx], threads)
+        shm, where = _share([sens, target])
+        if shm is None:
+            out[n] = (sens, target)
+        else:
+            from multiprocessing import resource_tracker
+
+            resource_tracker.unregister(shm._name, "shared_memory")  # noqa: SLF001 - the receiver owns it now
+            out[n] = (shm.name, where)
+            shm.close()
+    return protos, out
 
 
 @dataclass
@@ -44,36 +114,26 @@ class PackedShard:
         return len(self.episodes)
 
     def share(self):
-        """Copy the per-episode arrays into a new shared-memory block; returns the block (the caller unlinks
+        """Move the per-episode arrays into a new shared-memory block; returns the block (the caller unlinks
         it), or None where /dev/shm has no room for it (the arrays then travel pickled, as they are)."""
-        import shutil
-        from multiprocessing import shared_memory
-
         per_ep = [n for n, spec in self.specs.items() if spec[3]]
-        size = sum(piece[n].nbytes for piece in self.pieces for n in per_ep)
-        try:
-            free = shutil.disk_usage("/dev/shm").free
-        except OSError:
-            free = 0
-        if free < 2 * size:  # a full tmpfs would kill this process with SIGBUS on the copy
+        shm, where = _share([piece[n] for piece in self.pieces for n in per_ep])
+        if shm is None:
             return None
-        shm = shared_memory.SharedMemory(create=True, size=max(1, size))
-        offset = 0
+        it = iter(where)
         for piece in self.pieces:
-            where = {}
+            self.layout.append({n: next(it) for n in per_ep})
             for n in per_ep:
-                a = piece.pop(n)
-                np.ndarray(a.shape, a.dtype, buffer=shm.buf, offset=offset)[...] = a
-                where[n] = (offset, a.dtype.str, a.shape)
-                offset += a.nbytes
-            self.layout.append(where)
+                del piece[n]
         self.shm_name = shm.name
         return shm
 
     def arrays(self, buf) -> list[dict[str, np.ndarray]]:
         """The pieces with their shared arrays as views of `buf` (the attached block)."""
-        return [{**piece, **{n: np.ndarray(shape, np.dtype(dt), buffer=buf, offset=off) for n, (off, dt, shape) in where.items()}}
-                for piece, where in zip(self.pieces, self.layout or [{}] * len(self.pieces))]
+        out = []
+        for piece, where in zip(self.pieces, self.layout or [{}] * len(self.pieces)):
+            out.append({**piece, **dict(zip(where, _views(buf, list(where.values()))))})
+        return out
 
 
 def write_packed_shard(cfg: SceneConfig, out_dir: str, packed: PackedShard, sensor_attrs: dict, mjcf: str) -> dict:
@@ -86,13 +146,7 @@ def write_packed_shard(cfg: SceneConfig, out_dir: str, packed: PackedShard, sens
     from simulate.run import shard_writer
 
     _maybe_inject_fault(packed.shard)
-    shm = None
-    if packed.shm_name is not None:
-        from multiprocessing import resource_tracker, shared_memory
-
-        shm = shared_memory.SharedMemory(name=packed.shm_name)
-        # the driver owns the block: without this the tracker of this process would unlink it at exit
-        resource_tracker.unregister(shm._name, "shared_memory")  # noqa: SLF001 - Python < 3.13 has no track=False
+    shm = _attach(packed.shm_name) if packed.shm_name is not None else None  # the driver owns the block
     try:
         pieces = packed.arrays(shm.buf) if shm is not None else packed.pieces
         with shard_writer(cfg, Path(out_dir), packed.shard, sensor_attrs, mjcf) as w:
@@ -126,9 +180,11 @@ def _groups(cfg: SceneConfig, todo: list[int], worlds: int) -> list[list[int]]:
     return [g for g in groups if g]
 
 
-def produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, seconds: dict | None = None) -> list[PackedShard]:
+def produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, seconds: dict | None = None,
+            stepped: tuple[list, dict] | None = None) -> list[PackedShard]:
     """Simulate the episodes of `shards` as one batch and pack each shard's recorded channels (seconds: adds
-    the time spent simulating and packing)."""
+    the time spent simulating and packing). stepped: `step_worlds` of these episodes, run in the physics
+    process; this process then runs only the load field and the sensor chain."""
     import time
 
     from sensors.manifest import episode_seed
@@ -140,23 +196,40 @@ def produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, secon
     packs = {s: PackedShard(s) for s in shards}
     placed: dict[int, tuple[str, dict, int, int]] = {}
     seconds = {} if seconds is None else seconds
-    t0 = time.perf_counter()
-    for pos, protos, arrays in simulate_slices(cfg, seeds, sensor, threads, gids):
-        t1 = time.perf_counter()
-        seconds["simulate"] = seconds.get("simulate", 0.0) + t1 - t0
-        runs: dict[int, list[int]] = {}
-        for j, i in enumerate(pos):
-            runs.setdefault(owner[gids[i]], []).append(j)
-        for s, rows in runs.items():
-            p = packs[s]
-            p.specs = {n: (c.units, c.dims, c.description, c.per_episode) for n, c in arrays.items()}
-            take = slice(rows[0], rows[-1] + 1) if rows[-1] - rows[0] + 1 == len(rows) else rows
-            p.pieces.append({n: (c.data[take] if c.per_episode else c.data) for n, c in arrays.items()})
-            for r, j in enumerate(rows):
-                i = pos[j]
-                placed[gids[i]] = (f"ep-{gids[i]:06d}", episode_attrs(seeds[i], protos[j], gids[i]), len(p.pieces) - 1, r)
+    protos, physics, blocks = None, None, []
+    if stepped is not None:
+        protos, physics = stepped[0], {}
+        for n, handed in stepped[1].items():
+            if isinstance(handed[0], str):  # (block name, layout): views of the block, unlinked below
+                blocks.append(_attach(handed[0]))
+                handed = tuple(_views(blocks[-1].buf, handed[1]))
+            physics[n] = handed
+    try:
         t0 = time.perf_counter()
-        seconds["pack"] = seconds.get("pack", 0.0) + t0 - t1
+        for pos, protos_s, arrays in simulate_slices(cfg, seeds, sensor, threads, gids, protos, physics):
+            t1 = time.perf_counter()
+            seconds["simulate"] = seconds.get("simulate", 0.0) + t1 - t0
+            runs: dict[int, list[int]] = {}
+            for j, i in enumerate(pos):
+                runs.setdefault(owner[gids[i]], []).append(j)
+            for s, rows in runs.items():
+                p = packs[s]
+                p.specs = {n: (c.units, c.dims, c.description, c.per_episode) for n, c in arrays.items()}
+                take = slice(rows[0], rows[-1] + 1) if rows[-1] - rows[0] + 1 == len(rows) else rows
+                p.pieces.append({n: (c.data[take] if c.per_episode else c.data) for n, c in arrays.items()})
+                for r, j in enumerate(rows):
+                    i = pos[j]
+                    placed[gids[i]] = (f"ep-{gids[i]:06d}", episode_attrs(seeds[i], protos_s[j], gids[i]), len(p.pieces) - 1, r)
+            t0 = time.perf_counter()
+            seconds["pack"] = seconds.get("pack", 0.0) + t0 - t1
+    finally:
+        physics = None
+        for shm in blocks:
+            try:
+                shm.close()
+            except BufferError:  # a view still alive (an error unwinding): the memory goes with it
+                pass
+            shm.unlink()
     for k in gids:
         packs[owner[k]].episodes.append(placed[k])
     return [packs[s] for s in shards]
@@ -243,20 +316,50 @@ def generate_feed(
 
     import time
 
+    from simulate.contact import CONTACT_STAGES
+    from simulate.run import episode_ids_of_shard
+
     LAST_RUN_SECONDS.clear()
+    seconds = LAST_RUN_SECONDS
+
+    def add(key: str, t0: float) -> None:
+        seconds[key] = seconds.get(key, 0.0) + time.perf_counter() - t0
+
+    groups = _groups(cfg, todo, worlds or FEED_WORLDS)
+    # the worlds step in their own process, one batch ahead of the load field + sensor chain here (kinds with
+    # their own contact stage run it here)
+    physics = None if cfg.protocol.kind in CONTACT_STAGES else ProcessPoolExecutor(1, mp_context=ctx)
+
+    def step(b: int):
+        return physics.submit(step_worlds, cfg, [k for s in groups[b] for k in episode_ids_of_shard(cfg, s)], threads)
+
     try:
-        for b, group in enumerate(_groups(cfg, todo, worlds or FEED_WORLDS)):
+        ahead = step(0) if physics else None
+        for b, group in enumerate(groups):
             t0 = time.perf_counter()
             collect(b - MAX_PENDING_BATCHES)  # bounded memory: at most MAX_PENDING_BATCHES batches not yet written
-            LAST_RUN_SECONDS["wait for writers"] = LAST_RUN_SECONDS.get("wait for writers", 0.0) + time.perf_counter() - t0
-            for p in produce(cfg, group, sensor, threads, LAST_RUN_SECONDS):
+            add("wait for writers", t0)
+            stepped = None
+            if physics:
+                t0 = time.perf_counter()
+                try:
+                    stepped = ahead.result()
+                except BrokenProcessPool:
+                    raise RuntimeError(f"the physics process died stepping shards {group} (complete shards are kept: "
+                                       "rerun to resume)") from None
+                add("wait for physics", t0)
+                if b + 1 < len(groups):
+                    ahead = step(b + 1)
+            for p in produce(cfg, group, sensor, threads, seconds, stepped):
                 batch_of[p.shard] = b
                 submit(p)
         t0 = time.perf_counter()
         collect(len(todo))
-        LAST_RUN_SECONDS["wait for writers"] = LAST_RUN_SECONDS.get("wait for writers", 0.0) + time.perf_counter() - t0
+        add("wait for writers", t0)
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+        if physics:
+            physics.shutdown(wait=True, cancel_futures=True)
         for shard in list(blocks):
             release(PackedShard(shard))
     return entries

@@ -70,22 +70,34 @@ class ChannelArray:
 
 def simulate_slices(
     cfg: SceneConfig, seeds: list[int], sensor: SensorModel, threads: int = 1, indices: list[int] | None = None,
+    protos: list[EpisodeProtocol] | None = None, physics: dict[int, tuple[np.ndarray, np.ndarray]] | None = None,
 ) -> Iterator[tuple[list[int], list[EpisodeProtocol], dict[str, ChannelArray]]]:
     """Simulate the episodes of `seeds` and yield their recorded channels slice by slice: (positions in
     seeds, their protocols, channel name -> ChannelArray). Episodes of one length run as one batch of worlds
     (MuJoCo Warp) or one rollout (C MuJoCo); on the GPU the load field and sensor chain then go per
-    SENSOR_SLICE episodes, with the taxel fields left on the device for a sensor that takes them."""
-    protos = [make_episode_protocol(cfg, s, None if indices is None else indices[i]) for i, s in enumerate(seeds)]
+    SENSOR_SLICE episodes, with the taxel fields left on the device for a sensor that takes them.
+    protos, physics: the episodes' protocols and, per length, (sensordata, target) of its `length_groups`
+    entry, made elsewhere (the GPU feed steps the worlds in another process)."""
+    protos = protos or episode_protocols(cfg, seeds, indices)
     engine, engine_device = physics_engine(cfg)
     gpu = engine == "mujoco_warp"
     on_device = engine_device if gpu and getattr(sensor, "device_load", False) and sensor.device == engine_device else None
-    for n in sorted({p.n_samples for p in protos}):
-        idx = [i for i, p in enumerate(protos) if p.n_samples == n]
-        for sl, batch in iter_load_batches(cfg, [protos[i] for i in idx], threads, SENSOR_SLICE if gpu else None, on_device):
+    for n, idx in length_groups(protos):
+        done = None if physics is None else physics[n]
+        for sl, batch in iter_load_batches(cfg, [protos[i] for i in idx], threads, SENSOR_SLICE if gpu else None, on_device, done):
             part = idx[sl]
             out = sensor.run_load(batch if on_device else batch.on_host(), [seeds[i] for i in part])
             batch = batch.on_host() if _records_fields(cfg) else batch
             yield part, [protos[i] for i in part], channel_arrays(batch, out, cfg, sensor)
+
+
+def episode_protocols(cfg: SceneConfig, seeds: list[int], indices: list[int] | None = None) -> list[EpisodeProtocol]:
+    return [make_episode_protocol(cfg, s, None if indices is None else indices[i]) for i, s in enumerate(seeds)]
+
+
+def length_groups(protos: list[EpisodeProtocol]) -> list[tuple[int, list[int]]]:
+    """(n_samples, positions) of the episodes of each length, shortest first: one batch of worlds each."""
+    return [(n, [i for i, p in enumerate(protos) if p.n_samples == n]) for n in sorted({p.n_samples for p in protos})]
 
 
 def _records_fields(cfg: SceneConfig) -> bool:
