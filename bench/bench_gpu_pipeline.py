@@ -332,7 +332,7 @@ def end_to_end(device: str, per_shard: int, workers: int, shards_per_worker: int
     shutil.rmtree(root, ignore_errors=True)
     from simulate.executors import _feed_by_default
 
-    mode = "gpu feed (this process simulates, workers write)" if workers > 1 and _feed_by_default(cfg) else "shard workers"
+    mode = "gpu feed (physics process, sensor chain here, writer processes)" if workers > 1 and _feed_by_default(cfg) else "shard workers"
     from simulate.feed import LAST_RUN_SECONDS
 
     r = {"workers": workers, "mode": mode, "driver_seconds": dict(LAST_RUN_SECONDS) if "feed" in mode else None, "episodes": episodes, "shards": -(-episodes // per_shard), "seconds": dt,

@@ -4,8 +4,9 @@ Why (bench/README.md): MuJoCo Warp runs near its peak only with 16k-32k worlds p
 needs several host cores; worker processes that each simulate their own shard time-slice the GPU with smaller
 batches. Here a three-stage pipeline runs over batches of several shards' episodes (FEED_WORLDS):
 
-1. a physics process steps batch b+1 (`step_worlds`: protocols, controls, MuJoCo Warp) and hands its
-   sensordata over in shared memory;
+1. PHYSICS_PROCESSES processes step the next batches (`step_worlds`: protocols, controls, MuJoCo Warp; the
+   GPU time-slices between them, so one's host work overlaps the other's physics) and hand the sensordata
+   over in shared memory;
 2. the driver runs the load field and the sensor chain of batch b on the same GPU, slice by slice, and copies
    each shard's recorded channels once into shared memory (`produce`);
 3. writer processes (spawned; one shard per task) write the shards and make their manifest entries.
@@ -27,6 +28,7 @@ from scenes import SceneConfig
 
 FEED_WORLDS = 32768  # episodes per batch of worlds: 1.6e7 world-steps/s on an H100 (bench/results/gpu-pipeline-h100-physics.json)
 MAX_PENDING_BATCHES = 2  # batches handed to the writers and not yet written (bounds host memory)
+PHYSICS_PROCESSES = 2  # each steps its own batch: one's host work (protocols, controls) overlaps the other's GPU work
 # where the driver's time went in the last generate_feed of this process (for bench/): "simulate" (protocols,
 # physics, load field, sensor chain, channel arrays), "pack", "wait for writers"
 LAST_RUN_SECONDS: dict[str, float] = {}
@@ -326,15 +328,15 @@ def generate_feed(
         seconds[key] = seconds.get(key, 0.0) + time.perf_counter() - t0
 
     groups = _groups(cfg, todo, worlds or FEED_WORLDS)
-    # the worlds step in their own process, one batch ahead of the load field + sensor chain here (kinds with
+    # the worlds step in their own processes, batches ahead of the load field + sensor chain here (kinds with
     # their own contact stage run it here)
-    physics = None if cfg.protocol.kind in CONTACT_STAGES else ProcessPoolExecutor(1, mp_context=ctx)
+    physics = None if cfg.protocol.kind in CONTACT_STAGES else ProcessPoolExecutor(PHYSICS_PROCESSES, mp_context=ctx)
 
     def step(b: int):
         return physics.submit(step_worlds, cfg, [k for s in groups[b] for k in episode_ids_of_shard(cfg, s)], threads)
 
     try:
-        ahead = step(0) if physics else None
+        ahead = [step(b) for b in range(min(PHYSICS_PROCESSES, len(groups)))] if physics else []
         for b, group in enumerate(groups):
             t0 = time.perf_counter()
             collect(b - MAX_PENDING_BATCHES)  # bounded memory: at most MAX_PENDING_BATCHES batches not yet written
@@ -343,13 +345,13 @@ def generate_feed(
             if physics:
                 t0 = time.perf_counter()
                 try:
-                    stepped = ahead.result()
+                    stepped = ahead.pop(0).result()
                 except BrokenProcessPool:
                     raise RuntimeError(f"the physics process died stepping shards {group} (complete shards are kept: "
                                        "rerun to resume)") from None
                 add("wait for physics", t0)
-                if b + 1 < len(groups):
-                    ahead = step(b + 1)
+                if b + PHYSICS_PROCESSES < len(groups):
+                    ahead.append(step(b + PHYSICS_PROCESSES))
             for p in produce(cfg, group, sensor, threads, seconds, stepped):
                 batch_of[p.shard] = b
                 submit(p)
