@@ -142,10 +142,9 @@ def write_packed_shard(cfg: SceneConfig, out_dir: str, packed: PackedShard, sens
     """Writer task: write one packed shard atomically (what write_shard would write); returns its manifest
     entry (sha256 of the file just written, from the page cache), so the driver need not read it back."""
     from sensors.manifest import shard_entry
-    from simulate.run import config_sha256
     from sensors.recording import Channel
     from simulate.executors import _maybe_inject_fault
-    from simulate.run import shard_writer
+    from simulate.run import config_sha256, shard_writer
 
     _maybe_inject_fault(packed.shard)
     shm = _attach(packed.shm_name) if packed.shm_name is not None else None  # the driver owns the block
