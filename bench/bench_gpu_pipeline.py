@@ -320,8 +320,10 @@ def end_to_end(device: str, per_shard: int, workers: int, shards_per_worker: int
     shutil.rmtree(root, ignore_errors=True)
     t0 = time.perf_counter()
     generate(cfg, root, executor="local", workers=workers, device=device)
+    t_sync = time.perf_counter()
     os.sync()
     dt = time.perf_counter() - t0
+    t_sync = time.perf_counter() - t_sync
     nbytes = sum(p.stat().st_size for p in root.glob("*.h5"))
     from simulate.protocols import make_episode_protocol
 
@@ -335,7 +337,7 @@ def end_to_end(device: str, per_shard: int, workers: int, shards_per_worker: int
     mode = "gpu feed (physics process, sensor chain here, writer processes)" if workers > 1 and _feed_by_default(cfg) else "shard workers"
     from simulate.feed import LAST_RUN_SECONDS
 
-    r = {"workers": workers, "mode": mode, "driver_seconds": dict(LAST_RUN_SECONDS) if "feed" in mode else None, "episodes": episodes, "shards": -(-episodes // per_shard), "seconds": dt,
+    r = {"workers": workers, "mode": mode, "driver_seconds": dict(LAST_RUN_SECONDS) if "feed" in mode else None, "episodes": episodes, "shards": -(-episodes // per_shard), "seconds": dt, "sync_seconds": t_sync,
          "samples_per_s": samples / dt, "disk_MB_per_s": nbytes / dt / 1e6, "raw_write_MB_per_s_same_bytes": raw,
          "fraction_of_raw_write": nbytes / dt / 1e6 / raw, "bytes": nbytes}
     print(f"end to end, {workers} worker(s), {mode}, {episodes} episodes ({per_shard} per shard): {samples / dt:.3g} samples/s, "

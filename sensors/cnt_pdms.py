@@ -93,6 +93,7 @@ class CntPdmsSensor:
             import warp as wp
 
             from sensors.taxel_warp import TaxelChainWarp, scaled_on_device
+            from sensors.warp_setup import to_host
 
             chain = TaxelChainWarp(self.tp, E, N, self.device)
             d = drive if isinstance(drive, wp.array) else wp.array(np.ascontiguousarray(drive, np.float32).reshape(-1), dtype=wp.float32, device=self.device)
@@ -105,11 +106,11 @@ class CntPdmsSensor:
             noise = el.NoiseSeeds(seeds, e.white_noise_v, e.pink_noise_v)  # drawn in the readout kernel
             ro, _ = el.readout_warp(g_d, (E, T, self.n_channels), noise, self.ep, None, self.device, keep=keep_ro,
                                     adc_dtype=adc_dtype)
-            force = f_d.numpy().reshape(E, T) if "force" in want else None
-            strain = s_d.numpy().reshape(E, T, N) if "strain" in want else None
+            force = to_host(f_d, "cnt_pdms force").reshape(E, T) if "force" in want else None
+            strain = to_host(s_d, "cnt_pdms strain").reshape(E, T, N) if "strain" in want else None
             stress = None
             if "force_taxel" in want:  # stress x area on the device: one float32 multiply, as in numpy
-                force_taxel = scaled_on_device(st_d, self.tp.taxel_area_m2).numpy().reshape(E, T, N)
+                force_taxel = to_host(scaled_on_device(st_d, self.tp.taxel_area_m2), "cnt_pdms force_taxel").reshape(E, T, N)
         make = {
             "strain": lambda: strain,
             "force_taxel": lambda: force_taxel if stress is None else (stress * np.float32(self.tp.taxel_area_m2)).astype(np.float32),

@@ -16,6 +16,7 @@ import warp as wp
 from scipy.signal import lfilter
 
 from sensors.params import ElectronicsParams
+from sensors.warp_setup import to_host
 
 MAX_SECTIONS = 4  # 8th-order filter at most (ElectronicsConfig.filter_order <= 8)
 vec_sos = wp.types.vector(length=6 * MAX_SECTIONS, dtype=wp.float64)
@@ -457,5 +458,5 @@ def readout_warp(
         codes = wp.empty(E * T * C, dtype=wp.int16, device=d)
         wp.launch(_codes_int16, dim=E * T * C, inputs=[outs[2], codes], device=d)
         outs[2] = codes
-    result = {n: o.numpy().reshape(E, T, C) for n, o in zip(names, outs) if keep is None or n in keep}
+    result = {n: to_host(o, f"readout {n}").reshape(E, T, C) for n, o in zip(names, outs) if keep is None or n in keep}
     return result, ElectronicsState(filt.numpy(), primed.numpy(), pink.numpy())

@@ -129,28 +129,32 @@ def physics_engine(cfg: SceneConfig) -> tuple[str, str]:
 
 
 def simulate_sensors(
-    cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1
+    cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1, alloc=None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Run the episodes; returns sensordata (E, T, nsensordata) at the sample times and target (E, T).
-    Stepping: C MuJoCo's rollout on `threads` threads, or MuJoCo Warp worlds (`physics_engine`)."""
+    Stepping: C MuJoCo's rollout on `threads` threads, or MuJoCo Warp worlds (`physics_engine`).
+    alloc(shape) -> float64 array: where the sensordata goes (default np.zeros; the GPU feed's physics
+    process passes a view of a shared-memory block, so the worlds' output needs no second copy)."""
     engine, device = physics_engine(cfg)
     n = episode_length(protocols)
     sub = cfg.sampling.substeps
     nstep = (n - 1) * sub
-    m = build_model(cfg)
+    mjcf = build_mjcf(cfg)
+    m = mujoco.MjModel.from_xml_string(mjcf)
     E = len(protocols)
     if engine == "mujoco_warp":
-        from simulate.contact_mjw import WarpWorlds
+        from simulate.contact_mjw import worlds_for
 
         # controls are made chunk by chunk on a host thread while the worlds step (no (E, nstep, 3) array)
         states0, sens0 = _initial_states(m, cfg, protocols, episode_controls(cfg, protocols, nstep, slice(0, 1))[0][:, 0])
         qpos0 = states0[:, 1 : 1 + m.nq]  # full-physics state = (time, qpos, qvel, ...)
-        out = WarpWorlds(m, E, device).run(qpos0, lambda sl, eps: episode_controls(cfg, protocols[eps], nstep, sl)[0], sens0, sub, n)
+        out = worlds_for(m, mjcf, E, device).run(qpos0, lambda sl, eps: episode_controls(cfg, protocols[eps], nstep, sl)[0], sens0, sub, n,
+                                                 out=None if alloc is None else alloc((E, n, m.nsensordata)))
     else:
         ctrl, _ = episode_controls(cfg, protocols, nstep)
         states0, sens0 = _initial_states(m, cfg, protocols, ctrl[:, 0])
         rows = np.arange(1, n) * sub - 1
-        out = np.zeros((E, n, m.nsensordata))
+        out = np.zeros((E, n, m.nsensordata)) if alloc is None else alloc((E, n, m.nsensordata))
         out[:, 0] = sens0
         datas = [mujoco.MjData(m) for _ in range(max(1, threads))]
         data_arg = datas if threads > 1 else datas[0]

@@ -28,9 +28,11 @@ from scenes import SceneConfig
 
 FEED_WORLDS = 32768  # episodes per batch of worlds: 1.6e7 world-steps/s on an H100 (bench/results/gpu-pipeline-h100-physics.json)
 MAX_PENDING_BATCHES = 2  # batches handed to the writers and not yet written (bounds host memory)
+RAMP_BATCHES = 2  # batches of worlds / 4 and worlds / 2 episodes before the full ones (see _groups)
 PHYSICS_PROCESSES = 2  # each steps its own batch: one's host work (protocols, controls) overlaps the other's GPU work
-# where the driver's time went in the last generate_feed of this process (for bench/): "simulate" (protocols,
-# physics, load field, sensor chain, channel arrays), "pack", "wait for writers"
+# where the driver's time went in the last generate_feed of this process (for bench/): "start-up" (Warp, the
+# sensor), "simulate" (load field, sensor chain, channel arrays; protocols and physics too for kinds with their
+# own contact stage), "pack", "wait for physics", "wait for writers", "shut down" (the process pools)
 LAST_RUN_SECONDS: dict[str, float] = {}
 
 
@@ -45,29 +47,13 @@ def _shm_room(nbytes: int) -> bool:
 
 
 def _attach(name: str):
-    """Attach a block another process owns (this process's resource tracker must not unlink it at exit)."""
-    from multiprocessing import resource_tracker, shared_memory
-
-    shm = shared_memory.SharedMemory(name=name)
-    resource_tracker.unregister(shm._name, "shared_memory")  # noqa: SLF001 - Python < 3.13 has no track=False
-    return shm
-
-
-def _share(arrays: list[np.ndarray]):
-    """Copy arrays into one new shared-memory block: (block, [(offset, dtype, shape)]), or (None, None) where
-    /dev/shm has no room (the caller then sends the arrays pickled)."""
+    """Attach a block another process of this run made. The feed's processes are spawned by the driver and share
+    its resource tracker, which keeps a set of names: the creator registered the block, attaching (which registers
+    it again before Python 3.13) adds nothing, and the one unlink unregisters it; were a process to unregister
+    on attaching, the unlink would find the name gone (a KeyError traceback from the tracker)."""
     from multiprocessing import shared_memory
 
-    size = sum(a.nbytes for a in arrays)
-    if not _shm_room(size):
-        return None, None
-    shm = shared_memory.SharedMemory(create=True, size=max(1, size))
-    where, offset = [], 0
-    for a in arrays:
-        np.ndarray(a.shape, a.dtype, buffer=shm.buf, offset=offset)[...] = a
-        where.append((offset, a.dtype.str, a.shape))
-        offset += a.nbytes
-    return shm, where
+    return shared_memory.SharedMemory(name=name)
 
 
 def _views(buf, where: list[tuple[int, str, tuple[int, ...]]]) -> list[np.ndarray]:
@@ -76,8 +62,10 @@ def _views(buf, where: list[tuple[int, str, tuple[int, ...]]]) -> list[np.ndarra
 
 def step_worlds(cfg: SceneConfig, gids: list[int], threads: int = 1) -> tuple[list, dict]:
     """Physics task (in the feed's physics process): the protocols of episodes `gids` and, per length group,
-    their (sensordata, target) from `simulate_sensors`, handed over in a shared-memory block the receiver
-    unlinks: ({n_samples: (block name, layout)} or the arrays themselves where /dev/shm has no room)."""
+    their (sensordata, target) from `simulate_sensors`, written straight into a shared-memory block the
+    receiver unlinks: ({n_samples: (block name, layout)} or the arrays themselves where /dev/shm has no room)."""
+    from multiprocessing import shared_memory
+
     from sensors.manifest import episode_seed
     from simulate.contact import simulate_sensors
     from simulate.run import episode_protocols, length_groups
@@ -85,56 +73,118 @@ def step_worlds(cfg: SceneConfig, gids: list[int], threads: int = 1) -> tuple[li
     protos = episode_protocols(cfg, [episode_seed(cfg.generation.root_seed, k) for k in gids], gids)
     out = {}
     for n, idx in length_groups(protos):
-        sens, target = simulate_sensors(cfg, [protos[i] for i in idx], threads)
-        shm, where = _share([sens, target])
-        if shm is None:
-            out[n] = (sens, target)
-        else:
-            from multiprocessing import resource_tracker
+        made = []
 
-            resource_tracker.unregister(shm._name, "shared_memory")  # noqa: SLF001 - the receiver owns it now
-            out[n] = (shm.name, where)
-            shm.close()
+        def alloc(shape: tuple[int, ...]) -> np.ndarray:  # sensordata (E, n, ns) float64, then target (E, n)
+            nbytes = 8 * (int(np.prod(shape)) + shape[0] * shape[1])
+            if not _shm_room(nbytes):
+                return np.zeros(shape)
+            made.append(shared_memory.SharedMemory(create=True, size=nbytes))
+            return np.ndarray(shape, np.float64, buffer=made[0].buf)
+
+        sens, target = simulate_sensors(cfg, [protos[i] for i in idx], threads, alloc)
+        if not made:
+            out[n] = (sens, target)
+            continue
+        shm = made[0]  # the receiver unlinks it (the shared resource tracker has it registered until then)
+        np.ndarray(target.shape, np.float64, buffer=shm.buf, offset=sens.nbytes)[...] = target
+        out[n] = (shm.name, [(0, sens.dtype.str, sens.shape), (sens.nbytes, "<f8", target.shape)])
+        sens = None
+        shm.close()
     return protos, out
+
+
+class BlockPool:
+    """The driver's shared-memory blocks, reused batch after batch: a fresh tmpfs page costs a page fault on first
+    touch (copies into new blocks ran at ~1 GB/s, into reused ones at ~5 GB/s on a 2-core host). A block is lent
+    to one packed piece until its shard is written, then returned; close() unlinks them all."""
+
+    def __init__(self) -> None:
+        from multiprocessing import shared_memory
+
+        self._new = shared_memory.SharedMemory
+        self.blocks: dict = {}  # name -> SharedMemory
+        self.free: set[str] = set()
+
+    def get(self, nbytes: int):
+        """A block of at least nbytes (the smallest free one that fits, else a new one), or None where /dev/shm
+        has no room even after dropping the free blocks (the caller then keeps its arrays in process memory)."""
+        fits = sorted((self.blocks[n].size, n) for n in self.free if self.blocks[n].size >= nbytes)
+        if fits:
+            self.free.discard(fits[0][1])
+            return self.blocks[fits[0][1]]
+        if not _shm_room(nbytes):
+            for name in list(self.free):
+                self._drop(name)
+            if not _shm_room(nbytes):
+                return None
+        shm = self._new(create=True, size=max(1, nbytes))
+        self.blocks[shm.name] = shm
+        return shm
+
+    def put(self, name: str) -> None:
+        if name in self.blocks:
+            self.free.add(name)
+
+    def _drop(self, name: str) -> None:
+        self.free.discard(name)
+        shm = self.blocks.pop(name)
+        try:
+            shm.close()
+        except BufferError:  # a view still alive (an error unwinding): the memory goes with the process
+            pass
+        shm.unlink()
+
+    def close(self) -> None:
+        for name in list(self.blocks):
+            self._drop(name)
 
 
 @dataclass
 class PackedShard:
     """One shard's recorded channels, as the producer made them: pieces of stacked episodes (one per simulated
-    slice), and for each episode in file order its id, attrs and (piece, row). `share()` moves the stacked
-    arrays into one shared-memory block (what crosses to the writer is then only this metadata)."""
+    slice), and for each episode in file order its id, attrs and (piece, row). With a `BlockPool` the per-episode
+    arrays of each piece sit in a shared-memory block (`blocks[piece]` = (block name, name -> (offset, dtype,
+    shape))) and only this metadata crosses to the writer; without one (or without room) they travel pickled."""
 
     shard: int
     specs: dict[str, tuple[str, tuple[str, ...], str, bool]] = field(default_factory=dict)  # name -> units, dims, desc, per_episode
-    pieces: list[dict[str, np.ndarray]] = field(default_factory=list)
+    pieces: list[dict[str, np.ndarray]] = field(default_factory=list)  # arrays not in a block (time; all without room)
     episodes: list[tuple[str, dict, int, int]] = field(default_factory=list)  # (id, attrs, piece, row), in global order
-    shm_name: str | None = None
-    layout: list[dict[str, tuple[int, str, tuple[int, ...]]]] = field(default_factory=list)  # piece -> name -> (offset, dtype, shape)
+    blocks: list[tuple[str, dict[str, tuple[int, str, tuple[int, ...]]]] | None] = field(default_factory=list)
 
     @property
     def n_episodes(self) -> int:
         return len(self.episodes)
 
-    def share(self):
-        """Move the per-episode arrays into a new shared-memory block; returns the block (the caller unlinks
-        it), or None where /dev/shm has no room for it (the arrays then travel pickled, as they are)."""
-        per_ep = [n for n, spec in self.specs.items() if spec[3]]
-        shm, where = _share([piece[n] for piece in self.pieces for n in per_ep])
-        if shm is None:
-            return None
-        it = iter(where)
-        for piece in self.pieces:
-            self.layout.append({n: next(it) for n in per_ep})
-            for n in per_ep:
-                del piece[n]
-        self.shm_name = shm.name
-        return shm
+    @property
+    def block_names(self) -> list[str]:
+        return [b[0] for b in self.blocks if b is not None]
 
-    def arrays(self, buf) -> list[dict[str, np.ndarray]]:
-        """The pieces with their shared arrays as views of `buf` (the attached block)."""
+    def add_piece(self, arrays: dict[str, np.ndarray], pool: BlockPool | None) -> None:
+        """Append a piece, copying its per-episode arrays into a block of `pool` (or into process memory: the
+        arrays given may be views of buffers the next slice overwrites)."""
+        per_ep = [n for n, spec in self.specs.items() if spec[3]]
+        shm = pool.get(sum(arrays[n].nbytes for n in per_ep)) if pool is not None else None
+        if shm is None:
+            self.pieces.append({n: np.array(a) for n, a in arrays.items()})
+            self.blocks.append(None)
+            return
+        layout, offset = {}, 0
+        for n in per_ep:
+            a = arrays[n]
+            np.copyto(np.ndarray(a.shape, a.dtype, buffer=shm.buf, offset=offset), a)
+            layout[n] = (offset, a.dtype.str, a.shape)
+            offset += a.nbytes
+        self.pieces.append({n: np.array(a) for n, a in arrays.items() if n not in layout})
+        self.blocks.append((shm.name, layout))
+
+    def arrays(self, bufs: dict) -> list[dict[str, np.ndarray]]:
+        """The pieces with their shared arrays as views of the attached blocks (`bufs`: block name -> buffer)."""
         out = []
-        for piece, where in zip(self.pieces, self.layout or [{}] * len(self.pieces)):
-            out.append({**piece, **dict(zip(where, _views(buf, list(where.values()))))})
+        for piece, block in zip(self.pieces, self.blocks):
+            shared = {} if block is None else dict(zip(block[1], _views(bufs[block[0]], list(block[1].values()))))
+            out.append({**piece, **shared})
         return out
 
 
@@ -147,18 +197,18 @@ def write_packed_shard(cfg: SceneConfig, out_dir: str, packed: PackedShard, sens
     from simulate.run import config_sha256, shard_writer
 
     _maybe_inject_fault(packed.shard)
-    shm = _attach(packed.shm_name) if packed.shm_name is not None else None  # the driver owns the block
+    attached = {name: _attach(name) for name in dict.fromkeys(packed.block_names)}  # the driver owns them
     try:
-        pieces = packed.arrays(shm.buf) if shm is not None else packed.pieces
+        pieces = packed.arrays({name: shm.buf for name, shm in attached.items()})
         with shard_writer(cfg, Path(out_dir), packed.shard, sensor_attrs, mjcf) as w:
             for ep_id, attrs, piece, row in packed.episodes:
                 arrays = pieces[piece]
                 ch = {name: Channel(arrays[name][row] if per_ep else arrays[name], units, dims, desc)
                       for name, (units, dims, desc, per_ep) in packed.specs.items()}
                 w.add_episode(ep_id, ch, attrs)
-        pieces = arrays = ch = None  # drop the views before the block is closed
+        pieces = arrays = ch = None  # drop the views before the blocks are closed
     finally:
-        if shm is not None:
+        for shm in attached.values():
             try:
                 shm.close()
             except BufferError:  # views still held by a failing write's frames: the process cleans up
@@ -167,13 +217,15 @@ def write_packed_shard(cfg: SceneConfig, out_dir: str, packed: PackedShard, sens
 
 
 def _groups(cfg: SceneConfig, todo: list[int], worlds: int) -> list[list[int]]:
-    """Consecutive runs of the shards to make, each with >= `worlds` episodes where the shards allow."""
+    """Consecutive runs of the shards to make, each with >= `worlds` episodes where the shards allow, after a
+    ramp (worlds / 4, then worlds / 2): the driver and the writers start on a small first batch instead of
+    idling while the first full one steps."""
     from simulate.run import episode_ids_of_shard
 
     groups: list[list[int]] = [[]]
     n = 0
     for s in todo:
-        if n >= worlds:
+        if n >= worlds >> max(0, RAMP_BATCHES - len(groups) + 1):
             groups.append([])
             n = 0
         groups[-1].append(s)
@@ -182,13 +234,16 @@ def _groups(cfg: SceneConfig, todo: list[int], worlds: int) -> list[list[int]]:
 
 
 def produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, seconds: dict | None = None,
-            stepped: tuple[list, dict] | None = None) -> list[PackedShard]:
+            stepped: tuple[list, dict] | None = None, pool: BlockPool | None = None) -> list[PackedShard]:
     """Simulate the episodes of `shards` as one batch and pack each shard's recorded channels (seconds: adds
     the time spent simulating and packing). stepped: `step_worlds` of these episodes, run in the physics
-    process; this process then runs only the load field and the sensor chain."""
+    process; this process then runs only the load field and the sensor chain. pool: pack into its shared
+    blocks. Each slice's outputs come back from the GPU into reused page-locked buffers (`host_staging`)
+    and are packed before the next slice runs."""
     import time
 
     from sensors.manifest import episode_seed
+    from sensors.warp_setup import host_staging
     from simulate.run import episode_attrs, episode_ids_of_shard, simulate_slices
 
     gids = [k for s in shards for k in episode_ids_of_shard(cfg, s)]
@@ -206,23 +261,24 @@ def produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, secon
                 handed = tuple(_views(blocks[-1].buf, handed[1]))
             physics[n] = handed
     try:
-        t0 = time.perf_counter()
-        for pos, protos_s, arrays in simulate_slices(cfg, seeds, sensor, threads, gids, protos, physics):
-            t1 = time.perf_counter()
-            seconds["simulate"] = seconds.get("simulate", 0.0) + t1 - t0
-            runs: dict[int, list[int]] = {}
-            for j, i in enumerate(pos):
-                runs.setdefault(owner[gids[i]], []).append(j)
-            for s, rows in runs.items():
-                p = packs[s]
-                p.specs = {n: (c.units, c.dims, c.description, c.per_episode) for n, c in arrays.items()}
-                take = slice(rows[0], rows[-1] + 1) if rows[-1] - rows[0] + 1 == len(rows) else rows
-                p.pieces.append({n: (c.data[take] if c.per_episode else c.data) for n, c in arrays.items()})
-                for r, j in enumerate(rows):
-                    i = pos[j]
-                    placed[gids[i]] = (f"ep-{gids[i]:06d}", episode_attrs(seeds[i], protos_s[j], gids[i]), len(p.pieces) - 1, r)
+        with host_staging():
             t0 = time.perf_counter()
-            seconds["pack"] = seconds.get("pack", 0.0) + t0 - t1
+            for pos, protos_s, arrays in simulate_slices(cfg, seeds, sensor, threads, gids, protos, physics):
+                t1 = time.perf_counter()
+                seconds["simulate"] = seconds.get("simulate", 0.0) + t1 - t0
+                runs: dict[int, list[int]] = {}
+                for j, i in enumerate(pos):
+                    runs.setdefault(owner[gids[i]], []).append(j)
+                for s, rows in runs.items():
+                    p = packs[s]
+                    p.specs = {n: (c.units, c.dims, c.description, c.per_episode) for n, c in arrays.items()}
+                    take = slice(rows[0], rows[-1] + 1) if rows[-1] - rows[0] + 1 == len(rows) else rows
+                    p.add_piece({n: (c.data[take] if c.per_episode else c.data) for n, c in arrays.items()}, pool)
+                    for r, j in enumerate(rows):
+                        i = pos[j]
+                        placed[gids[i]] = (f"ep-{gids[i]:06d}", episode_attrs(seeds[i], protos_s[j], gids[i]), len(p.pieces) - 1, r)
+                t0 = time.perf_counter()
+                seconds["pack"] = seconds.get("pack", 0.0) + t0 - t1
     finally:
         physics = None
         for shm in blocks:
@@ -247,34 +303,54 @@ def generate_feed(
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
 
+    import time
+
     from sensors.registry import make_sensor
     from sensors.warp_setup import init_warp
+    from simulate.contact import CONTACT_STAGES
     from simulate.executors import ShardFailedError, _check_written
     from simulate.mjcf import build_mjcf
-    from simulate.run import config_sha256, shard_sensor_attrs
+    from simulate.run import config_sha256, episode_ids_of_shard, shard_sensor_attrs
 
-    if backend == "warp":
-        init_warp()
-    sensor = make_sensor(cfg, backend, device)
-    mjcf, sha = build_mjcf(cfg), config_sha256(cfg)
-    sensor_attrs = shard_sensor_attrs(cfg, sensor)
+    LAST_RUN_SECONDS.clear()
+    seconds = LAST_RUN_SECONDS
+    t_start = time.perf_counter()
+
+    def add(key: str, t0: float) -> None:
+        seconds[key] = seconds.get(key, 0.0) + time.perf_counter() - t0
+
     ctx = mp.get_context("spawn")
+    groups = _groups(cfg, todo, worlds or FEED_WORLDS)
+    # the worlds step in their own processes, batches ahead of the load field + sensor chain here (kinds with
+    # their own contact stage run it here); they start first, so their start-up overlaps the driver's
+    physics = None if cfg.protocol.kind in CONTACT_STAGES else ProcessPoolExecutor(PHYSICS_PROCESSES, mp_context=ctx)
+
+    def step(b: int):
+        return physics.submit(step_worlds, cfg, [k for s in groups[b] for k in episode_ids_of_shard(cfg, s)], threads)
+
+    ahead = [step(b) for b in range(min(PHYSICS_PROCESSES, len(groups)))] if physics else []
+    try:
+        if backend == "warp":
+            init_warp()
+        sensor = make_sensor(cfg, backend, device)
+        mjcf, sha = build_mjcf(cfg), config_sha256(cfg)
+        sensor_attrs = shard_sensor_attrs(cfg, sensor)
+    except BaseException:
+        if physics:
+            physics.shutdown(wait=False, cancel_futures=True)
+        raise
     pool = ProcessPoolExecutor(writers, mp_context=ctx)
     pending: dict = {}  # future -> packed shard (kept until its file is checked, for a resubmit)
-    blocks: dict = {}  # shard -> its shared-memory block (unlinked once the shard is written)
+    shared = BlockPool()  # the packed pieces' blocks, lent until their shard is written
     batch_of: dict[int, int] = {}
     entries: dict[int, dict] = {}
     attempts: dict[int, int] = {}
 
     def release(p: PackedShard) -> None:
-        shm = blocks.pop(p.shard, None)
-        if shm:
-            shm.close()
-            shm.unlink()
+        for name in p.block_names:
+            shared.put(name)
 
     def submit(p: PackedShard) -> None:
-        if p.shard not in blocks:
-            blocks[p.shard] = p.share()
         attempts[p.shard] = attempts.get(p.shard, 0) + 1
         pending[pool.submit(write_packed_shard, cfg, str(out), p, sensor_attrs, mjcf)] = p
 
@@ -315,27 +391,8 @@ def generate_feed(
                                                "writer process died (complete shards are kept: rerun to resume)")
                     submit(p)
 
-    import time
-
-    from simulate.contact import CONTACT_STAGES
-    from simulate.run import episode_ids_of_shard
-
-    LAST_RUN_SECONDS.clear()
-    seconds = LAST_RUN_SECONDS
-
-    def add(key: str, t0: float) -> None:
-        seconds[key] = seconds.get(key, 0.0) + time.perf_counter() - t0
-
-    groups = _groups(cfg, todo, worlds or FEED_WORLDS)
-    # the worlds step in their own processes, batches ahead of the load field + sensor chain here (kinds with
-    # their own contact stage run it here)
-    physics = None if cfg.protocol.kind in CONTACT_STAGES else ProcessPoolExecutor(PHYSICS_PROCESSES, mp_context=ctx)
-
-    def step(b: int):
-        return physics.submit(step_worlds, cfg, [k for s in groups[b] for k in episode_ids_of_shard(cfg, s)], threads)
-
+    add("start-up", t_start)
     try:
-        ahead = [step(b) for b in range(min(PHYSICS_PROCESSES, len(groups)))] if physics else []
         for b, group in enumerate(groups):
             t0 = time.perf_counter()
             collect(b - MAX_PENDING_BATCHES)  # bounded memory: at most MAX_PENDING_BATCHES batches not yet written
@@ -351,16 +408,17 @@ def generate_feed(
                 add("wait for physics", t0)
                 if b + PHYSICS_PROCESSES < len(groups):
                     ahead.append(step(b + PHYSICS_PROCESSES))
-            for p in produce(cfg, group, sensor, threads, seconds, stepped):
+            for p in produce(cfg, group, sensor, threads, seconds, stepped, shared):
                 batch_of[p.shard] = b
                 submit(p)
         t0 = time.perf_counter()
         collect(len(todo))
         add("wait for writers", t0)
     finally:
+        t0 = time.perf_counter()
         pool.shutdown(wait=True, cancel_futures=True)
         if physics:
             physics.shutdown(wait=True, cancel_futures=True)
-        for shard in list(blocks):
-            release(PackedShard(shard))
+        shared.close()
+        add("shut down", t0)
     return entries

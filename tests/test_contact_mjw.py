@@ -158,3 +158,50 @@ def test_gpu_generation_keeps_fields_on_device_and_slices_the_sensor_stage(gpu_d
         assert a.channels.keys() == b.channels.keys()
         for k in a.channels:
             np.testing.assert_array_equal(a.channels[k].data, b.channels[k].data, err_msg=f"{a.ep_id} {k}")
+
+
+def _worlds_runs(device: str):
+    """Sensordata of the same episodes: sensors in every step; sensors only in the recorded step, run twice
+    on the same (reused) worlds; plus a run of other episodes in between."""
+    from simulate.contact import _initial_states, build_model, episode_controls
+    from simulate.contact_mjw import WarpWorlds
+
+    cfg = load_scene("cnt_pdms", SHORT)
+    m, sub = build_model(cfg), cfg.sampling.substeps
+    protos = [make_episode_protocol(cfg, s) for s in range(4)]
+    n = 40  # the press starts within the first 0.4 s
+    nstep = (n - 1) * sub
+    ctrl, _ = episode_controls(cfg, protos, nstep)
+    st, s0 = _initial_states(m, cfg, protos, ctrl[:, 0])
+    q0 = st[:, 1 : 1 + m.nq]
+    every = WarpWorlds(m, 4, device, sensors_every_step=True).run(q0, ctrl, s0, sub, n)
+    ww = WarpWorlds(m, 4, device)
+    first = ww.run(q0, ctrl, s0, sub, n)
+    ww.run(q0[::-1].copy(), ctrl[::-1].copy(), s0[::-1].copy(), sub, n)  # other states between the two
+    again = ww.run(q0, ctrl, s0, sub, n)
+    assert np.abs(every[..., 4:7]).max() > 0.5  # a loaded contact is compared
+    return every, first, again
+
+
+@needs_mjw
+@pytest.mark.slow
+def test_sensors_only_in_the_recorded_step_and_reused_worlds_cpu():
+    """Warp's CPU device is deterministic: skipping sensors in the unrecorded substeps, and reusing the worlds
+    (buffers, reset) for another batch, change no recorded value."""
+    from sensors.warp_setup import init_warp
+
+    init_warp()
+    every, first, again = _worlds_runs("cpu")
+    np.testing.assert_array_equal(first, every)
+    np.testing.assert_array_equal(again, first)
+
+
+@needs_mjw
+@pytest.mark.gpu
+def test_sensors_only_in_the_recorded_step_and_reused_worlds_cuda(gpu_device):
+    """On CUDA the contact solver sums with atomics: equal within float32 noise (forces within 1e-4 of full scale)."""
+    every, first, again = _worlds_runs(gpu_device)
+    scale = np.abs(every[..., 4:7]).max()
+    for b in (first, again):
+        assert np.abs(b[..., 4:7] - every[..., 4:7]).max() < 1e-4 * scale
+        np.testing.assert_allclose(b[..., 0:3], every[..., 0:3], atol=1e-8)

@@ -124,7 +124,7 @@ def test_episode_channels_do_not_depend_on_shard_size_or_batching(serial, tmp_pa
 def test_gpu_feed_equals_serial_and_retries_a_killed_writer(tmp_path, monkeypatch):
     """The GPU feed (simulate.feed: episodes of several shards as one batch here, shards written by writer
     processes), forced on the CPU engine: mixed episode lengths, batches of 2 shards, a writer dies once ->
-    the same files as the serial loop."""
+    the same files as the serial loop, and no shared block left behind."""
     from simulate import feed
 
     mixed = load_scene("cnt_pdms", ["protocol.frequencies_hz=[2.0,4.0]", "protocol.cycles=1", "pad.taxels_x=3",
@@ -132,8 +132,11 @@ def test_gpu_feed_equals_serial_and_retries_a_killed_writer(tmp_path, monkeypatc
                                     "generation.root_seed=5"])
     ref = tmp_path / "serial"
     run.generate(mixed, ref)
-    monkeypatch.setattr(feed, "FEED_WORLDS", 3)  # shards [0, 1], [2, 3]: two batches of worlds
-    assert feed._groups(mixed, [0, 1, 2, 3], 3) == [[0, 1], [2, 3]]
+    monkeypatch.setattr(feed, "FEED_WORLDS", 8)  # a ramp of >= 2, >= 4 episodes, then >= 8: three batches
+    assert feed._groups(mixed, [0, 1, 2, 3], 8) == [[0], [1, 2], [3]]
+    monkeypatch.setattr(feed, "RAMP_BATCHES", 0)
+    assert feed._groups(mixed, [0, 1, 2, 3], 3) == [[0, 1], [2, 3]]  # no ramp: >= 3 episodes each
+    monkeypatch.setattr(feed, "RAMP_BATCHES", 2)
     packs = feed.produce(mixed, [0, 1], run.make_sensor(mixed, "warp", "cpu"))
     assert max(len(pk.pieces) for pk in packs) == 2  # a shard with both episode lengths: one piece per length
     marker = _inject(monkeypatch, tmp_path, 1, "exit")
@@ -162,3 +165,41 @@ def test_gpu_feed_equals_serial_and_retries_a_killed_writer(tmp_path, monkeypatc
     assert [s["episode_seeds"] for s in mb["shards"]] == [s["episode_seeds"] for s in ma["shards"]]
     assert ma["splits"] == mb["splits"] and verify_manifest(out) == []
     assert mb["shards"] == [describe_shard(shard_path(out, i)) for i in range(4)]
+
+
+@pytest.mark.gpu
+def test_feed_packs_each_gpu_slice_before_the_next_overwrites_its_staging(gpu_device, monkeypatch):
+    """The feed's producer on CUDA: outputs copied back into reused page-locked buffers (one per call site),
+    packed into shared blocks of a BlockPool slice by slice (3-episode slices, 2-episode shards), equal to the
+    same physics run through the plain path (a fresh host array per copy)."""
+    from sensors.manifest import episode_seed
+    from simulate import contact, feed
+    from simulate.contact import physics_engine
+
+    dev = "cpu" if gpu_device == "cpu" else "cuda"
+    cfg = load_scene("cnt_pdms", FAST[:-3] + ["sensor.readout=taxel", "generation.physics=mujoco_warp", f"generation.device={dev}",
+                                              "generation.record=[time,position,force_taxel,adc]", "generation.episodes=7",
+                                              "generation.episodes_per_shard=2", "generation.root_seed=3"])
+    sensor = run.make_sensor(cfg, "warp", physics_engine(cfg)[1])
+    physics, real = [], contact.simulate_sensors  # one physics run for both (GPU atomics need not repeat bit for bit)
+    monkeypatch.setattr(contact, "simulate_sensors", lambda *a: physics[0] if physics else physics.append(real(*a)) or physics[0])
+    monkeypatch.setattr(run, "SENSOR_SLICE", 3)
+    pool = feed.BlockPool()
+    try:
+        packs = feed.produce(cfg, [0, 1, 2, 3], sensor, pool=pool)
+        assert len(pool.blocks) >= 4  # the pieces went into shared blocks
+        seeds = [episode_seed(cfg.generation.root_seed, k) for k in range(7)]
+        ref = run.simulate_episodes(cfg, seeds, [f"ep-{k:06d}" for k in range(7)], sensor, indices=list(range(7)))
+        got = {}
+        for p in packs:
+            pieces = p.arrays({n: pool.blocks[n].buf for n in p.block_names})
+            for ep_id, _, piece, row in p.episodes:
+                got[ep_id] = {n: pieces[piece][n][row] if spec[3] else pieces[piece][n] for n, spec in p.specs.items()}
+            pieces = None
+        assert max(float(np.abs(r.channels["force_taxel"].data).max()) for r in ref) > 0.1  # they press
+        for r in ref:
+            for n, c in r.channels.items():
+                np.testing.assert_array_equal(got[r.ep_id][n], c.data, err_msg=f"{r.ep_id} {n}")
+        got = None
+    finally:
+        pool.close()

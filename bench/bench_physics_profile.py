@@ -1,0 +1,115 @@
+"""Where MuJoCo Warp's step time goes on the bench scene, and what skipping sensors between records buys.
+
+    python bench/bench_physics_profile.py --device cuda:0 [--worlds 32768] [--samples 41]
+
+Scene: the one of bench_gpu_pipeline.py (cnt_pdms, box indenter on a box pad, 10 x 1 ms steps per 100 Hz
+sample). Measured in one run, written to bench/results/physics-profile-<tag>.json:
+1. world-steps/s of `simulate.contact_mjw.WarpWorlds` (CUDA graph per sample period) with sensors computed in
+   every step and with sensors only in the recorded step (the default), same worlds and controls;
+2. GPU time per kernel over one sample period, launched eagerly (Warp's kernel timing: the sum of the kernels
+   is the GPU work a graph replays, without the launch gaps), grouped by kernel name, largest first.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import time
+from collections import defaultdict
+from pathlib import Path
+
+from bench_gpu_pipeline import _cfg
+
+
+def _worlds(cfg, n_worlds: int, n_samples: int):
+    from simulate.contact import _initial_states, build_model, episode_controls
+    from simulate.protocols import make_episode_protocol
+
+    m, sub = build_model(cfg), cfg.sampling.substeps
+    protos = [make_episode_protocol(cfg, s) for s in range(n_worlds)]
+    ctrl, _ = episode_controls(cfg, protos, (n_samples - 1) * sub)
+    st, s0 = _initial_states(m, cfg, protos, ctrl[:, 0])
+    return m, sub, st[:, 1 : 1 + m.nq], ctrl, s0
+
+
+def rates(device: str, n_worlds: int, n_samples: int) -> dict:
+    """world-steps/s with sensors in every step and only in the recorded one (each after a warm-up run)."""
+    from simulate.contact_mjw import WarpWorlds
+
+    m, sub, q0, ctrl, s0 = _worlds(_cfg([]), n_worlds, n_samples)
+    out = {}
+    for every in (True, False):
+        ww = WarpWorlds(m, n_worlds, device, sensors_every_step=every)
+        ww.run(q0, ctrl, s0, sub, n_samples)  # compile, capture
+        t0 = time.perf_counter()
+        ww.run(q0, ctrl, s0, sub, n_samples)
+        dt = time.perf_counter() - t0
+        name = "sensors every step" if every else "sensors in the recorded step"
+        out[name] = {"seconds": dt, "world_steps_per_s": n_worlds * (n_samples - 1) * sub / dt}
+        print(f"{name}: {out[name]['world_steps_per_s']:.3g} world-steps/s ({n_worlds} worlds)")
+        del ww
+    a, b = (out[k]["world_steps_per_s"] for k in ("sensors every step", "sensors in the recorded step"))
+    out["speed-up"] = b / a
+    return out
+
+
+def kernel_profile(device: str, n_worlds: int, top: int = 30) -> dict:
+    """GPU milliseconds per kernel name for one sample period (substeps steps + record) of n_worlds worlds."""
+    import warp as wp
+
+    from simulate.contact_mjw import WarpWorlds
+
+    m, sub, q0, ctrl, s0 = _worlds(_cfg([]), n_worlds, 6)
+    ww = WarpWorlds(m, n_worlds, device)
+    ww.run(q0, ctrl, s0, sub, 6)  # leaves the worlds mid-episode, the indenter pressing
+    _, _, seq, rec, _, _ = ww._buffers  # noqa: SLF001 - the bench drives one sample period by hand
+    with wp.ScopedDevice(device):
+        ww.counter.zero_()
+        ww._step_sample(seq, rec, sub)  # noqa: SLF001 - warm (eager launches)
+        ww.counter.zero_()
+        wp.synchronize_device(device)
+        wp.timing_begin(cuda_filter=wp.TIMING_KERNEL)
+        t0 = time.perf_counter()
+        ww._step_sample(seq, rec, sub)  # noqa: SLF001
+        wp.synchronize_device(device)
+        wall = time.perf_counter() - t0
+        results = wp.timing_end()
+    per = defaultdict(lambda: [0.0, 0])
+    for r in results:
+        name = re.sub(r"_[0-9a-f]{6,}$", "", r.name.split("::")[-1])
+        per[name][0] += r.elapsed
+        per[name][1] += 1
+    total = sum(v[0] for v in per.values())
+    rows = sorted(per.items(), key=lambda kv: -kv[1][0])
+    print(f"one sample period ({sub} steps, {n_worlds} worlds): {len(results)} launches, {total:.2f} ms of kernels, "
+          f"{wall * 1e3:.1f} ms wall (eager)")
+    for name, (ms, n) in rows[:top]:
+        print(f"  {ms:8.3f} ms {ms / total:6.1%} x{n:4d}  {name}")
+    return {"worlds": n_worlds, "launches": len(results), "kernel_ms": total, "eager_wall_ms": wall * 1e3,
+            "kernels": [{"name": k, "ms": v[0], "launches": v[1]} for k, v in rows[:top]]}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--device", default="cuda:0")
+    ap.add_argument("--worlds", type=int, default=32768)
+    ap.add_argument("--samples", type=int, default=41)
+    ap.add_argument("--tag", default="gpu")
+    ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
+    a = ap.parse_args()
+    from sensors.warp_setup import init_warp
+
+    init_warp()
+    import warp as wp
+
+    res = {"device": a.device, "device_name": wp.get_device(a.device).name,
+           "rates": rates(a.device, a.worlds, a.samples), "kernels": kernel_profile(a.device, a.worlds)}
+    a.out.mkdir(parents=True, exist_ok=True)
+    path = a.out / f"physics-profile-{a.tag}.json"
+    path.write_text(json.dumps(res, indent=2))
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
