@@ -32,7 +32,8 @@ RAMP_BATCHES = 2  # batches of worlds / 4 and worlds / 2 episodes before the ful
 PHYSICS_PROCESSES = 2  # each steps its own batch: one's host work (protocols, controls) overlaps the other's GPU work
 # where the driver's time went in the last generate_feed of this process (for bench/): "start-up" (Warp, the
 # sensor), "simulate" (load field, sensor chain, channel arrays; protocols and physics too for kinds with their
-# own contact stage), "pack", "wait for physics", "wait for writers", "shut down" (the process pools)
+# own contact stage), "pack", "wait for physics", "wait for writers", "shut down" (the process pools); and,
+# summed over the writer processes, "writers: episodes" (HDF5), "writers: close, fsync", "writers: sha256"
 LAST_RUN_SECONDS: dict[str, float] = {}
 
 
@@ -188,9 +189,12 @@ class PackedShard:
         return out
 
 
-def write_packed_shard(cfg: SceneConfig, out_dir: str, packed: PackedShard, sensor_attrs: dict, mjcf: str) -> dict:
+def write_packed_shard(cfg: SceneConfig, out_dir: str, packed: PackedShard, sensor_attrs: dict, mjcf: str) -> tuple[dict, dict]:
     """Writer task: write one packed shard atomically (what write_shard would write); returns its manifest
-    entry (sha256 of the file just written, from the page cache), so the driver need not read it back."""
+    entry (sha256 of the file just written, from the page cache), so the driver need not read it back, and
+    the seconds this writer spent on "episodes" (HDF5), "close, fsync" and "sha256"."""
+    import time
+
     from sensors.manifest import shard_entry
     from sensors.recording import Channel
     from simulate.executors import _maybe_inject_fault
@@ -200,12 +204,15 @@ def write_packed_shard(cfg: SceneConfig, out_dir: str, packed: PackedShard, sens
     attached = {name: _attach(name) for name in dict.fromkeys(packed.block_names)}  # the driver owns them
     try:
         pieces = packed.arrays({name: shm.buf for name, shm in attached.items()})
+        t0 = time.perf_counter()
         with shard_writer(cfg, Path(out_dir), packed.shard, sensor_attrs, mjcf) as w:
             for ep_id, attrs, piece, row in packed.episodes:
                 arrays = pieces[piece]
                 ch = {name: Channel(arrays[name][row] if per_ep else arrays[name], units, dims, desc)
                       for name, (units, dims, desc, per_ep) in packed.specs.items()}
                 w.add_episode(ep_id, ch, attrs)
+            t1 = time.perf_counter()
+        t2 = time.perf_counter()
         pieces = arrays = ch = None  # drop the views before the blocks are closed
     finally:
         for shm in attached.values():
@@ -213,7 +220,8 @@ def write_packed_shard(cfg: SceneConfig, out_dir: str, packed: PackedShard, sens
                 shm.close()
             except BufferError:  # views still held by a failing write's frames: the process cleans up
                 pass
-    return shard_entry(w.path, [e[0] for e in packed.episodes], [e[1]["seed"] for e in packed.episodes], config_sha256(cfg))
+    entry = shard_entry(w.path, [e[0] for e in packed.episodes], [e[1]["seed"] for e in packed.episodes], config_sha256(cfg))
+    return entry, {"episodes": t1 - t0, "close, fsync": t2 - t1, "sha256": time.perf_counter() - t2}
 
 
 def _groups(cfg: SceneConfig, todo: list[int], worlds: int) -> list[list[int]]:
@@ -366,7 +374,9 @@ def generate_feed(
             for f in done:
                 p = pending.pop(f)
                 try:
-                    entries[p.shard] = f.result()
+                    entries[p.shard], spent = f.result()
+                    for k, v in spent.items():
+                        seconds[f"writers: {k}"] = seconds.get(f"writers: {k}", 0.0) + v
                     _check_written(out, p.shard, sha)
                 except BrokenProcessPool:
                     broken.append(p)
