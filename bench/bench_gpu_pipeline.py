@@ -335,13 +335,16 @@ def end_to_end(device: str, per_shard: int, workers: int, shards_per_worker: int
     from simulate.executors import _feed_by_default
 
     mode = "gpu feed (physics process, sensor chain here, writer processes)" if workers > 1 and _feed_by_default(cfg) else "shard workers"
+    from simulate.executors import LAST_GENERATE_SECONDS
     from simulate.feed import LAST_RUN_SECONDS
 
-    r = {"workers": workers, "mode": mode, "driver_seconds": dict(LAST_RUN_SECONDS) if "feed" in mode else None, "episodes": episodes, "shards": -(-episodes // per_shard), "seconds": dt, "sync_seconds": t_sync,
+    r = {"workers": workers, "mode": mode, "generate_seconds": dict(LAST_GENERATE_SECONDS),
+         "driver_seconds": dict(LAST_RUN_SECONDS) if "feed" in mode else None, "episodes": episodes, "shards": -(-episodes // per_shard), "seconds": dt, "sync_seconds": t_sync,
          "samples_per_s": samples / dt, "disk_MB_per_s": nbytes / dt / 1e6, "raw_write_MB_per_s_same_bytes": raw,
          "fraction_of_raw_write": nbytes / dt / 1e6 / raw, "bytes": nbytes}
     print(f"end to end, {workers} worker(s), {mode}, {episodes} episodes ({per_shard} per shard): {samples / dt:.3g} samples/s, "
-          f"{nbytes / dt / 1e6:.0f} MB/s on disk = {r['fraction_of_raw_write']:.0%} of raw write ({raw:.0f} MB/s), incl. start-up"
+          f"{nbytes / dt / 1e6:.0f} MB/s on disk = {r['fraction_of_raw_write']:.0%} of raw write ({raw:.0f} MB/s), incl. start-up; "
+          f"generate: {', '.join(f'{k} {v:.1f} s' for k, v in LAST_GENERATE_SECONDS.items())}, sync {t_sync:.1f} s"
           + (f"; driver: {', '.join(f'{k} {v:.1f} s' for k, v in LAST_RUN_SECONDS.items())}" if "feed" in mode else ""))
     return r
 

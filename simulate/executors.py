@@ -123,8 +123,12 @@ def generate(
     shards first), in completion order. feed: simulate here and write in `workers` processes (default: with
     MuJoCo Warp on a single GPU; see the module docstring).
     """
+    import time
+
     from simulate import run
 
+    LAST_GENERATE_SECONDS.clear()
+    t0 = time.perf_counter()
     if executor not in EXECUTORS:
         raise ValueError(f"executor must be one of {', '.join(EXECUTORS)} (got {executor!r})")
     if workers < 1:
@@ -148,7 +152,10 @@ def generate(
     described = None
     if todo:
         kw = dict(backend=backend, device=device, threads=threads)
-        if executor == "local" and (feed if feed is not None else _feed_by_default(cfg)):
+        use_feed = executor == "local" and (feed if feed is not None else _feed_by_default(cfg))
+        t1 = time.perf_counter()
+        LAST_GENERATE_SECONDS["checks, imports"] = t1 - t0
+        if use_feed:
             from simulate.feed import generate_feed
 
             described = generate_feed(cfg, out, todo, workers, max_retries=max_retries, on_shard=on_shard, **kw)
@@ -156,7 +163,16 @@ def generate(
             _run_local(cfg, out, todo, workers, max_retries, on_shard, kw)
         else:
             _run_ray(cfg, out, todo, workers, address, max_retries, on_shard, kw)
-    return run.write_dataset_manifest(cfg, out, described)
+        t0 = time.perf_counter()
+        LAST_GENERATE_SECONDS["shards"] = t0 - t1
+    path = run.write_dataset_manifest(cfg, out, described)
+    LAST_GENERATE_SECONDS["manifest"] = time.perf_counter() - t0
+    return path
+
+
+# where the last multi-worker `generate` of this process spent its time (for bench/): "checks, imports" (config,
+# finished shards, the executor's choice), "shards", "manifest"
+LAST_GENERATE_SECONDS: dict[str, float] = {}
 
 
 def _feed_by_default(cfg: SceneConfig) -> bool:

@@ -27,7 +27,9 @@ import numpy as np
 from scenes import SceneConfig
 
 FEED_WORLDS = 32768  # episodes per batch of worlds: 1.6e7 world-steps/s on an H100 (bench/results/gpu-pipeline-h100-physics.json)
-MAX_PENDING_BATCHES = 2  # batches handed to the writers and not yet written (bounds host memory)
+PENDING_PER_WRITER = 2  # shards handed to the writers and not yet written, per writer: one being written, one
+# queued, so no writer idles while the driver packs the next batch (bounds host memory: ~1.4 GB per shard of
+# 8192 bench episodes)
 RAMP_BATCHES = 2  # batches of worlds / 4 and worlds / 2 episodes before the full ones (see _groups)
 PHYSICS_PROCESSES = 2  # each steps its own batch: one's host work (protocols, controls) overlaps the other's GPU work
 # where the driver's time went in the last generate_feed of this process (for bench/): "start-up" (Warp, the
@@ -350,7 +352,6 @@ def generate_feed(
     pool = ProcessPoolExecutor(writers, mp_context=ctx)
     pending: dict = {}  # future -> packed shard (kept until its file is checked, for a resubmit)
     shared = BlockPool()  # the packed pieces' blocks, lent until their shard is written
-    batch_of: dict[int, int] = {}
     entries: dict[int, dict] = {}
     attempts: dict[int, int] = {}
 
@@ -362,11 +363,12 @@ def generate_feed(
         attempts[p.shard] = attempts.get(p.shard, 0) + 1
         pending[pool.submit(write_packed_shard, cfg, str(out), p, sensor_attrs, mjcf)] = p
 
-    def collect(block_until_batch: int | None) -> None:
-        """Handle finished writes; wait until no shard of a batch <= block_until_batch is pending."""
+    def collect(room_for: int | None) -> None:
+        """Handle finished writes; wait until `room_for` more shards fit under PENDING_PER_WRITER per writer
+        (a batch larger than that waits for every write), or with None until every write is done."""
         nonlocal pool
         while pending:
-            waiting = block_until_batch is not None and any(batch_of[p.shard] <= block_until_batch for p in pending.values())
+            waiting = room_for is None or len(pending) + room_for > max(PENDING_PER_WRITER * writers, room_for)
             done, _ = wait(list(pending), timeout=None if waiting else 0, return_when=FIRST_COMPLETED)
             if not done:
                 return
@@ -405,7 +407,7 @@ def generate_feed(
     try:
         for b, group in enumerate(groups):
             t0 = time.perf_counter()
-            collect(b - MAX_PENDING_BATCHES)  # bounded memory: at most MAX_PENDING_BATCHES batches not yet written
+            collect(len(group))  # bounded memory: at most PENDING_PER_WRITER shards per writer not yet written
             add("wait for writers", t0)
             stepped = None
             if physics:
@@ -415,14 +417,13 @@ def generate_feed(
                 except BrokenProcessPool:
                     raise RuntimeError(f"the physics process died stepping shards {group} (complete shards are kept: "
                                        "rerun to resume)") from None
-                add("wait for physics", t0)
+                add("wait for physics (first batch)" if b == 0 else "wait for physics", t0)
                 if b + PHYSICS_PROCESSES < len(groups):
                     ahead.append(step(b + PHYSICS_PROCESSES))
             for p in produce(cfg, group, sensor, threads, seconds, stepped, shared):
-                batch_of[p.shard] = b
                 submit(p)
         t0 = time.perf_counter()
-        collect(len(todo))
+        collect(None)
         add("wait for writers", t0)
     finally:
         t0 = time.perf_counter()
