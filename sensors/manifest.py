@@ -182,6 +182,26 @@ def shard_entry(
 # --------------------------------------------------------------------------- splits
 
 
+_DIGITS = re.compile(r"(\d+)")
+
+
+def _natural_order(ids: Iterable[str]) -> list[str]:
+    """ids in natural order (`_natural_key`, ties broken by the text). Dataset ids share their non-digit parts
+    ("shard-00003.h5/ep-000123"): their order is then the numeric one of their digit runs, sorted by numpy (the
+    per-id Python key took seconds for 200k episodes); other id sets take the general key."""
+    ids = list(ids)
+    parts = [_DIGITS.split(e) for e in ids]
+    if ids and all(len(p) == len(parts[0]) and p[0::2] == parts[0][0::2] for p in parts):
+        try:
+            cols = [np.array([int(p[k]) for p in parts], dtype=np.int64) for k in range(1, len(parts[0]), 2)]
+        except OverflowError:  # a digit run beyond int64: the general key
+            cols = None
+        if cols is not None:
+            order = np.lexsort([np.array(ids)] + cols[::-1])
+            return [ids[i] for i in order]
+    return sorted(ids, key=lambda e: (_natural_key(e), e))
+
+
 def make_splits(
     episode_ids: Iterable[str],
     seed: int,
@@ -193,7 +213,7 @@ def make_splits(
     ``default_rng(seed)``; valid and test get ``round(n * fraction)`` ids each, train the rest.
     Each list is returned in natural order.
     """
-    ids = sorted(set(episode_ids), key=lambda e: (_natural_key(e), e))  # a total order: ties broken by the text
+    ids = _natural_order(set(episode_ids))
     if len(fractions) != 3 or any(f < 0 for f in fractions) or not np.isclose(sum(fractions), 1.0):
         raise ValueError(f"fractions must be 3 non-negative numbers summing to 1, got {fractions}")
     n = len(ids)

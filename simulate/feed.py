@@ -420,6 +420,8 @@ def generate_feed(
                 add("wait for physics (first batch)" if b == 0 else "wait for physics", t0)
                 if b + PHYSICS_PROCESSES < len(groups):
                     ahead.append(step(b + PHYSICS_PROCESSES))
+                elif not ahead:  # the last batch is here: the physics processes exit (free the GPU) meanwhile
+                    physics.shutdown(wait=False)
             for p in produce(cfg, group, sensor, threads, seconds, stepped, shared):
                 submit(p)
         t0 = time.perf_counter()

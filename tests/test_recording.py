@@ -295,3 +295,21 @@ def test_episode_seeds_stable_and_count_independent():
     assert mf.episode_seed(0, 0) == 8668861027912758289
     assert all(isinstance(x, int) and 0 <= x < 2**64 for x in s)
     assert mf.shard_seed(42, 0) not in s
+
+
+def test_natural_order_fast_path_equals_the_general_key():
+    """Dataset ids (same non-digit parts) are ordered by numpy; the order equals the per-id natural key with
+    ties broken by the text, and id sets it cannot take (other shapes, digit runs beyond int64) fall back."""
+    import random
+
+    from sensors.manifest import _natural_order
+    from sensors.recording import _natural_key
+
+    general = lambda ids: sorted(ids, key=lambda e: (_natural_key(e), e))  # noqa: E731
+    rng = random.Random(1)
+    same_shape = [f"shard-{rng.randrange(30):05d}.h5/ep-{rng.randrange(10**6):0{rng.choice([1, 6])}d}" for _ in range(3000)]
+    cases = [same_shape, ["ep-10", "ep-9", "ep-09", "ep-1"], ["a2b", "a10b", "b1", "x"], ["s/e-99999999999999999999", "s/e-3"]]
+    for ids in cases:
+        rng.shuffle(ids)
+        assert _natural_order(ids) == general(ids)
+    assert _natural_order(["ep-10", "ep-9"]) == ["ep-9", "ep-10"]  # numeric, not text order
