@@ -35,7 +35,8 @@ PHYSICS_PROCESSES = 2  # each steps its own batch: one's host work (protocols, c
 # where the driver's time went in the last generate_feed of this process (for bench/): "start-up" (Warp, the
 # sensor), "simulate" (load field, sensor chain, channel arrays; protocols and physics too for kinds with their
 # own contact stage), "pack", "wait for physics", "wait for writers", "shut down" (the process pools); and,
-# summed over the writer processes, "writers: episodes" (HDF5), "writers: close, fsync", "writers: sha256"
+# summed over the writer processes, "writers: episodes" (HDF5), "writers: close, fsync", "writers: sha256"; and
+# summed over the physics tasks, "physics: ..." (see step_worlds; the first batch's apart)
 LAST_RUN_SECONDS: dict[str, float] = {}
 
 
@@ -63,17 +64,25 @@ def _views(buf, where: list[tuple[int, str, tuple[int, ...]]]) -> list[np.ndarra
     return [np.ndarray(shape, np.dtype(dt), buffer=buf, offset=off) for off, dt, shape in where]
 
 
-def step_worlds(cfg: SceneConfig, gids: list[int], threads: int = 1) -> tuple[list, dict]:
+def step_worlds(cfg: SceneConfig, gids: list[int], threads: int = 1, submitted: float | None = None) -> tuple[list, dict, dict]:
     """Physics task (in the feed's physics process): the protocols of episodes `gids` and, per length group,
     their (sensordata, target) from `simulate_sensors`, written straight into a shared-memory block the
-    receiver unlinks: ({n_samples: (block name, layout)} or the arrays themselves where /dev/shm has no room)."""
+    receiver unlinks: ({n_samples: (block name, layout)} or the arrays themselves where /dev/shm has no room);
+    and where the task's time went ("waiting to start" since `submitted`, a time.time(), "imports", "protocols",
+    "worlds": initial states, controls, MuJoCo Warp)."""
+    import time
+
+    t0 = time.time()
     from multiprocessing import shared_memory
 
     from sensors.manifest import episode_seed
     from simulate.contact import simulate_sensors
     from simulate.run import episode_protocols, length_groups
 
+    t1 = time.time()
     protos = episode_protocols(cfg, [episode_seed(cfg.generation.root_seed, k) for k in gids], gids)
+    t2 = time.time()
+    spent = {"waiting to start": t0 - (submitted or t0), "imports": t1 - t0, "protocols": t2 - t1}
     out = {}
     for n, idx in length_groups(protos):
         made = []
@@ -94,7 +103,21 @@ def step_worlds(cfg: SceneConfig, gids: list[int], threads: int = 1) -> tuple[li
         out[n] = (shm.name, [(0, sens.dtype.str, sens.shape), (sens.nbytes, "<f8", target.shape)])
         sens = None
         shm.close()
-    return protos, out
+    spent["worlds"] = time.time() - t2
+    return protos, out, spent
+
+
+PACK_THREADS = 4  # threads copying a piece into its shared block (numpy copies release the GIL)
+_PACKERS = None
+
+
+def _pack_pool():
+    global _PACKERS
+    if _PACKERS is None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        _PACKERS = ThreadPoolExecutor(PACK_THREADS, thread_name_prefix="pack")
+    return _PACKERS
 
 
 class BlockPool:
@@ -173,12 +196,16 @@ class PackedShard:
             self.pieces.append({n: np.array(a) for n, a in arrays.items()})
             self.blocks.append(None)
             return
-        layout, offset = {}, 0
+        layout, offset, copies = {}, 0, []
         for n in per_ep:
             a = arrays[n]
-            np.copyto(np.ndarray(a.shape, a.dtype, buffer=shm.buf, offset=offset), a)
+            dst = np.ndarray(a.shape, a.dtype, buffer=shm.buf, offset=offset)
+            step = -(-len(a) // PACK_THREADS)  # rows per thread: the first touch of a block's pages is the cost
+            copies += [(dst[r : r + step], a[r : r + step]) for r in range(0, len(a), step)]
             layout[n] = (offset, a.dtype.str, a.shape)
             offset += a.nbytes
+        list(_pack_pool().map(lambda c: np.copyto(*c), copies))
+        copies = dst = None
         self.pieces.append({n: np.array(a) for n, a in arrays.items() if n not in layout})
         self.blocks.append((shm.name, layout))
 
@@ -336,7 +363,7 @@ def generate_feed(
     physics = None if cfg.protocol.kind in CONTACT_STAGES else ProcessPoolExecutor(PHYSICS_PROCESSES, mp_context=ctx)
 
     def step(b: int):
-        return physics.submit(step_worlds, cfg, [k for s in groups[b] for k in episode_ids_of_shard(cfg, s)], threads)
+        return physics.submit(step_worlds, cfg, [k for s in groups[b] for k in episode_ids_of_shard(cfg, s)], threads, time.time())
 
     ahead = [step(b) for b in range(min(PHYSICS_PROCESSES, len(groups)))] if physics else []
     try:
@@ -418,6 +445,9 @@ def generate_feed(
                     raise RuntimeError(f"the physics process died stepping shards {group} (complete shards are kept: "
                                        "rerun to resume)") from None
                 add("wait for physics (first batch)" if b == 0 else "wait for physics", t0)
+                for k, v in stepped[2].items():  # the physics processes' own split (summed over batches)
+                    key = f"physics{' (first batch)' if b == 0 else ''}: {k}"
+                    seconds[key] = seconds.get(key, 0.0) + v
                 if b + PHYSICS_PROCESSES < len(groups):
                     ahead.append(step(b + PHYSICS_PROCESSES))
                 elif not ahead:  # the last batch is here: the physics processes exit (free the GPU) meanwhile
