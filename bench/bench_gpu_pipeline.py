@@ -310,12 +310,12 @@ def raw_write(folder: Path, nbytes: int) -> float:
     return nbytes / dt / 1e6
 
 
-def end_to_end(device: str, per_shard: int, workers: int, shards_per_worker: int) -> dict:
+def end_to_end(device: str, per_shard: int, workers: int, shards_per_worker: int, extra: list[str] | None = None) -> dict:
     """`workers` processes share the GPU(s), each writing `shards_per_worker` shards of `per_shard` episodes."""
     from simulate.executors import generate
 
     episodes = per_shard * workers * shards_per_worker
-    cfg = _cfg([f"generation.episodes={episodes}", f"generation.episodes_per_shard={per_shard}"], device)
+    cfg = _cfg([f"generation.episodes={episodes}", f"generation.episodes_per_shard={per_shard}", *(extra or [])], device)
     root = Path(os.environ.get("BENCH_DIR", tempfile.gettempdir())) / f"e2e-{workers}"
     shutil.rmtree(root, ignore_errors=True)
     t0 = time.perf_counter()
@@ -358,6 +358,8 @@ def main() -> None:
     ap.add_argument("--shard-episodes", type=int, default=8192)
     ap.add_argument("--workers", default="1,2,4")
     ap.add_argument("--shards-per-worker", type=int, default=1)
+    ap.add_argument("--physics-processes", type=int, default=None, help="e2e: the GPU feed's physics processes")
+    ap.add_argument("--override", action="append", default=[], help="e2e: a scene override on top of the bench scene")
     ap.add_argument("--parts", default="physics,equivalence,stages,e2e")
     ap.add_argument("--tag", default="", help="result file name: gpu-pipeline-<tag>.json")
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
@@ -389,7 +391,12 @@ def main() -> None:
         from simulate.run import GPU_BATCH, SENSOR_SLICE
 
         res["gpu_batch"], res["feed_worlds"], res["sensor_slice"] = GPU_BATCH, FEED_WORLDS, SENSOR_SLICE
-        res["end_to_end"] = [end_to_end(a.device, a.shard_episodes, int(w), a.shards_per_worker) for w in a.workers.split(",")]
+        from simulate import feed
+
+        if a.physics_processes:
+            feed.PHYSICS_PROCESSES = a.physics_processes
+        res["physics_processes"], res["e2e_overrides"] = feed.PHYSICS_PROCESSES, a.override
+        res["end_to_end"] = [end_to_end(a.device, a.shard_episodes, int(w), a.shards_per_worker, a.override) for w in a.workers.split(",")]
         r1 = res["end_to_end"][0]
         for r in res["end_to_end"]:
             r["scaling_efficiency_vs_first"] = r["samples_per_s"] / (r1["samples_per_s"] * r["workers"] / r1["workers"])
