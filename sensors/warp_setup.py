@@ -1,4 +1,5 @@
-"""One place that initialises Warp quietly and resolves the device name ("cpu", "cuda", "cuda:0", "auto")."""
+"""One place that initialises Warp quietly, resolves the device name ("cpu", "cuda", "cuda:0", "auto") and copies
+results back from the GPU (`to_host`, into reused page-locked buffers inside `host_staging`)."""
 
 from __future__ import annotations
 

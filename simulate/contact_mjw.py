@@ -9,7 +9,8 @@ On CUDA one sample period (substeps x [set ctrl, step] + record sensors) is capt
 and replayed; per-step controls come from a device buffer indexed by a device-side step counter, so no
 Python runs per physics step. Sensors are computed only in the step that is recorded (the other substeps
 step a copy of the model with mjDSBL_SENSOR: sensors do not act on the dynamics, so the recorded values are
-the same). `worlds_for` keeps one set of worlds per process, with its buffers and graph, for the next batch. Controls are uploaded and sensors read back in time chunks that bound
+the same). `worlds_for` keeps one set of worlds per process, with its buffers and graph, for the next batch.
+Controls are uploaded and sensors read back (through a page-locked buffer) in time chunks that bound
 device memory. MuJoCo Warp computes in float32 (C MuJoCo in float64) and its contact solver sums with
 atomics on the GPU, so results agree with the C path within float32 tolerances, not bit for bit.
 """

@@ -5,11 +5,14 @@ needs several host cores; worker processes that each simulate their own shard ti
 batches. Here a three-stage pipeline runs over batches of several shards' episodes (FEED_WORLDS):
 
 1. PHYSICS_PROCESSES processes step the next batches (`step_worlds`: protocols, controls, MuJoCo Warp; the
-   GPU time-slices between them, so one's host work overlaps the other's physics) and hand the sensordata
-   over in shared memory;
-2. the driver runs the load field and the sensor chain of batch b on the same GPU, slice by slice, and copies
-   each shard's recorded channels once into shared memory (`produce`);
-3. writer processes (spawned; one shard per task) write the shards and make their manifest entries.
+   GPU time-slices between them, so one's host work overlaps the other's physics) and write the sensordata
+   straight into shared memory;
+2. the driver runs the load field and the sensor chain of batch b on the same GPU, slice by slice; each slice's
+   outputs come back into reused page-locked buffers and are packed into shared blocks that a `BlockPool`
+   lends until their shard is written (`produce`); the first batches are smaller (RAMP_BATCHES), so the
+   driver and writers start early;
+3. writer processes (spawned; one shard per task, at most PENDING_PER_WRITER queued each) write the shards and
+   make their manifest entries.
 
 The files are those of `simulate.run.write_shard`: an episode's channels do not depend on the batch it ran in.
 A writer that dies is replaced and its shard resubmitted (up to max_retries); finished shards stay, so a
@@ -26,7 +29,7 @@ import numpy as np
 
 from scenes import SceneConfig
 
-FEED_WORLDS = 32768  # episodes per batch of worlds: 1.6e7 world-steps/s on an H100 (bench/results/gpu-pipeline-h100-physics.json)
+FEED_WORLDS = 32768  # episodes per batch of worlds: 2.4e7 world-steps/s on an H100 (bench/results/physics-profile-h100-s4.json)
 PENDING_PER_WRITER = 2  # shards handed to the writers and not yet written, per writer: one being written, one
 # queued, so no writer idles while the driver packs the next batch (bounds host memory: ~1.4 GB per shard of
 # 8192 bench episodes)
