@@ -7,7 +7,9 @@ sample). Measured in one run, written to bench/results/physics-profile-<tag>.jso
 1. world-steps/s of `simulate.contact_mjw.WarpWorlds` (CUDA graph per sample period) with sensors computed in
    every step and with sensors only in the recorded step (the default), same worlds and controls;
 2. GPU time per kernel over one sample period, launched eagerly (Warp's kernel timing: the sum of the kernels
-   is the GPU work a graph replays, without the launch gaps), grouped by kernel name, largest first.
+   is the GPU work a graph replays, without the launch gaps), grouped by kernel name, largest first;
+3. (--parts variants) solver and collision options of the same model: world-steps/s and how far the recorded
+   contact force and position move from the default options' (same worlds and controls).
 """
 
 from __future__ import annotations
@@ -90,12 +92,55 @@ def kernel_profile(device: str, n_worlds: int, top: int = 30) -> dict:
             "kernels": [{"name": k, "ms": v[0], "launches": v[1]} for k, v in rows[:top]]}
 
 
+VARIANTS = {  # name -> (MjModel.opt changes, MuJoCo Warp-only Option changes)
+    "default": ({}, {}),
+    "ls_iterations=10": ({"ls_iterations": 10}, {}),
+    "ls_iterations=4": ({"ls_iterations": 4}, {}),
+    "ccd_iterations=12": ({"ccd_iterations": 12}, {}),
+    "ls_iterations=10, ccd_iterations=12": ({"ls_iterations": 10, "ccd_iterations": 12}, {}),
+    "run_qacc_smooth=False": ({}, {"run_qacc_smooth": False}),
+}  # measured on Warp's CPU device and left out: solver=CG (force 0.7 % of full scale off), mjDSBL_GRAVITY (0.15 %)
+
+
+def variants(device: str, n_worlds: int, n_samples: int) -> dict:
+    """world-steps/s of each VARIANTS entry and its largest deviation from the default options' sensordata."""
+    import copy
+
+    from simulate.contact_mjw import WarpWorlds
+
+    m0, sub, q0, ctrl, s0 = _worlds(_cfg([]), n_worlds, n_samples)
+    out, ref = {}, None
+    for name, (opt, warp_opt) in VARIANTS.items():
+        m = copy.copy(m0)
+        for k, v in opt.items():
+            setattr(m.opt, k, v)
+        ww = WarpWorlds(m, n_worlds, device)
+        for k, v in warp_opt.items():
+            setattr(ww.m.opt, k, v)
+            setattr(ww.m_quiet.opt, k, v)
+        ww.run(q0, ctrl, s0, sub, n_samples)  # compile, capture
+        t0 = time.perf_counter()
+        sens = ww.run(q0, ctrl, s0, sub, n_samples)
+        dt = time.perf_counter() - t0
+        ref = sens if ref is None else ref
+        full = float(abs(ref[..., 4:7]).max())
+        r = {"world_steps_per_s": n_worlds * (n_samples - 1) * sub / dt,
+             "max_force_dev_of_full_scale": float(abs(sens[..., 4:7] - ref[..., 4:7]).max()) / full,
+             "max_position_dev_m": float(abs(sens[..., 0:3] - ref[..., 0:3]).max())}
+        out[name] = r
+        print(f"{name:40s} {r['world_steps_per_s']:.3g} world-steps/s, force dev {r['max_force_dev_of_full_scale']:.2e} of full "
+              f"scale, position dev {r['max_position_dev_m']:.2e} m")
+        del ww
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--device", default="cuda:0")
     ap.add_argument("--worlds", type=int, default=32768)
     ap.add_argument("--samples", type=int, default=41)
     ap.add_argument("--tag", default="gpu")
+    ap.add_argument("--parts", default="rates,kernels")
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     a = ap.parse_args()
     from sensors.warp_setup import init_warp
@@ -103,8 +148,14 @@ def main() -> None:
     init_warp()
     import warp as wp
 
-    res = {"device": a.device, "device_name": wp.get_device(a.device).name,
-           "rates": rates(a.device, a.worlds, a.samples), "kernels": kernel_profile(a.device, a.worlds)}
+    res = {"device": a.device, "device_name": wp.get_device(a.device).name, "worlds": a.worlds, "samples": a.samples}
+    parts = a.parts.split(",")
+    if "rates" in parts:
+        res["rates"] = rates(a.device, a.worlds, a.samples)
+    if "kernels" in parts:
+        res["kernels"] = kernel_profile(a.device, a.worlds)
+    if "variants" in parts:
+        res["variants"] = variants(a.device, a.worlds, a.samples)
     a.out.mkdir(parents=True, exist_ok=True)
     path = a.out / f"physics-profile-{a.tag}.json"
     path.write_text(json.dumps(res, indent=2))
