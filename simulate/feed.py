@@ -134,6 +134,7 @@ class BlockPool:
         self._new = shared_memory.SharedMemory
         self.blocks: dict = {}  # name -> SharedMemory
         self.free: set[str] = set()
+        self.draining = False
 
     def get(self, nbytes: int):
         """A block of at least nbytes (the smallest free one that fits, else a new one), or None where /dev/shm
@@ -154,6 +155,15 @@ class BlockPool:
     def put(self, name: str) -> None:
         if name in self.blocks:
             self.free.add(name)
+            if self.draining:
+                self._drop(name)
+
+    def drain(self) -> None:
+        """No more gets: unlink the free blocks now and every block as it comes back (freeing the pages of a
+        large pool takes seconds; done while the last shards are written, not after)."""
+        self.draining = True
+        for name in list(self.free):
+            self._drop(name)
 
     def _drop(self, name: str) -> None:
         self.free.discard(name)
@@ -457,6 +467,7 @@ def generate_feed(
                     physics.shutdown(wait=False)
             for p in produce(cfg, group, sensor, threads, seconds, stepped, shared):
                 submit(p)
+        shared.drain()
         t0 = time.perf_counter()
         collect(None)
         add("wait for writers", t0)
