@@ -21,6 +21,7 @@ rerun resumes at the missing ones. Where /dev/shm has no room, the arrays travel
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -31,8 +32,8 @@ from scenes import SceneConfig
 
 FEED_WORLDS = 32768  # episodes per batch of worlds: 2.4e7 world-steps/s on an H100 (bench/results/physics-profile-h100-s4.json)
 PENDING_PER_WRITER = 2  # shards handed to the writers and not yet written, per writer: one being written, one
-# queued, so no writer idles while the driver packs the next batch (bounds host memory: ~1.4 GB per shard of
-# 8192 bench episodes)
+# queued, so no writer idles while the driver packs the next batch (~1.4 GB per shard of 8192 bench episodes) ...
+PENDING_RAM_FRACTION = 0.25  # ... and no more bytes pending than this fraction of the host's memory
 RAMP_BATCHES = 2  # batches of worlds / 4 and worlds / 2 episodes before the full ones (see _groups)
 PHYSICS_PROCESSES = 2  # each steps its own batch: one's host work (protocols, controls) overlaps the other's GPU work
 # where the driver's time went in the last generate_feed of this process (for bench/): "start-up" (Warp, the
@@ -199,6 +200,12 @@ class PackedShard:
     @property
     def block_names(self) -> list[str]:
         return [b[0] for b in self.blocks if b is not None]
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of its arrays held for the writer (in blocks or in process memory)."""
+        shared = sum(int(np.prod(shape)) * np.dtype(dt).itemsize for b in self.blocks if b for _, dt, shape in b[1].values())
+        return shared + sum(a.nbytes for piece in self.pieces for a in piece.values())
 
     def add_piece(self, arrays: dict[str, np.ndarray], pool: BlockPool | None) -> None:
         """Append a piece, copying its per-episode arrays into a block of `pool` (or into process memory: the
@@ -392,6 +399,7 @@ def generate_feed(
     pool = ProcessPoolExecutor(writers, mp_context=ctx)
     pending: dict = {}  # future -> packed shard (kept until its file is checked, for a resubmit)
     shared = BlockPool()  # the packed pieces' blocks, lent until their shard is written
+    ram_budget = PENDING_RAM_FRACTION * os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     entries: dict[int, dict] = {}
     attempts: dict[int, int] = {}
 
@@ -408,7 +416,8 @@ def generate_feed(
         (a batch larger than that waits for every write), or with None until every write is done."""
         nonlocal pool
         while pending:
-            waiting = room_for is None or len(pending) + room_for > max(PENDING_PER_WRITER * writers, room_for)
+            waiting = (room_for is None or len(pending) + room_for > max(PENDING_PER_WRITER * writers, room_for)
+                       or sum(p.nbytes for p in pending.values()) > ram_budget)
             done, _ = wait(list(pending), timeout=None if waiting else 0, return_when=FIRST_COMPLETED)
             if not done:
                 return

@@ -203,3 +203,15 @@ def test_feed_packs_each_gpu_slice_before_the_next_overwrites_its_staging(gpu_de
         got = None
     finally:
         pool.close()
+
+
+def test_gpu_feed_bounded_by_host_memory_still_finishes(cfg, serial, tmp_path, monkeypatch):
+    """With a pending-bytes budget smaller than one shard, the feed writes one shard at a time (no deadlock)
+    and the dataset is the serial one."""
+    from simulate import feed
+
+    monkeypatch.setattr(feed, "PENDING_RAM_FRACTION", 1e-12)
+    monkeypatch.setattr(feed, "FEED_WORLDS", 2)
+    out = tmp_path / "bounded"
+    executors.generate(cfg, out, workers=2, feed=True)
+    _assert_same_dataset(serial, out, 4)
