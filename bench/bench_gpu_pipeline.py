@@ -13,7 +13,7 @@ Measured in one run, written to bench/results/gpu-pipeline-<device>.json:
 2. equivalence: MuJoCo Warp on the GPU vs C MuJoCo, same episodes (force and position differences);
 3. stages: seconds per stage for one batch in one process (controls, physics, load field, sensor chain,
    HDF5 write) -> what limits the throughput;
-4. end to end: `simulate.executors.generate` (the code `piezotwin generate --physics mujoco_warp` runs)
+4. end to end: `simulate.generation.executors.generate` (the code `piezotwin generate --physics mujoco_warp` runs)
    with 1..W worker processes sharing the GPU(s) (pinned round-robin when there are several), samples/s and MB/s on disk, against the raw write speed of
    the same bytes to the same disk measured right after (plain file, 64 MiB blocks, fsync at the end in both).
 """
@@ -47,9 +47,9 @@ def _cfg(extra: list[str], device: str | None = None):
 
 def physics(device: str, worlds: list[int], n_samples: int) -> dict:
     """World-steps/s of MuJoCo Warp against batch size, and C MuJoCo (all cores) on the largest batch <= 4096."""
-    from simulate.contact import _initial_states, build_model, episode_controls, simulate_sensors
-    from simulate.contact_mjw import WarpWorlds
-    from simulate.protocols import make_episode_protocol
+    from simulate.contact.load_field import _initial_states, build_model, episode_controls, simulate_sensors
+    from simulate.contact.mujoco_warp import WarpWorlds
+    from simulate.protocols.indenter import make_episode_protocol
 
     cfg = _cfg([])
     sub = cfg.sampling.substeps
@@ -87,9 +87,9 @@ def _physics_worker(args) -> tuple[float, int]:
     from sensors.warp_setup import init_warp
 
     init_warp()
-    from simulate.contact import _initial_states, build_model, episode_controls
-    from simulate.contact_mjw import WarpWorlds
-    from simulate.protocols import make_episode_protocol
+    from simulate.contact.load_field import _initial_states, build_model, episode_controls
+    from simulate.contact.mujoco_warp import WarpWorlds
+    from simulate.protocols.indenter import make_episode_protocol
 
     cfg = _cfg([])
     sub, m = cfg.sampling.substeps, build_model(cfg)
@@ -124,8 +124,8 @@ def physics_multi_gpu(worlds: int, n_samples: int) -> dict:
 
 
 def equivalence(device: str, n: int = 16) -> dict:
-    from simulate.contact import simulate_sensors
-    from simulate.protocols import make_episode_protocol
+    from simulate.contact.load_field import simulate_sensors
+    from simulate.protocols.indenter import make_episode_protocol
 
     cfg = _cfg([])
     cfg_w = _cfg([], device)
@@ -144,12 +144,12 @@ def stages(device: str, batch: int) -> dict:
     """Seconds per stage for one batch of `batch` episodes in this process (after a warm-up), along the path
     `generate` takes: physics for the whole batch, then load field and sensor chain per SENSOR_SLICE on the
     device (fields left there for the chain), channels, HDF5."""
-    from sensors.manifest import episode_seed
-    from sensors.recording import RecordingWriter
+    from sensors.data.manifest import episode_seed
+    from sensors.data.recording import RecordingWriter
     from sensors.registry import make_sensor
-    from simulate import contact
-    from simulate.protocols import make_episode_protocol
-    from simulate.run import SENSOR_SLICE, EpisodeResult, _episode_attrs, channel_arrays, episode_channels
+    from simulate.contact.load_field import load_field as contact
+    from simulate.protocols.indenter import make_episode_protocol
+    from simulate.generation.run import SENSOR_SLICE, EpisodeResult, _episode_attrs, channel_arrays, episode_channels
 
     cfg = _cfg([], device)
     sensor = make_sensor(cfg, "warp", device)
@@ -207,8 +207,8 @@ def chain_profile(device: str, episodes: int) -> dict:
 
     from sensors import electronics as el
     from sensors.registry import make_sensor
-    from sensors.taxel_warp import TaxelChainWarp, drive_on_device, scaled_on_device
-    from simulate.load_field_warp import load_field_warp
+    from sensors.cnt_pdms.kernels import TaxelChainWarp, drive_on_device, scaled_on_device
+    from simulate.contact.load_field_kernels import load_field_warp
 
     cfg = _cfg([], device)
     s = make_sensor(cfg, "warp", device)
@@ -264,7 +264,7 @@ def _tiled(el, c_d, st_d, tc, N, shape, device):
 def writer_vs_episode_length(lengths: list[int], total_samples: int) -> dict:
     """HDF5 writer alone (no physics): MB/s of the compact 36-taxel record against episode length, and the raw
     write of the same bytes to the same disk. The per-episode cost (groups, datasets, attributes) is fixed."""
-    from sensors.recording import Channel, RecordingWriter
+    from sensors.data.recording import Channel, RecordingWriter
 
     rng = np.random.default_rng(0)
     out = {}
@@ -312,7 +312,7 @@ def raw_write(folder: Path, nbytes: int) -> float:
 
 def end_to_end(device: str, per_shard: int, workers: int, shards_per_worker: int, extra: list[str] | None = None) -> dict:
     """`workers` processes share the GPU(s), each writing `shards_per_worker` shards of `per_shard` episodes."""
-    from simulate.executors import generate
+    from simulate.generation.executors import generate
 
     episodes = per_shard * workers * shards_per_worker
     cfg = _cfg([f"generation.episodes={episodes}", f"generation.episodes_per_shard={per_shard}", *(extra or [])], device)
@@ -325,18 +325,18 @@ def end_to_end(device: str, per_shard: int, workers: int, shards_per_worker: int
     dt = time.perf_counter() - t0
     t_sync = time.perf_counter() - t_sync
     nbytes = sum(p.stat().st_size for p in root.glob("*.h5"))
-    from simulate.protocols import make_episode_protocol
+    from simulate.protocols.indenter import make_episode_protocol
 
     samples = episodes * make_episode_protocol(cfg, 0).n_samples
     shutil.rmtree(root, ignore_errors=True)  # the disk holds the dataset or the raw file, not both
     root.mkdir(parents=True)
     raw = raw_write(root, nbytes)
     shutil.rmtree(root, ignore_errors=True)
-    from simulate.executors import _feed_by_default
+    from simulate.generation.executors import _feed_by_default
 
     mode = "gpu feed (physics process, sensor chain here, writer processes)" if workers > 1 and _feed_by_default(cfg) else "shard workers"
-    from simulate.executors import LAST_GENERATE_SECONDS
-    from simulate.feed import LAST_RUN_SECONDS
+    from simulate.generation.executors import LAST_GENERATE_SECONDS
+    from simulate.generation.feed import LAST_RUN_SECONDS
 
     r = {"workers": workers, "mode": mode, "generate_seconds": dict(LAST_GENERATE_SECONDS),
          "driver_seconds": dict(LAST_RUN_SECONDS) if "feed" in mode else None, "episodes": episodes, "shards": -(-episodes // per_shard), "seconds": dt, "sync_seconds": t_sync,
@@ -387,11 +387,11 @@ def main() -> None:
     if "stages" in parts:
         res["stages"] = stages(a.device, a.stage_batch)
     if "e2e" in parts:
-        from simulate.feed import FEED_WORLDS
-        from simulate.run import GPU_BATCH, SENSOR_SLICE
+        from simulate.generation.feed import FEED_WORLDS
+        from simulate.generation.run import GPU_BATCH, SENSOR_SLICE
 
         res["gpu_batch"], res["feed_worlds"], res["sensor_slice"] = GPU_BATCH, FEED_WORLDS, SENSOR_SLICE
-        from simulate import feed
+        from simulate.generation import feed
 
         if a.physics_processes:
             feed.PHYSICS_PROCESSES = a.physics_processes

@@ -4,7 +4,7 @@
 
 Scene: the one of bench_gpu_pipeline.py (cnt_pdms, box indenter on a box pad, 10 x 1 ms steps per 100 Hz
 sample). Measured in one run, written to bench/results/physics-profile-<tag>.json:
-1. world-steps/s of `simulate.contact_mjw.WarpWorlds` (CUDA graph per sample period) with sensors computed in
+1. world-steps/s of `simulate.contact.mujoco_warp.WarpWorlds` (CUDA graph per sample period) with sensors computed in
    every step and with sensors only in the recorded step (the default), same worlds and controls;
 2. GPU time per kernel over one sample period, launched eagerly (Warp's kernel timing: the sum of the kernels
    is the GPU work a graph replays, without the launch gaps), grouped by kernel name, largest first;
@@ -25,8 +25,8 @@ from bench_gpu_pipeline import _cfg
 
 
 def _worlds(cfg, n_worlds: int, n_samples: int):
-    from simulate.contact import _initial_states, build_model, episode_controls
-    from simulate.protocols import make_episode_protocol
+    from simulate.contact.load_field import _initial_states, build_model, episode_controls
+    from simulate.protocols.indenter import make_episode_protocol
 
     m, sub = build_model(cfg), cfg.sampling.substeps
     protos = [make_episode_protocol(cfg, s) for s in range(n_worlds)]
@@ -37,7 +37,7 @@ def _worlds(cfg, n_worlds: int, n_samples: int):
 
 def rates(device: str, n_worlds: int, n_samples: int) -> dict:
     """world-steps/s with sensors in every step and only in the recorded one (each after a warm-up run)."""
-    from simulate.contact_mjw import WarpWorlds
+    from simulate.contact.mujoco_warp import WarpWorlds
 
     m, sub, q0, ctrl, s0 = _worlds(_cfg([]), n_worlds, n_samples)
     out = {}
@@ -60,7 +60,7 @@ def kernel_profile(device: str, n_worlds: int, top: int = 30) -> dict:
     """GPU milliseconds per kernel name for one sample period (substeps steps + record) of n_worlds worlds."""
     import warp as wp
 
-    from simulate.contact_mjw import WarpWorlds
+    from simulate.contact.mujoco_warp import WarpWorlds
 
     m, sub, q0, ctrl, s0 = _worlds(_cfg([]), n_worlds, 6)
     ww = WarpWorlds(m, n_worlds, device)
@@ -106,7 +106,7 @@ def variants(device: str, n_worlds: int, n_samples: int) -> dict:
     """world-steps/s of each VARIANTS entry and its largest deviation from the default options' sensordata."""
     import copy
 
-    from simulate.contact_mjw import WarpWorlds
+    from simulate.contact.mujoco_warp import WarpWorlds
 
     m0, sub, q0, ctrl, s0 = _worlds(_cfg([]), n_worlds, n_samples)
     out, ref = {}, None

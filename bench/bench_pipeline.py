@@ -29,12 +29,12 @@ def main() -> None:
     a = ap.parse_args()
 
     from scenes import config_json, load_scene
-    from sensors.cnt_pdms import CntPdmsSensor
-    from sensors.recording import write_recording
+    from sensors.cnt_pdms.model import CntPdmsSensor
+    from sensors.data.recording import write_recording
     from sensors.warp_setup import init_warp
-    from simulate.contact import run_episodes
-    from simulate.protocols import make_episode_protocol
-    from simulate.run import channel_arrays, episode_channels
+    from simulate.contact.load_field import run_episodes
+    from simulate.protocols.indenter import make_episode_protocol
+    from simulate.generation.run import channel_arrays, episode_channels
 
     init_warp()
     cfg = load_scene("cnt_pdms", [f"protocol.frequencies_hz=[{a.frequency}]"])

@@ -1,11 +1,11 @@
 """Generation at scale on CPU: time per stage, then throughput against batch size with 1 and 2 worker
-processes (the local executor of simulate/executors.py), memory per episode, scaling efficiency.
+processes (the local executor of simulate/generation/executors.py), memory per episode, scaling efficiency.
 
     python bench/bench_scale.py [--batches 4,16,32] [--workers 1,2] [--shards-per-worker 2]
 
 "Sensor sample" = one 100 Hz frame of one episode (all taxels and channels, with labels), written to
 disk; "taxel-steps" = sensor samples x taxels. Batch size = episodes per shard; write_shard runs them in
-up to 4 batched MuJoCo rollouts + sensor-kernel launches (`simulate.run.shard_batches`, >= 4 episodes
+up to 4 batched MuJoCo rollouts + sensor-kernel launches (`simulate.generation.run.shard_batches`, >= 4 episodes
 each) and writes batch i while batch i+1 runs. Each point runs `shards-per-worker x workers` shards in
 an already started pool (worker start-up and one untimed warm-up shard per worker are reported apart),
 so 1 and 2 workers do the same work per worker and scaling efficiency = throughput(2) / (2 x throughput(1)).
@@ -43,13 +43,13 @@ def stage_profile(batch: int, threads: int = 1) -> dict:
     """Seconds per stage for `batch` episodes in one batch in this process (after a warm-up), then the same
     shard end to end through write_shard (pipelined)."""
     from scenes import config_json
-    from sensors.manifest import episode_seed
-    from sensors.recording import write_recording
+    from sensors.data.manifest import episode_seed
+    from sensors.data.recording import write_recording
     from sensors.registry import make_sensor
     from sensors.warp_setup import init_warp
-    from simulate import contact
-    from simulate.protocols import make_episode_protocol
-    from simulate.run import channel_arrays, episode_channels
+    from simulate.contact.load_field import load_field as contact
+    from simulate.protocols.indenter import make_episode_protocol
+    from simulate.generation.run import channel_arrays, episode_channels
 
     init_warp()
     cfg = _cfg(batch, batch)
@@ -86,13 +86,13 @@ def stage_profile(batch: int, threads: int = 1) -> dict:
             res = {"episodes": batch, "threads": threads, "seconds": t, "total_s": sum(t.values()),
                    "share": {k: v / sum(t.values()) for k, v in t.items()}, "raw_bytes_per_episode": raw / batch,
                    "file_bytes_per_episode": p.stat().st_size / batch}
-        # the whole shard through simulate.run.write_shard, interleaved: PIPELINE_PARTS = 1 (simulate all, then
+        # the whole shard through simulate.generation.run.write_shard, interleaved: PIPELINE_PARTS = 1 (simulate all, then
         # write: the old path) vs the default (batches; HDF5 write of batch i in a thread while batch i+1 runs);
         # peak Python/numpy heap (tracemalloc) per episode
         import tracemalloc
 
-        from simulate import run
-        from simulate.mjcf import build_mjcf
+        from simulate.generation import run
+        from simulate.contact.mjcf import build_mjcf
 
         mjcf = build_mjcf(cfg)
         default_parts = run.PIPELINE_PARTS
@@ -131,14 +131,14 @@ def _batches(run, n: int, parts: int) -> list[slice]:
 
 
 def _set_parts(parts: int) -> None:
-    from simulate import run
+    from simulate.generation import run
 
     run.PIPELINE_PARTS = parts
 
 
 def _warm(cfg, out: str, parts: int, device: str) -> int:
     """Import, initialise Warp and build the sensor for `cfg` in this worker (one scratch shard, untimed)."""
-    from simulate.executors import shard_task
+    from simulate.generation.executors import shard_task
 
     global DEVICE
     DEVICE = device
@@ -154,7 +154,7 @@ def _cpu_s() -> float:
 
 
 def _task(cfg, out: str, shard: int) -> tuple[int, float, float]:  # runs with the worker's PIPELINE_PARTS
-    from simulate.executors import shard_task
+    from simulate.generation.executors import shard_task
 
     c0 = _cpu_s()
     _, n, _ = shard_task(cfg, out, shard, device=DEVICE, threads=1)
@@ -162,7 +162,7 @@ def _task(cfg, out: str, shard: int) -> tuple[int, float, float]:  # runs with t
 
 
 def throughput(batch: int, workers: int, shards_per_worker: int, root: Path, parts: int) -> dict:
-    from simulate import run
+    from simulate.generation import run
 
     n_shards = shards_per_worker * workers
     cfg = _cfg(batch, batch * n_shards)
@@ -178,7 +178,7 @@ def throughput(batch: int, workers: int, shards_per_worker: int, root: Path, par
         futs = [pool.submit(_task, cfg, str(out), s) for s in range(n_shards)]
         res = [f.result() for f in futs]
         wall = time.perf_counter() - t1
-    from simulate.protocols import make_episode_protocol
+    from simulate.protocols.indenter import make_episode_protocol
 
     T = make_episode_protocol(cfg, 0).n_samples
     samples = sum(r[0] for r in res) * T

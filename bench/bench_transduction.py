@@ -26,8 +26,8 @@ def _drive(E: int, T: int, N: int) -> np.ndarray:
 
 
 def bench_numpy(cfg, E, T, N):
-    from sensors.params import taxel_params
-    from sensors.taxel_ref import taxel_chain_numpy
+    from sensors.cnt_pdms.params import taxel_params
+    from sensors.cnt_pdms.reference import taxel_chain_numpy
 
     d = _drive(E, T, N)
     t0 = time.perf_counter()
@@ -39,8 +39,8 @@ def bench_warp(cfg, E, T, N, device, repeats=3):
     import warp as wp
 
     from sensors import electronics as el
-    from sensors.params import electronics_params, taxel_params
-    from sensors.taxel_warp import TaxelChainWarp
+    from sensors.cnt_pdms.params import electronics_params, taxel_params
+    from sensors.cnt_pdms.kernels import TaxelChainWarp
 
     tp, ep = taxel_params(cfg), electronics_params(cfg)
     chain = TaxelChainWarp(tp, E, N, device)

@@ -34,7 +34,7 @@ TENSORS_NAME = "model.safetensors"
 
 def _version() -> dict[str, str]:
     try:
-        from sensors.recording import generator_info
+        from sensors.data.recording import generator_info
 
         return dict(generator_info())
     except Exception:  # noqa: BLE001

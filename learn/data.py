@@ -17,8 +17,8 @@ from typing import Any, Callable, Iterable, Sequence as Seq
 
 import numpy as np
 
-from sensors.manifest import episode_key, read_manifest, shard_files
-from sensors.recording import Recording
+from sensors.data.manifest import episode_key, read_manifest, shard_files
+from sensors.data.recording import Recording
 
 __all__ = ["Sequence", "load_sequences", "stratified_split", "dataset_fingerprint", "group_by"]
 

@@ -41,7 +41,7 @@ from torch import nn
 from learn.data import Sequence
 from learn.models.base import Compensator, make_model
 from learn.normalize import ZScore
-from sensors.resample import resample
+from sensors.data.resample import resample
 
 __all__ = [
     "InputMap", "FREEZE_POLICIES", "load_recording", "resample", "apply_map", "head_parameter_names",
@@ -83,8 +83,8 @@ def load_recording(path: str | Path, inputs: Seq[str], targets: Seq[str], *, rat
                    episodes: Seq[str] | None = None) -> list[Sequence]:
     """Episodes of one recording file (or a dataset folder) as Sequences in physical units, optionally
     resampled to ``rate_hz``; ``meta['key']`` is the episode id."""
-    from sensors.manifest import shard_files
-    from sensors.recording import Recording
+    from sensors.data.manifest import shard_files
+    from sensors.data.recording import Recording
 
     path = Path(path)
     files = [path] if path.is_file() else shard_files(path)

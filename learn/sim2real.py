@@ -35,8 +35,8 @@ def pretrain(data_dir: str | Path, out_dir: str | Path, *, kind: str = "tcn", hp
     from learn.checkpoint import save_checkpoint
     from learn.data import dataset_fingerprint
     from learn.models.base import make_model
-    from sensors.manifest import shard_files
-    from sensors.recording import Recording
+    from sensors.data.manifest import shard_files
+    from sensors.data.recording import Recording
 
     seqs = FT.apply_map(load_sequences(data_dir, [input_channel], [target]), transform)
     if len(seqs) < 3:

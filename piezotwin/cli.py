@@ -105,7 +105,7 @@ def generate(
             fail(str(exc))
     _check_writable(out)
     _quiet_warp()
-    from simulate.run import check_record
+    from simulate.generation.run import check_record
 
     try:
         check_record(cfg)
@@ -113,9 +113,9 @@ def generate(
         fail(str(exc))
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-    from simulate.executors import ShardFailedError
-    from simulate.executors import generate as run_generate
-    from simulate.run import n_shards
+    from simulate.generation.executors import ShardFailedError
+    from simulate.generation.executors import generate as run_generate
+    from simulate.generation.run import n_shards
 
     with Progress(
         TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("episodes"),
@@ -139,7 +139,7 @@ def generate(
     if skipped:
         console.print(f"resumed: {len(skipped)} complete shard(s) kept")
     console.print(f"wrote {manifest}")
-    from sensors.manifest import shard_path
+    from sensors.data.manifest import shard_path
 
     _print_summary(shard_path(out, 0))
 
@@ -148,7 +148,7 @@ def generate(
 def inspect(path: Annotated[Path, typer.Argument(help="A recording (.h5) or a dataset folder.")]) -> None:
     """Summary table of a recording: episodes, duration, channels with units and ranges."""
     if path.is_dir():
-        from sensors.manifest import ManifestError, read_manifest
+        from sensors.data.manifest import ManifestError, read_manifest
 
         try:
             m = read_manifest(path)
@@ -165,7 +165,7 @@ def inspect(path: Annotated[Path, typer.Argument(help="A recording (.h5) or a da
 
 
 def _print_summary(path: Path) -> None:
-    from sensors.recording import RecordingError, read_recording_summary
+    from sensors.data.recording import RecordingError, read_recording_summary
 
     if not path.is_file():
         fail(f"'{path}' does not exist")

@@ -2,7 +2,7 @@
 
 pretrain  a compensator on a generated dataset, input map recorded in the checkpoint (learn/sim2real.py)
 finetune  that checkpoint on a real recording: zero-shot vs fine-tuned vs from scratch (learn/finetune.py)
-fit       the velostat film model's parameters to a real recording, writes the fitted preset (sensors/velostat_fit.py)
+fit       the velostat film model's parameters to a real recording, writes the fitted preset (sensors/velostat/fit.py)
 """
 
 from __future__ import annotations
@@ -119,7 +119,7 @@ def fit(
 ) -> None:
     """Fit the film's conductance law, creep and noise to a real recording (least squares on a fast numpy model)."""
     from scenes import ConfigError, load_scene
-    from sensors import velostat_fit as VF
+    from sensors.velostat import fit as VF
 
     try:
         cfg = load_scene(preset)

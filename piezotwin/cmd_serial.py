@@ -16,7 +16,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from sensors.serial_codec import PROTOCOLS
+from sensors.serial.codec import PROTOCOLS
 
 
 from piezotwin import cli as _cli  # noqa: E402  (commands register on the named module's app)
@@ -52,8 +52,8 @@ def capture(
     rebuild: Annotated[bool, typer.Option("--rebuild", help="Only rebuild OUT from OUT.rawlog (after a crash or a parser fix).")] = False,
 ) -> None:
     """Capture one or two serial streams (host-time stamped, aligned) into a recording; appends on restart."""
-    from sensors.capture import CaptureError, StreamSpec, build_recording, rawlog_path
-    from sensors.capture import capture as run_capture
+    from sensors.serial.capture import CaptureError, StreamSpec, build_recording, rawlog_path
+    from sensors.serial.capture import capture as run_capture
 
     _check_protocol(protocol, "--protocol")
     _check_protocol(protocol2, "--protocol2")
@@ -120,7 +120,7 @@ def import_(
 ) -> None:
     """Import a sensor log and a load-cell log (host unix time) into a recording with source="real"."""
     _check_writable, _print_summary = _cli._check_writable, _cli._print_summary
-    from sensors.real_import import ImportLogError, import_runs, lupasic_pairs
+    from sensors.data.real_import import ImportLogError, import_runs, lupasic_pairs
 
     n_logs = (sensor_log is not None) + (force_log is not None)
     if (lupasic_dir is None and n_logs != 2) or (lupasic_dir is not None and n_logs):
@@ -132,7 +132,7 @@ def import_(
                         sensor_units=sensor_units, family=family)
     except ImportLogError as exc:
         fail(str(exc))
-    from sensors.recording import Recording
+    from sensors.data.recording import Recording
 
     with Recording(p) as rec:
         for ep in rec.episode_ids:
@@ -165,8 +165,9 @@ def serve(
     start_delay: Annotated[float, typer.Option(help="Wait this long (s) after the client appears before streaming.")] = 0.0,
 ) -> None:
     """Play a simulated sensor as a real board would, over text, poll or frames, with injectable faults."""
-    from simulate.virtual_device import DeviceError, Faults, load_source
-    from simulate.virtual_device import serve as run_serve
+    from sensors.serial.board import DeviceError, Faults
+    from simulate.generation.board_source import load_source
+    from sensors.serial.board import serve as run_serve
 
     _check_protocol(protocol, "--protocol")
     try:

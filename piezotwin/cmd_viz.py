@@ -17,8 +17,8 @@ from piezotwin.cli import _check_writable, app, console, err, fail
 
 @contextmanager
 def _open(path: Path, episode: Optional[str], fields: list[str] | None) -> Iterator:
-    from sensors.recording import Recording, RecordingError
-    from simulate.fields import FieldError, load_episode
+    from sensors.data.recording import Recording, RecordingError
+    from simulate.pictures.fields import FieldError, load_episode
 
     if path.is_dir():
         shards = sorted(path.glob("shard-*.h5"))
@@ -46,8 +46,8 @@ def _bar(label: str):
 
 
 def _viz_errors():
-    from simulate.fields import FieldError
-    from simulate.render import VizUnavailable
+    from simulate.pictures.fields import FieldError
+    from simulate.pictures.render import VizUnavailable
 
     return (FieldError, VizUnavailable)
 
@@ -74,7 +74,7 @@ def show(
     With a display and no -o: an interactive window. Without a display: a PNG (named after the recording,
     episode and field) is written and its path printed.
     """
-    from simulate.fields import FIELDS
+    from simulate.pictures.fields import FIELDS
 
     if field not in FIELDS:
         fail(f"unknown field '{field}' (allowed: {', '.join(FIELDS)})")
@@ -96,7 +96,7 @@ def show(
         fail(f"-o '{out}' must end in .png (for a movie add --animate)")
     if out is not None:
         _check_writable(out.parent if str(out.parent) else Path("."))
-    from simulate.render import RenderOptions, has_display, render_animation, render_frame, show_window
+    from simulate.pictures.render import RenderOptions, has_display, render_animation, render_frame, show_window
 
     opts = RenderOptions(window_size=(w, h), view=view, exaggeration=exaggeration)
     with _open(recording, episode, [field]) as ev:
@@ -140,7 +140,7 @@ def export(
     if stride < 1:
         fail(f"--stride must be >= 1 (got {stride})")
     _check_writable(out)
-    from simulate.export import export_episode
+    from simulate.pictures.export import export_episode
 
     with _open(recording, episode, None) as ev:
         try:
@@ -160,14 +160,14 @@ def plot(
     field: Annotated[str, typer.Option("--field", "-f", help="Field for the per-taxel peak map.")] = "deformation",
 ) -> None:
     """One episode at a glance (matplotlib): force-resistance loop, time series, per-taxel peak map."""
-    from simulate.fields import FIELDS
+    from simulate.pictures.fields import FIELDS
 
     if field not in FIELDS:
         fail(f"unknown field '{field}' (allowed: {', '.join(FIELDS)})")
     if out.suffix.lower() != ".png":
         fail(f"-o '{out}' must end in .png")
     _check_writable(out.parent if str(out.parent) else Path("."))
-    from simulate.plots import episode_overview
+    from simulate.pictures.plots import episode_overview
 
     with _open(recording, episode, None) as ev:
         if field not in ev.fields:

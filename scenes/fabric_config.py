@@ -3,7 +3,7 @@
 A stack of `layers` fabric layers (1 x 1 cm) between two silver-thread electrodes, read by a 2-wire
 multimeter. Every value is SI with the unit in the field name; defaults without a source are marked
 `# estimate`. The stack-curve defaults are the 1-layer calibration (fit to the paper's eq. 6 through the
-whole chain, see sensors/fabric_calib.py); the presets fabric_3/6/12 carry their own fitted values.
+whole chain, see sensors/fabric/calibrate.py); the presets fabric_3/6/12 carry their own fitted values.
 The paper does not print the unit of its resistance axis; we read it as kOhm (EeonTex is sold at
 ~20 kOhm/sq), so eq. 6's R(0) = 3.17 becomes 3170 ohm.  # estimate
 """
@@ -30,7 +30,7 @@ class FabricStackConfig(Strict):
     """
 
     layer_thickness_m: PositiveFloat = 0.38e-3  # fabric sect. 3.1 (EeonTex, 0.38 mm)
-    layer_r_inf_ohm: NonNegFloat = 242.368  # fit to fabric eq. 6 (sensors/fabric_calib.py)
+    layer_r_inf_ohm: NonNegFloat = 242.368  # fit to fabric eq. 6 (sensors/fabric/calibrate.py)
     layer_r_amp_ohm: NonNegFloat = 855.664  # fit to fabric eq. 6
     layer_force_n: PositiveFloat = 0.758332  # fit to fabric eq. 6
     layer_beta: Annotated[float, Field(gt=0, le=4)] = 1.39721  # fit to fabric eq. 6

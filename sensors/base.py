@@ -37,7 +37,7 @@ class LoadBatch:
     taxel_area_m2: area of one taxel cell.
     control: "displacement" | "force".
 
-    On the GPU path (`simulate.contact.iter_load_batches(device_fields=...)`) deformation_m, pressure_pa and
+    On the GPU path (`simulate.contact.load_field.iter_load_batches(device_fields=...)`) deformation_m, pressure_pa and
     shear_pa may instead be Warp arrays on the sensor's device, flat over frames: (E T, N), (E T, N, 2);
     only a sensor with `device_load = True` is given those; `on_host()` makes the numpy form.
     """

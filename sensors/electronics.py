@@ -15,7 +15,7 @@ import numpy as np
 import warp as wp
 from scipy.signal import lfilter
 
-from sensors.params import ElectronicsParams
+from sensors.cnt_pdms.params import ElectronicsParams
 from sensors.warp_setup import to_host
 
 MAX_SECTIONS = 4  # 8th-order filter at most (ElectronicsConfig.filter_order <= 8)

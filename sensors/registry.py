@@ -8,10 +8,10 @@ from scenes import SceneConfig
 from sensors.base import SensorModel
 
 FAMILIES: dict[str, str] = {
-    "cnt_pdms": "sensors.cnt_pdms:CntPdmsSensor",
-    "fabric": "sensors.fabric:FabricSensor",
-    "ntype": "sensors.ntype:NtypeSensor",
-    "velostat": "sensors.velostat:VelostatSensor",
+    "cnt_pdms": "sensors.cnt_pdms.model:CntPdmsSensor",
+    "fabric": "sensors.fabric.model:FabricSensor",
+    "ntype": "sensors.ntype.model:NtypeSensor",
+    "velostat": "sensors.velostat.model:VelostatSensor",
 }
 
 

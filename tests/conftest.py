@@ -33,8 +33,8 @@ def gpu_device() -> str:
 @pytest.fixture(scope="module")
 def views(recs):
     """Episode 0 of each recording of the module's `recs` fixture, loaded as per-taxel fields."""
-    from sensors.recording import Recording
-    from simulate.fields import load_episode
+    from sensors.data.recording import Recording
+    from simulate.pictures.fields import load_episode
 
     out = {}
     for key, path in recs.items():
@@ -47,7 +47,7 @@ def views(recs):
 def offscreen():
     """Skip (with the reason) where rendering cannot work; else return the render module."""
     try:
-        from simulate import render
+        from simulate.pictures import render
 
         pv = render.import_pyvista()
     except Exception as exc:  # noqa: BLE001

@@ -15,9 +15,9 @@ import pytest
 from typer.testing import CliRunner
 
 from piezotwin.cli import app
-from sensors.capture import RAW, CaptureError, StreamSpec, build_recording, capture, rawlog_path, read_records
-from sensors.recording import Recording
-from simulate.virtual_device import Faults, Source, serve
+from sensors.serial.capture import RAW, CaptureError, StreamSpec, build_recording, capture, rawlog_path, read_records
+from sensors.data.recording import Recording
+from sensors.serial.board import Faults, Source, serve
 
 ROOT = Path(__file__).resolve().parents[1]
 runner = CliRunner()

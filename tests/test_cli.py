@@ -4,7 +4,7 @@ import pytest
 from typer.testing import CliRunner
 
 from piezotwin.cli import app
-from sensors.recording import Recording
+from sensors.data.recording import Recording
 
 runner = CliRunner()
 FAST = ["--set", "protocol.frequencies_hz=[2.0]", "--set", "protocol.cycles=1", "--set", "pad.taxels_x=5",

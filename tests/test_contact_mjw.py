@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from scenes import load_scene
-from simulate.contact import physics_engine, simulate_sensors
-from simulate.contact_mjw import available
-from simulate.protocols import make_episode_protocol
+from simulate.contact.load_field import physics_engine, simulate_sensors
+from simulate.contact.mujoco_warp import available
+from simulate.protocols.indenter import make_episode_protocol
 
 needs_mjw = pytest.mark.skipif(not available(), reason="mujoco_warp not installed (extra: gpu)")
 SHORT = ["protocol.frequencies_hz=[2.0]", "protocol.cycles=1", "pad.taxels_x=6", "pad.taxels_y=6"]
@@ -58,14 +58,14 @@ def test_physics_engine_choice():
 
 
 def test_record_subset_and_errors(tmp_path):
-    from sensors.recording import Recording
-    from simulate.run import check_record, generate
+    from sensors.data.recording import Recording
+    from simulate.generation.run import check_record, generate
 
     keep = ["time", "adc", "force_taxel", "contact_force"]
     cfg = load_scene("cnt_pdms", SHORT + ["generation.episodes=2", "generation.episodes_per_shard=2",
                                           "sensor.readout=taxel", f"generation.record=[{','.join(keep)}]"])
     generate(cfg, tmp_path / "ds")
-    from sensors.manifest import shard_path
+    from sensors.data.manifest import shard_path
 
     with Recording(shard_path(tmp_path / "ds", 0)) as rec:
         assert rec.attrs["physics_engine"] == "mujoco"  # the engine that ran is recorded in every shard
@@ -79,7 +79,7 @@ def test_record_subset_and_errors(tmp_path):
 
 def test_taxel_readout_localises_the_press():
     """sensor.readout = taxel: the pressed taxel's channel falls in resistance, a far one stays at rest."""
-    from sensors.cnt_pdms import CntPdmsSensor
+    from sensors.cnt_pdms.model import CntPdmsSensor
 
     cfg = load_scene("cnt_pdms", ["pad.taxels_x=6", "pad.taxels_y=6", "sensor.readout=taxel"])
     s = CntPdmsSensor(cfg, backend="numpy")
@@ -101,8 +101,8 @@ def test_taxel_readout_localises_the_press():
 def test_load_field_warp_equals_numpy(shape):
     """The Warp load field (GPU path) against its numpy reference, incl. the no-overlap fallback frames."""
     from sensors.warp_setup import init_warp
-    from simulate.contact import load_field
-    from simulate.load_field_warp import load_field_warp
+    from simulate.contact.load_field import load_field
+    from simulate.contact.load_field_kernels import load_field_warp
 
     init_warp()
     extra = ["pad.taxels_x=5", "pad.taxels_y=4"] + (["indenter.shape=sphere", "indenter.radius_m=6 mm"] if shape == "sphere" else [])
@@ -122,7 +122,7 @@ def test_load_field_warp_equals_numpy(shape):
 
 def test_taxel_readout_gain_keeps_a_full_press_inside_the_adc_range():
     """A taxel readout gets its own default gain (the pad's would clip); an explicit gain is kept."""
-    from sensors.cnt_pdms import CntPdmsSensor
+    from sensors.cnt_pdms.model import CntPdmsSensor
 
     cfg = load_scene("cnt_pdms", ["pad.taxels_x=6", "pad.taxels_y=6", "sensor.readout=taxel"])
     assert load_scene("cnt_pdms", ["sensor.readout=taxel", "sensor.electronics.amp_gain=100"]).sensor.electronics.amp_gain == 100
@@ -163,8 +163,8 @@ def test_gpu_generation_keeps_fields_on_device_and_slices_the_sensor_stage(gpu_d
 def _worlds_runs(device: str):
     """Sensordata of the same episodes: sensors in every step; sensors only in the recorded step, run twice
     on the same (reused) worlds; plus a run of other episodes in between."""
-    from simulate.contact import _initial_states, build_model, episode_controls
-    from simulate.contact_mjw import WarpWorlds
+    from simulate.contact.load_field import _initial_states, build_model, episode_controls
+    from simulate.contact.mujoco_warp import WarpWorlds
 
     cfg = load_scene("cnt_pdms", SHORT)
     m, sub = build_model(cfg), cfg.sampling.substeps

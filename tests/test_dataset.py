@@ -9,9 +9,9 @@ import pytest
 import torch
 from torch.utils.data import DataLoader
 
-from sensors import manifest as mf
-from sensors.dataset import WindowDataset
-from sensors.recording import Channel, write_recording
+from sensors.data import manifest as mf
+from sensors.data.dataset import WindowDataset
+from sensors.data.recording import Channel, write_recording
 
 LENGTHS = {0: {"a": 20, "b": 7, "c": 3}, 1: {"a": 11}}  # c is shorter than a window
 

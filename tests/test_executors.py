@@ -1,4 +1,4 @@
-"""Distributed generation (simulate/executors.py): a local process pool and Ray give the serial dataset,
+"""Distributed generation (simulate/generation/executors.py): a local process pool and Ray give the serial dataset,
 a killed worker's shard is retried, exhausted retries give a clear error and a rerun resumes."""
 
 import importlib.util
@@ -8,11 +8,11 @@ import numpy as np
 
 import pytest
 
-import simulate.run as run
+import simulate.generation.run as run
 from scenes import load_scene
-from sensors.manifest import read_manifest, shard_path
-from sensors.recording import Recording
-from simulate import executors
+from sensors.data.manifest import read_manifest, shard_path
+from sensors.data.recording import Recording
+from simulate.generation import executors
 
 FAST = ["protocol.frequencies_hz=[2.0]", "protocol.cycles=1", "pad.taxels_x=6", "pad.taxels_y=6",
         "generation.episodes=4", "generation.episodes_per_shard=1", "generation.root_seed=11"]
@@ -122,10 +122,10 @@ def test_episode_channels_do_not_depend_on_shard_size_or_batching(serial, tmp_pa
 
 
 def test_gpu_feed_equals_serial_and_retries_a_killed_writer(tmp_path, monkeypatch):
-    """The GPU feed (simulate.feed: episodes of several shards as one batch here, shards written by writer
+    """The GPU feed (simulate.generation.feed: episodes of several shards as one batch here, shards written by writer
     processes), forced on the CPU engine: mixed episode lengths, batches of 2 shards, a writer dies once ->
     the same files as the serial loop, and no shared block left behind."""
-    from simulate import feed
+    from simulate.generation import feed
 
     mixed = load_scene("cnt_pdms", ["protocol.frequencies_hz=[2.0,4.0]", "protocol.cycles=1", "pad.taxels_x=3",
                                     "pad.taxels_y=2", "generation.episodes=7", "generation.episodes_per_shard=2",
@@ -159,7 +159,7 @@ def test_gpu_feed_equals_serial_and_retries_a_killed_writer(tmp_path, monkeypatc
                 np.testing.assert_equal(rb.episode_attrs(ep), ra.episode_attrs(ep))
             assert ra.sensor_attrs.keys() == rb.sensor_attrs.keys()
     # the manifest entries the writers made equal what the driver reads back from the files
-    from sensors.manifest import describe_shard, verify_manifest
+    from sensors.data.manifest import describe_shard, verify_manifest
 
     ma, mb = read_manifest(ref), read_manifest(out)
     assert [s["episode_seeds"] for s in mb["shards"]] == [s["episode_seeds"] for s in ma["shards"]]
@@ -172,9 +172,9 @@ def test_feed_packs_each_gpu_slice_before_the_next_overwrites_its_staging(gpu_de
     """The feed's producer on CUDA: outputs copied back into reused page-locked buffers (one per call site),
     packed into shared blocks of a BlockPool slice by slice (3-episode slices, 2-episode shards), equal to the
     same physics run through the plain path (a fresh host array per copy)."""
-    from sensors.manifest import episode_seed
+    from sensors.data.manifest import episode_seed
     from simulate import contact, feed
-    from simulate.contact import physics_engine
+    from simulate.contact.load_field import physics_engine
 
     dev = "cpu" if gpu_device == "cpu" else "cuda"
     cfg = load_scene("cnt_pdms", FAST[:-3] + ["sensor.readout=taxel", "generation.physics=mujoco_warp", f"generation.device={dev}",
@@ -208,7 +208,7 @@ def test_feed_packs_each_gpu_slice_before_the_next_overwrites_its_staging(gpu_de
 def test_gpu_feed_bounded_by_host_memory_still_finishes(cfg, serial, tmp_path, monkeypatch):
     """With a pending-bytes budget smaller than one shard, the feed writes one shard at a time (no deadlock)
     and the dataset is the serial one."""
-    from simulate import feed
+    from simulate.generation import feed
 
     monkeypatch.setattr(feed, "PENDING_RAM_FRACTION", 1e-12)
     monkeypatch.setattr(feed, "FEED_WORLDS", 2)

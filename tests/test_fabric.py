@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 
 from scenes import ConfigError, load_scene
-from sensors.fabric import FabricSensor, multimeter_numpy
-from sensors.fabric_calib import PAPER_CURVES, loading_branch_x
-from sensors.fabric_ref import fabric_chain_numpy, fabric_params, stack_resistance
-from simulate.protocols import make_episode_protocol, staircase_levels, target_waveform
+from sensors.fabric.model import FabricSensor, multimeter_numpy
+from sensors.fabric.calibrate import PAPER_CURVES, loading_branch_x
+from sensors.fabric.reference import fabric_chain_numpy, fabric_params, stack_resistance
+from simulate.protocols.indenter import make_episode_protocol, staircase_levels, target_waveform
 
 PRESETS = {n: f"fabric_{n}" for n in (1, 3, 6, 12)}
 DWELL = 20  # samples: 2 s at 10 Hz
@@ -86,7 +86,7 @@ def test_creep_under_held_force(cfgs):
 
 
 def test_warp_matches_numpy_and_state_streams(cfgs):
-    from sensors.fabric_warp import FabricChainWarp
+    from sensors.fabric.kernels import FabricChainWarp
 
     cfg = load_scene("fabric_3", ["pad.taxels_x=2", "pad.taxels_y=2"])
     p = fabric_params(cfg)
@@ -163,9 +163,9 @@ def test_characterize_fabric_1_through_mujoco(cfgs):
 
 
 def test_generate_fabric_dataset(tmp_path):
-    import simulate.run as run
-    from sensors.recording import Recording
-    from sensors.manifest import shard_path
+    import simulate.generation.run as run
+    from sensors.data.recording import Recording
+    from sensors.data.manifest import shard_path
 
     cfg = load_scene("fabric_1", ["generation.episodes=2", "generation.episodes_per_shard=2",
                                   "protocol.stair_cycles_min=1", "protocol.stair_cycles_max=1", "protocol.amplitude_max=1.0"])

@@ -14,8 +14,8 @@ from learn.data import Sequence
 from learn.models.base import make_model
 from learn.sim2real import run_finetune
 from piezotwin.cli import app
-from sensors.recording import Channel, write_recording
-from sensors.velostat_fit import FitParams, Model, forward_reading
+from sensors.data.recording import Channel, write_recording
+from sensors.velostat.fit import FitParams, Model, forward_reading
 
 torch.set_num_threads(1)
 runner = CliRunner()
@@ -148,7 +148,7 @@ def test_split_by_run_and_bad_input(tmp_path):
 
 @needs_real
 def test_lupasic_import_and_tiny_finetune_end_to_end(ckpt, tmp_path):
-    from sensors.real_import import import_runs, lupasic_pairs
+    from sensors.data.real_import import import_runs, lupasic_pairs
 
     pairs = [p for p in lupasic_pairs(REAL) if p[0].parent.name in ("pike1", "pike1_force_10")]
     rec = import_runs(pairs, tmp_path / "lupasic.h5")

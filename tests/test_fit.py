@@ -1,4 +1,4 @@
-"""Real-to-sim fit of the velostat film model (sensors/velostat_fit.py, `piezotwin fit`)."""
+"""Real-to-sim fit of the velostat film model (sensors/velostat/fit.py, `piezotwin fit`)."""
 
 from pathlib import Path
 
@@ -8,9 +8,9 @@ from typer.testing import CliRunner
 
 from piezotwin.cli import app
 from scenes import load_scene
-from sensors import velostat_fit as VF
-from sensors.recording import Channel, write_recording
-from sensors.velostat_ref import FilmParams, film_chain_numpy
+from sensors.velostat import fit as VF
+from sensors.data.recording import Channel, write_recording
+from sensors.velostat.reference import FilmParams, film_chain_numpy
 
 runner = CliRunner()
 RATE = 20.0

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from scenes import load_scene
-from sensors.cnt_pdms import CntPdmsSensor
-from sensors.params import MODE_DISPLACEMENT, MODE_FORCE, taxel_params
-from sensors.taxel_warp import TaxelChainWarp
+from sensors.cnt_pdms.model import CntPdmsSensor
+from sensors.cnt_pdms.params import MODE_DISPLACEMENT, MODE_FORCE, taxel_params
+from sensors.cnt_pdms.kernels import TaxelChainWarp
 
 pytestmark = pytest.mark.gpu
 

@@ -71,7 +71,7 @@ def devices(gpu_device):
 
 
 def _fabric_kernel(p, load, device):
-    from sensors.fabric_warp import FabricChainWarp
+    from sensors.fabric.kernels import FabricChainWarp
 
     E, T, N = load.shape
     ch = FabricChainWarp(p, E, N, device)
@@ -83,7 +83,7 @@ def _fabric_kernel(p, load, device):
 
 @pytest.mark.parametrize("layers", [1, 3, 6, 12])
 def test_fabric_kernel_cuda_equals_cpu(gpu_device, layers):
-    from sensors.fabric_ref import fabric_params
+    from sensors.fabric.reference import fabric_params
 
     cfg = load_scene(f"fabric_{layers}")
     p = fabric_params(cfg)
@@ -110,7 +110,7 @@ def _multimeter_agrees(b, a, cfg):
 
 
 def test_fabric_sensor_cuda_equals_cpu_and_is_deterministic(gpu_device):
-    from sensors.fabric import FabricSensor
+    from sensors.fabric.model import FabricSensor
 
     cfg = load_scene("fabric_3", ["pad.taxels_x=3", "pad.taxels_y=3"])
     force = waves(np.random.default_rng(11), 3, 500, 9, cfg.protocol.amplitude_max / 9)  # N per taxel
@@ -140,7 +140,7 @@ def _velostat_pressure(cfg, rng, E, T, n_loaded=6):
 
 
 def _velostat_film(s, pressure, device):
-    from sensors.velostat_warp import run_film_warp
+    from sensors.velostat.kernels import run_film_warp
 
     T = pressure.shape[1]
     g1, st = run_film_warp(pressure[:, : T // 2], s.fp, device)
@@ -150,8 +150,8 @@ def _velostat_film(s, pressure, device):
 
 
 def test_velostat_kernels_cuda_equal_cpu(gpu_device):
-    from sensors.velostat import VelostatSensor
-    from sensors.velostat_warp import run_readout_warp
+    from sensors.velostat.model import VelostatSensor
+    from sensors.velostat.kernels import run_readout_warp
 
     cfg = load_scene("velostat")
     s = VelostatSensor(cfg, backend="numpy")  # only its film / readout parameters
@@ -193,7 +193,7 @@ def _velostat_readout_agrees(b, a, rp, what):
 
 
 def test_velostat_sensor_cuda_equals_cpu_and_is_deterministic(gpu_device):
-    from sensors.velostat import VelostatSensor
+    from sensors.velostat.model import VelostatSensor
 
     cfg = load_scene("velostat")
     pressure = _velostat_pressure(cfg, np.random.default_rng(22), 3, 300)
@@ -219,7 +219,7 @@ def _ntype_force(rng, E, T, M):
 
 
 def _ntype_kernel(p, force, device):
-    from sensors.ntype_warp import ntype_chain_warp
+    from sensors.ntype.kernels import ntype_chain_warp
 
     T = force.shape[1]
     d1, s1, r1, q = ntype_chain_warp(force[:, : T // 2], p, device)
@@ -229,7 +229,7 @@ def _ntype_kernel(p, force, device):
 
 
 def test_ntype_kernel_cuda_equals_cpu(gpu_device):
-    from sensors.ntype import ntype_params
+    from sensors.ntype.model import ntype_params
 
     cfg = load_scene("ntype")
     p = ntype_params(cfg)
@@ -242,8 +242,8 @@ def test_ntype_kernel_cuda_equals_cpu(gpu_device):
 
 
 def test_ntype_sensor_cuda_equals_cpu_and_is_deterministic(gpu_device):
-    from sensors.ntype import NtypeSensor
-    from simulate.ntype_characterize import patch_load
+    from sensors.ntype.model import NtypeSensor
+    from simulate.characterize.ntype import patch_load
 
     cfg = load_scene("ntype")
     rng = np.random.default_rng(32)
@@ -275,7 +275,7 @@ def _family_run(family, device):
     rng = np.random.default_rng(41)
     if family == "cnt_pdms":
         cfg = load_scene("cnt_pdms")
-        from sensors.params import MODE_FORCE
+        from sensors.cnt_pdms.params import MODE_FORCE
 
         s = make_sensor(cfg, "warp", device)
         drive = rng.uniform(0, 0.02, (1, 20, cfg.pad.n_taxels)) * (2e6 if s.mode == MODE_FORCE else 1.0)

@@ -234,8 +234,8 @@ def test_calibration_sweep_covers_every_unit_and_split_keeps_the_first_round():
     from types import SimpleNamespace
 
     from learn.experiments.velostat import calibration_split
-    from sensors.manifest import episode_seed
-    from simulate.protocols import make_episode_protocol
+    from sensors.data.manifest import episode_seed
+    from simulate.protocols.indenter import make_episode_protocol
 
     cfg = load_scene("velostat", ["protocol.kind=velostat_calibration_sweep", "generation.episodes=80"])
     rnd = load_scene("velostat", ["protocol.kind=velostat_calibration", "generation.episodes=80"])

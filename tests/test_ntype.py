@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from scenes import ConfigError, load_scene
-from sensors.ntype import NtypeSensor
-from simulate.ntype_characterize import patch_load, pure_and_crosstalk
+from sensors.ntype.model import NtypeSensor
+from simulate.characterize.ntype import patch_load, pure_and_crosstalk
 
 RX, RY, RZ = 0, 1, 2
 
@@ -68,8 +68,8 @@ def test_warp_matches_numpy(cfg):
 
 
 def _one_indenter(cfg, force, shear_ratio, theta=0.0):
-    from simulate.mjcf import shear_stiffness_n_per_m
-    from simulate.protocols import make_episode_protocol
+    from simulate.contact.mjcf import shear_stiffness_n_per_m
+    from simulate.protocols.indenter import make_episode_protocol
 
     cfg = cfg.model_copy(deep=True)
     cfg.indenter.count = 1
@@ -84,7 +84,7 @@ def _one_indenter(cfg, force, shear_ratio, theta=0.0):
 
 @pytest.mark.parametrize("ratio", [0.5, 1.5])
 def test_mujoco_stroke_gives_intended_shear_with_the_right_sign(cfg, ratio):
-    from simulate.contact import run_episodes
+    from simulate.contact.load_field import run_episodes
 
     c1, p = _one_indenter(cfg, 3.0, ratio)
     b = run_episodes(c1, [p])

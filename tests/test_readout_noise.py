@@ -7,8 +7,8 @@ import warp as wp
 
 from scenes import load_scene
 from sensors import electronics as el
-from sensors.manifest import episode_seed
-from sensors.params import electronics_params
+from sensors.data.manifest import episode_seed
+from sensors.cnt_pdms.params import electronics_params
 
 FS = 100.0
 

@@ -7,8 +7,8 @@ import pytest
 from typer.testing import CliRunner
 
 from piezotwin.cli import app
-from sensors.real_import import ImportLogError, import_logs, lupasic_pairs, read_calibration, read_log
-from sensors.recording import Recording
+from sensors.data.real_import import ImportLogError, import_logs, lupasic_pairs, read_calibration, read_log
+from sensors.data.recording import Recording
 
 runner = CliRunner()
 REAL = Path(__file__).resolve().parents[1].parent / "shared" / "real" / "velostat-lupasic"
@@ -101,11 +101,11 @@ def test_missing_file_and_no_overlap(tmp_path):
 @needs_real
 def test_import_whole_folder_one_episode_per_run(tmp_path):
     pairs = lupasic_pairs(REAL)
-    assert len(pairs) == 14 and all(s.name == f.name for s, f in pairs)
+    assert len(pairs) == 16 and all(s.name == f.name for s, f in pairs)
     res = runner.invoke(app, ["import", "--dir", str(REAL), "-o", str(tmp_path / "all.h5")])
     assert res.exit_code == 0, res.output
     with Recording(tmp_path / "all.h5") as rec:
-        assert len(rec.episode_ids) == 14 and "exp_pike1_force_40_sensor1_exp2" in rec.episode_ids
+        assert len(rec.episode_ids) == 16 and "exp_pike1_force_40_sensor1_exp2" in rec.episode_ids
         rates = {rec.episode_attrs(ep)["rate_hz"] for ep in rec.episode_ids}
         peak = max(rec.episode_attrs(ep)["force_max_n"] for ep in rec.episode_ids)
     assert rates == {143.0} and 44 < peak < 46

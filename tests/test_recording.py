@@ -12,9 +12,9 @@ import h5py
 import numpy as np
 import pytest
 
-from sensors import manifest as mf
-from sensors import recording as rc
-from sensors.recording import FORMAT, Channel, Recording, RecordingError, write_recording
+from sensors.data import manifest as mf
+from sensors.data import recording as rc
+from sensors.data.recording import FORMAT, Channel, Recording, RecordingError, write_recording
 
 CONFIG = json.dumps({"family": "cnt_pdms", "sample_rate_hz": 100.0}, sort_keys=True)
 CONFIG_SHA = __import__("hashlib").sha256(CONFIG.encode()).hexdigest()
@@ -160,7 +160,7 @@ def test_killed_process_leaves_only_tmp(tmp_path):
     script = textwrap.dedent(
         f"""
         import os, numpy as np
-        from sensors import recording as rc
+        from sensors.data import recording as rc
         real = rc.RecordingWriter.add_episode
         n = [0]
         def die(*a, **k):
@@ -302,8 +302,8 @@ def test_natural_order_fast_path_equals_the_general_key():
     ties broken by the text, and id sets it cannot take (other shapes, digit runs beyond int64) fall back."""
     import random
 
-    from sensors.manifest import _natural_order
-    from sensors.recording import _natural_key
+    from sensors.data.manifest import _natural_order
+    from sensors.data.recording import _natural_key
 
     general = lambda ids: sorted(ids, key=lambda e: (_natural_key(e), e))  # noqa: E731
     rng = random.Random(1)

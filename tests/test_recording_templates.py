@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from h5py import h5a, h5o
 
-from sensors import recording as rc
-from sensors.recording import Channel, Recording, RecordingWriter
+from sensors.data import recording as rc
+from sensors.data.recording import Channel, Recording, RecordingWriter
 
 
 def make_episodes() -> list[tuple[str, dict[str, Channel], dict]]:

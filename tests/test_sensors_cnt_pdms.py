@@ -6,11 +6,11 @@ import pytest
 
 from scenes import load_scene
 from sensors.analysis import hysteresis_error_fso, loop_area
-from sensors.cnt_pdms import CntPdmsSensor
+from sensors.cnt_pdms.model import CntPdmsSensor
 from sensors.electronics import ElectronicsState, readout_numpy
-from sensors.params import MODE_DISPLACEMENT, MODE_FORCE, electronics_params, taxel_params
-from sensors.taxel_ref import taxel_chain_numpy
-from sensors.taxel_warp import TaxelChainWarp
+from sensors.cnt_pdms.params import MODE_DISPLACEMENT, MODE_FORCE, electronics_params, taxel_params
+from sensors.cnt_pdms.reference import taxel_chain_numpy
+from sensors.cnt_pdms.kernels import TaxelChainWarp
 
 FS = 100.0
 

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from sensors.serial_codec import (
+from sensors.serial.codec import (
     FrameDecoder,
     PollDecoder,
     TextDecoder,

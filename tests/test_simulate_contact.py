@@ -1,4 +1,4 @@
-"""simulate.contact: batched MuJoCo episodes -> per-taxel load field. Physics asserted, short episodes."""
+"""simulate.contact.load_field: batched MuJoCo episodes -> per-taxel load field. Physics asserted, short episodes."""
 
 import dataclasses
 
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from scenes import load_scene
-from simulate.contact import load_field, run_episodes
-from simulate.protocols import make_episode_protocol
+from simulate.contact.load_field import load_field, run_episodes
+from simulate.protocols.indenter import make_episode_protocol
 
 FAST = ["protocol.frequencies_hz=[2.0]", "protocol.cycles=1"]
 
@@ -166,7 +166,7 @@ def test_load_field_distributes_tangential_force():
 def test_controls_made_in_chunks_equal_the_whole():
     """The GPU path makes controls chunk by chunk while the worlds step: every chunk equals those rows of the
     whole arrays (incl. the velocity feed-forward's differences at chunk borders and at both ends)."""
-    from simulate.contact import episode_controls, sample_targets
+    from simulate.contact.load_field import episode_controls, sample_targets
 
     cfg = load_scene("cnt_pdms", FAST)
     protos = [make_episode_protocol(cfg, s) for s in range(3)]
@@ -184,7 +184,7 @@ def test_controls_made_in_chunks_equal_the_whole():
 
 def test_load_batches_in_slices_equal_one_batch(disp):
     """The sensor stage goes slice by slice after one physics batch: each slice equals those episodes."""
-    from simulate.contact import iter_load_batches
+    from simulate.contact.load_field import iter_load_batches
 
     cfg, protos, whole = disp
     parts = list(iter_load_batches(cfg, protos, slice_episodes=3))
@@ -198,9 +198,9 @@ def test_sensor_chain_on_device_fields_equals_host_fields():
     """cnt_pdms takes taxel fields left on the Warp device (GPU path) and gives the same outputs as from numpy."""
     import dataclasses as dc
 
-    from sensors.cnt_pdms import CntPdmsSensor
+    from sensors.cnt_pdms.model import CntPdmsSensor
     from sensors.warp_setup import init_warp
-    from simulate.load_field_warp import load_field_warp
+    from simulate.contact.load_field_kernels import load_field_warp
 
     init_warp()
     for control in ("displacement", "force"):
@@ -232,7 +232,7 @@ def test_sensor_chain_on_device_fields_equals_host_fields():
 def test_batched_waveforms_equal_per_episode(kind):
     """The controls of a batch are one array expression for sinusoid/hold (32k episodes on the GPU path):
     bit for bit the per-episode waveforms; other kinds go episode by episode."""
-    from simulate.protocols import target_waveform, target_waveforms, xy_waveform, xy_waveforms
+    from simulate.protocols.indenter import target_waveform, target_waveforms, xy_waveform, xy_waveforms
 
     extra = {"hold": ["protocol.kind=hold", "protocol.control=force"], "staircase": []}.get(kind, [])
     cfg = load_scene("fabric_1" if kind == "staircase" else "cnt_pdms", FAST + extra if kind != "staircase" else [])

@@ -1,4 +1,4 @@
-"""simulate.mjcf and simulate.protocols: the MJCF compiles, the contact stiffness is the Winkler one,
+"""simulate.contact.mjcf and simulate.protocols.indenter: the MJCF compiles, the contact stiffness is the Winkler one,
 protocols are seeded draws, waveforms have the paper's shape."""
 
 import mujoco
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from scenes import load_scene
-from simulate.mjcf import build_mjcf, contact_design
-from simulate.protocols import make_episode_protocol, target_waveform
+from simulate.contact.mjcf import build_mjcf, contact_design
+from simulate.protocols.indenter import make_episode_protocol, target_waveform
 
 FAST = ["protocol.frequencies_hz=[2.0]", "protocol.cycles=1"]
 

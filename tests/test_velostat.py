@@ -5,8 +5,8 @@ import pytest
 
 from scenes import ConfigError, load_scene
 from sensors.registry import make_sensor
-from simulate import velostat_characterize as vc
-from simulate.velostat_protocols import knots_steps, ramp_s
+from simulate.characterize import velostat as vc
+from simulate.protocols.compression_tester import knots_steps, ramp_s
 
 
 @pytest.fixture(scope="module")
@@ -143,7 +143,7 @@ def test_bad_parameter_one_line_naming_field(override, expected):
 
 
 def test_protocols_and_film_field(cfg):
-    from simulate.protocols import make_episode_protocol, target_waveform
+    from simulate.protocols.indenter import make_episode_protocol, target_waveform
 
     kinds = set()
     for s in range(12):

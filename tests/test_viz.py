@@ -15,14 +15,14 @@ import pytest
 from typer.testing import CliRunner
 
 from scenes import load_scene
-from sensors.recording import Recording
-from simulate.fields import FieldError, load_episode, nice_exaggeration
+from sensors.data.recording import Recording
+from simulate.pictures.fields import FieldError, load_episode, nice_exaggeration
 
 SMALL = (240, 176)
 
 
 def _make(out: Path, amplitude_m: float, jitter_m: float = 0.004) -> Path:
-    from simulate.run import generate
+    from simulate.generation.run import generate
 
     cfg = load_scene("cnt_pdms", [
         "protocol.frequencies_hz=[2.0]", "protocol.cycles=1", "pad.taxels_x=10", "pad.taxels_y=10",
@@ -93,7 +93,7 @@ def test_nice_exaggeration():
 
 
 def test_no_pyvista_import_without_rendering():
-    code = "import sys, piezotwin.cli, simulate.fields, simulate.plots; assert 'pyvista' not in sys.modules, 'eager'"
+    code = "import sys, piezotwin.cli, simulate.pictures.fields, simulate.pictures.plots; assert 'pyvista' not in sys.modules, 'eager'"
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                        cwd=Path(__file__).resolve().parents[1])
     assert r.returncode == 0, r.stderr
@@ -178,8 +178,8 @@ def test_animation_gif(offscreen, views, tmp_path):
 def test_export_round_trip(offscreen, views, recs, tmp_path):
     import pyvista as pv
 
-    from simulate.export import export_episode
-    from simulate.geometry import make_geometry
+    from simulate.pictures.export import export_episode
+    from simulate.pictures.geometry import make_geometry
 
     v = views["hard"]
     pvd = export_episode(v, tmp_path / "vtk", stride=5)
@@ -248,7 +248,7 @@ def test_loading_mask_and_loop_colours(tmp_path):
     import matplotlib
 
     matplotlib.use("Agg")
-    from simulate import plots
+    from simulate.pictures import plots
 
     d = np.concatenate([np.linspace(0, 1, 11), np.linspace(1, 0.5, 6)[1:], np.full(3, 0.5), np.linspace(0.5, 1, 6)[1:]])
     m = plots.loading_mask(d)
@@ -263,7 +263,7 @@ def test_loading_mask_and_loop_colours(tmp_path):
 
 
 def test_taxel_map_and_error_map_place_values(tmp_path):
-    from simulate import plots
+    from simulate.pictures import plots
 
     xy = np.array([[x, y] for y in (-1e-3, 1e-3) for x in (-2e-3, 0.0, 2e-3)])  # 3 x 2 grid, x fastest
     vals = np.arange(6.0)
@@ -282,7 +282,7 @@ def test_taxel_map_and_error_map_place_values(tmp_path):
 
 
 def test_creep_curve(tmp_path):
-    from simulate import plots
+    from simulate.pictures import plots
 
     t = np.linspace(0, 20, 2001)
     v = np.where(t < 1, t, 1 + 0.05 * np.log1p(np.clip(t - 1, 0, None)))  # ramp then log creep

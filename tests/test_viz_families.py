@@ -15,7 +15,7 @@ import pytest
 from typer.testing import CliRunner
 
 from scenes import load_scene
-from sensors.recording import Recording
+from sensors.data.recording import Recording
 
 
 SMALL = (240, 176)
@@ -30,7 +30,7 @@ SPECS = {
 
 @pytest.fixture(scope="module")
 def recs(tmp_path_factory):
-    from simulate.run import generate
+    from simulate.generation.run import generate
 
     d = tmp_path_factory.mktemp("vizfam")
     out = {}
@@ -100,7 +100,7 @@ def test_field_mappers_follow_the_recordings(views, recs):
 
 
 def test_fabric_more_layers_more_slabs(offscreen, views):
-    from simulate.geometry import make_geometry
+    from simulate.pictures.geometry import make_geometry
 
     v = views["fabric"]
     k = v.peak_index()
@@ -165,7 +165,7 @@ def test_velostat_picture_has_sheets_tip_and_decoded_position(offscreen, views):
 
 
 def test_ntype_pressed_element_normal_column_is_the_extreme(offscreen, views):
-    from simulate.geometry import make_geometry
+    from simulate.pictures.geometry import make_geometry
 
     v = views["ntype"]
     with Recording(v.path) as rec:
@@ -220,8 +220,8 @@ def test_animation_velostat(offscreen, views, tmp_path):
 def test_export_round_trip_ntype(offscreen, views, tmp_path):
     import pyvista as pv
 
-    from simulate.export import export_episode
-    from simulate.geometry import make_geometry
+    from simulate.pictures.export import export_episode
+    from simulate.pictures.geometry import make_geometry
 
     v = views["ntype"]
     pvd = export_episode(v, tmp_path / "vtk", stride=4)
@@ -273,7 +273,7 @@ def test_cli_show_and_export_each_family(offscreen, recs, tmp_path):
 
 
 def test_unit_dendrogram_has_36_leaves(tmp_path):
-    from simulate import plots
+    from simulate.pictures import plots
 
     rng = np.random.default_rng(0)
     F = np.arange(1.0, 16.0)
@@ -301,7 +301,7 @@ def test_unit_dendrogram_has_36_leaves(tmp_path):
 
 
 def test_position_error_maps(tmp_path):
-    from simulate import plots
+    from simulate.pictures import plots
 
     c = (np.arange(6) - 2.5) * 0.02
     gx, gy = np.meshgrid(c, c)

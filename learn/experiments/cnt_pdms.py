@@ -1,6 +1,6 @@
 """cnt_pdms experiment (paper 002): stacked LSTM + baselines + our TCN, Tables 3 and 4 beside the paper's.
 
-  data     simulate.run.generate on the cnt_pdms preset (reused when the folder already holds it):
+  data     simulate.generation.run.generate on the cnt_pdms preset (reused when the folder already holds it):
            displacement-controlled sinusoids at 0.1/0.5/1/2 Hz, random amplitude; input
            `resistance_measured` (ohm; z-scored, so equal to the paper's Delta R up to the offset),
            label `force` (N, the viscoelastic reference), drive `target` (m, for loop analysis).

@@ -24,7 +24,7 @@ def make_data(data_dir, cfg, log: Callable[[str], None]):
     from pathlib import Path
 
     from sensors.warp_setup import init_warp
-    from simulate.run import generate
+    from simulate.generation.run import generate
 
     init_warp()
     t0 = time.perf_counter()

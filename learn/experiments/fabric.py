@@ -1,7 +1,7 @@
 """fabric experiment (paper 000, Abdul-Hussain et al.): BP network trained by Levenberg-Marquardt on the
 1/3/6/12-layer fabric sensors, max hysteresis error before/after and Appendix Table 2 beside the paper's.
 
-  data     simulate.run.generate on fabric_1/3/6/12: force-controlled staircases (0.1 N steps, 2 s dwell, a
+  data     simulate.generation.run.generate on fabric_1/3/6/12: force-controlled staircases (0.1 N steps, 2 s dwell, a
            full-range cycle then random minor loops, the paper's protocol). Training episodes from root seed
            ``seed``; the test episodes are a second dataset from root seed ``seed + 1000``: new random force
            sequences, never seen in training (the paper's Fig. 13 validation). One observation per force
@@ -119,7 +119,7 @@ def scenes_for(mode: Mode, n: int, overrides: list[str], seed: int):
 
 def readings(seqs: list[Sequence], cfg) -> list[Sequence]:
     """Episode time series -> one observation per force level: the reading at the end of its dwell (sample
-    ceil((settle + (j+1) dwell) fs) - 1, as simulate.characterize_fabric reads it). x = resistance_measured,
+    ceil((settle + (j+1) dwell) fs) - 1, as simulate.characterize.fabric reads it). x = resistance_measured,
     y = applied force (replaced by the target later); extra: level (nominal N), force (N), r_true (ohm).
     The rest after the last level (episodes are padded to the longest plan) is dropped."""
     p, fs = cfg.protocol, cfg.sampling.sample_rate_hz
@@ -142,7 +142,7 @@ def readings(seqs: list[Sequence], cfg) -> list[Sequence]:
 
 def make_data(root: Path, n: int, cfgs, log: Callable[[str], None]) -> tuple[list[Sequence], list[Sequence], dict]:
     from sensors.warp_setup import init_warp
-    from simulate.run import generate
+    from simulate.generation.run import generate
 
     init_warp()
     parts, fps = [], {}
@@ -290,7 +290,7 @@ def _run(md: Mode, cfgs, out_dir, data_dir, models, seed, progress, log) -> dict
 
 
 def _paper_curves() -> dict[str, Any]:
-    from sensors.fabric_calib import PAPER_CURVES
+    from sensors.fabric.calibrate import PAPER_CURVES
 
     return {str(n): {"coeffs": list(c.coeffs), "range_n": c.fitted_range_n, "samples": c.samples, "equation": c.equation}
             for n, c in PAPER_CURVES.items()}
@@ -424,7 +424,7 @@ def plots(out: Path, keep: dict[int, Any], L: dict[str, Any]) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from sensors.fabric_calib import PAPER_CURVES
+    from sensors.fabric.calibrate import PAPER_CURVES
 
     ns = sorted(keep)
     fig, axes = plt.subplots(1, len(ns), figsize=(4.2 * len(ns), 3.8), squeeze=False)

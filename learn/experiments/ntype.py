@@ -2,7 +2,7 @@
 spread swept 1-10, 10-fold cross-validation, neighbour sliding windows; Tables 1, 3 and 4 beside the
 paper's, and our two models on the same folds (elem_mlp: ours, beats the best RBF; map_cnn: first attempt).
 
-  data     simulate.run.generate on the ntype preset (reused when the folder already holds it): 6 x 6
+  data     simulate.generation.run.generate on the ntype preset (reused when the folder already holds it): 6 x 6
            elements x 3 columns of `resistance_measured` (ohm) -> `force_element` (N, 36 x 3).
   scale    the paper's eq. 13: min-max of each column type over the training folds onto its kOhm range,
            R_x, R_y -> [32, 50], R_z -> [16, 25]. The spread is a distance in these units, which is what
@@ -144,9 +144,9 @@ def sensor_rest_ohm(data: Path) -> np.ndarray:
 
 def sensor_law(data: Path) -> tuple[np.ndarray, float]:
     """(rest resistances (R_x, R_y, R_z), piezoresistive exponent beta) from the recording's sensor attributes:
-    R_j = R_j0 (1 + e_j)^2 exp(beta e_j) (sensors/ntype_ref.py)."""
-    from sensors.manifest import shard_files
-    from sensors.recording import Recording
+    R_j = R_j0 (1 + e_j)^2 exp(beta e_j) (sensors/ntype/reference.py)."""
+    from sensors.data.manifest import shard_files
+    from sensors.data.recording import Recording
 
     with Recording(shard_files(data)[0]) as rec:
         a = rec.sensor_attrs

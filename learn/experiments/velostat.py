@@ -1,7 +1,7 @@
 """velostat experiment (paper 001): creep tracking compensation, AGNES/Ward unit clustering, BP force model,
 and our TCN, on the same held-out recordings; the paper's numbers beside ours.
 
-  data     simulate.run.generate on the velostat preset, three folders (each reused when already there):
+  data     simulate.generation.run.generate on the velostat preset, three folders (each reused when already there):
              mix  the preset's velostat_mix (steps / staircase / calibration at A-E, random places, units)
              cal  protocol.kind=velostat_calibration_sweep: 1-15 N staircases on every unit in turn
                   (sect. 4.1: the paper calibrates all 36 units over 1-15 N); each round of 36 episodes covers
@@ -110,7 +110,7 @@ def scenes_of(mode: Mode, overrides: list[str], seed: int) -> dict[str, Any]:
 
 
 def _load(data: Path, cfg) -> list[Sequence]:
-    from simulate.protocols import make_episode_protocol
+    from simulate.protocols.indenter import make_episode_protocol
 
     seqs = load_sequences(data, INPUTS, TARGETS, extra=EXTRA)
     for s in seqs:  # the inner kind, the site and the unit live in the protocol, re-drawn from the seed
@@ -209,7 +209,7 @@ def cluster_units(units: np.ndarray, curves: np.ndarray, n_units: int, centres: 
     the nearest unit that has some."""
     from scipy.cluster.hierarchy import fcluster, linkage
 
-    from simulate.velostat_characterize import elbow
+    from simulate.characterize.velostat import elbow
 
     Z = linkage(curves, method="ward")
     kmax = min(15, len(units) - 1)
@@ -285,8 +285,8 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
     from learn.models import make_model
     from learn.models.velostat import CreepTracker, search_hidden
     from sensors.warp_setup import init_warp
-    from simulate.run import generate
-    from simulate.velostat_protocols import unit_centres_m
+    from simulate.generation.run import generate
+    from simulate.protocols.compression_tester import unit_centres_m
 
     if mode not in MODES:
         raise ValueError(f"mode must be one of {sorted(MODES)}, got {mode!r}")
@@ -505,7 +505,7 @@ def plots(out: Path, tracker, tr, cl, units, curves, levels, te, preds, results,
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from simulate.plots import unit_dendrogram
+    from simulate.pictures.plots import unit_dendrogram
 
     d = np.concatenate([a[v] for a, v in (tracker.delta(s.x[:, 0]) for s in tr)])
     lab = tracker.kmeans.predict(d)
@@ -687,7 +687,7 @@ DIFFERENCES = """
   has one. Cluster indices are ordered by mean R, so the literal scalar input is at least ordinal. E, the film's
   centre, is the common corner of four units: the decoded unit there depends on ~0.2 mm of decoding error (a
   genuine limit of a per-unit calibration, the paper's too). The elbow is the characterization's
-  (`simulate.velostat_characterize.elbow`).
+  (`simulate.characterize.velostat.elbow`).
 - **One sensor.** The three folders (mix, calibrations, A-E) share one film (`sensor.film.field_seed` pinned to
   the experiment seed); the film's random fields otherwise follow each folder's root seed, i.e. calibrating one part
   and testing another (before the pin, corner B of the A-E part read 820 ohm at 15 N against 360 ohm for the

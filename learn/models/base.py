@@ -25,6 +25,27 @@ __all__ = ["Compensator", "Streamer", "register", "MODELS", "make_model", "edge_
 
 MODELS: dict[str, type["Compensator"]] = {}
 
+# the modules whose classes register themselves with @register; make_model imports them on first use
+BUILTIN_MODULES = (
+    "learn.models.classical",  # mean, linear, cubic
+    "learn.models.neural",  # mlp, lstm, gru
+    "learn.models.tcn",  # tcn (ours)
+    "learn.models.velostat",  # bp (velostat paper)
+    "learn.models.bpnet",  # bp_lm (fabric paper: Levenberg-Marquardt)
+    "learn.models.rbf",  # rbf (ntype paper)
+    "learn.models.map_cnn",  # map_cnn (ntype, ours)
+    "learn.models.ensemble",  # ensemble of any registered model
+)
+
+
+def load_builtin_models() -> dict[str, type["Compensator"]]:
+    """Import every built-in model module (each registers its classes) and return MODELS."""
+    import importlib
+
+    for mod in BUILTIN_MODULES:
+        importlib.import_module(mod)
+    return MODELS
+
 
 def register(kind: str) -> Callable[[type["Compensator"]], type["Compensator"]]:
     """Class decorator: make a compensator constructible by name (``make_model(kind, **hparams)``)."""
@@ -40,8 +61,8 @@ def register(kind: str) -> Callable[[type["Compensator"]], type["Compensator"]]:
 
 
 def make_model(kind: str, **hparams: Any) -> "Compensator":
-    import learn.models  # noqa: F401  (registers the built-in models)
-
+    if kind not in MODELS:
+        load_builtin_models()
     if kind not in MODELS:
         raise ValueError(f"unknown model {kind!r}; known: {sorted(MODELS)}")
     return MODELS[kind](**hparams)

@@ -1,7 +1,7 @@
 """Ours for the ntype array: a physics-informed per-element network (``ElementMLP``).
 
   strain      each column's resistance is inverted through the sensor's own law R = R0 (1 + e)^2 exp(beta e)
-              (sensors/ntype_ref.py; R0 and beta from the recording's attributes) by Newton's method, so the
+              (sensors/ntype/reference.py; R0 and beta from the recording's attributes) by Newton's method, so the
               network sees the column strains e_j, which are linear in the electrode force (e = N u / l,
               u = K^-1 F) instead of the exponential resistances. One global scale (the training std of e)
               keeps the shared physical scale across columns and elements (unlike a per-feature z-score).

@@ -21,7 +21,7 @@ from typing import Any, Sequence as Seq
 
 import numpy as np
 
-from learn.models.base import MODELS, Compensator, Streamer, make_model, register
+from learn.models.base import MODELS, Compensator, Streamer, make_model, register, load_builtin_models
 from learn.normalize import ZScore
 
 __all__ = ["Ensemble", "EnsembleStreamer"]
@@ -38,7 +38,7 @@ class Ensemble(Compensator):
 
     def __init__(self, **hparams: Any):
         super().__init__(**hparams)
-        import learn.models  # noqa: F401  (registers the member kinds)
+        load_builtin_models()  # the member kinds register themselves
 
         h = self.hparams
         if h["member"] not in MODELS or h["member"] == "ensemble":

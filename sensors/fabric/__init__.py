@@ -1,0 +1,1 @@
+"""Knitted conductive fabric stacks (paper key `fabric`): model, numpy reference, Warp kernels, calibration."""

@@ -1,0 +1,119 @@
+"""Knitted conductive fabric stack (paper key `fabric`: Abdul-Hussain et al., "Modified Nonlinear Hysteresis
+Approach of a Tactile Sensor"): EeonTex layers (1, 3, 6, 12) of 1 x 1 cm between silver-thread electrodes,
+read by a 2-wire multimeter.
+
+Pipeline (ground truth and measurement both kept):
+  pressure field [E,T,N] -> whole-sample-equivalent force per taxel f = N p A_taxel (N) -> taxel chain
+  (sensors/fabric/kernels.py, reference sensors/fabric/reference.py): Prony creep -> Prandtl-Ishlinskii play bank
+  (return-point memory, slow recovery) -> Kirchhoff stack of in-layer resistances and Holm contact
+  resistances (Holm, Electric Contacts, 1967) -> taxel columns in parallel + lead resistance (2-wire)
+  -> multimeter (autorange, finite counts, a reading every 1/readings_per_s, held between readings).
+The multimeter runs in numpy for both backends (integer counts: identical by construction).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sensors.base import ChannelSpec, LoadBatch, resolve_backend
+from sensors.fabric.reference import FabricState, fabric_chain_numpy, fabric_params
+
+OUTPUTS: dict[str, ChannelSpec] = {
+    "force_taxel": ChannelSpec("N", ("time", "taxel"), "applied normal force per taxel (ground truth)"),
+    "force": ChannelSpec("N", ("time",), "applied normal force on the sample (reference label)"),
+    "load_effective": ChannelSpec("N", ("time", "taxel"), "compaction load after creep and hysteresis (model state)"),
+    "resistance": ChannelSpec("ohm", ("time", "channel"), "true 2-wire resistance: stack + leads"),
+    "dmm_counts": ChannelSpec("counts", ("time", "channel"), "multimeter display counts (held between readings)"),
+    "dmm_range_ohm": ChannelSpec("ohm", ("time", "channel"), "multimeter range (full scale) of the reading"),
+    "resistance_measured": ChannelSpec("ohm", ("time", "channel"), "multimeter reading"),
+}
+
+
+def multimeter_numpy(r_ohm: np.ndarray, seeds: list[int], mm, sample_rate_hz: float) -> dict[str, np.ndarray]:
+    """2-wire autoranging multimeter. r_ohm [E, T] (float64) -> counts, range, reading, each [E, T].
+
+    A reading is taken at samples 0, h, 2h, ... (h = round(sample_rate / readings_per_s)) and held until the
+    next; it uses the smallest range whose full scale exceeds R (1 + gain_error), resolution = range / counts,
+    white noise of noise_counts rms (from the episode seed, stream 1), and clips at counts - 1 on the top range.
+    """
+    E, T = r_ohm.shape
+    hold = max(1, int(round(sample_rate_hz / mm.readings_per_s)))
+    ranges = np.asarray(mm.ranges_ohm, np.float64)
+    idx = np.arange(0, T, hold)
+    r = r_ohm[:, idx] * (1.0 + mm.gain_error)
+    ri = np.minimum(np.searchsorted(ranges, r, side="right"), len(ranges) - 1)
+    rng_fs = ranges[ri]
+    res = rng_fs / mm.counts
+    noise = np.stack([np.random.default_rng([s, 1]).standard_normal(len(idx)) for s in seeds]) * mm.noise_counts
+    counts = np.clip(np.round(r / res + noise), 0, mm.counts - 1).astype(np.int32)
+    k = np.minimum(np.arange(T) // hold, len(idx) - 1)
+    return {"counts": counts[:, k], "range": rng_fs[:, k], "reading": (counts * res)[:, k]}
+
+
+class FabricSensor:
+    """Batched fabric stack. Shapes: E episodes, T samples, N taxels, C = 1 channel (whole sample)."""
+
+    family = "fabric"
+    outputs = OUTPUTS
+
+    def __init__(self, cfg, backend: str = "warp", device: str = "cpu"):
+        if cfg.sensor.family != "fabric":
+            raise ValueError(f"FabricSensor needs sensor.family=fabric; got {cfg.sensor.family!r}")
+        device = resolve_backend(backend, device)
+        self.cfg, self.backend, self.device = cfg, backend, device
+        self.p = fabric_params(cfg)
+        self.n_taxels = cfg.pad.n_taxels
+        self.taxel_area_m2 = cfg.pad.size_x_m * cfg.pad.size_y_m / self.n_taxels
+
+    def run_load(self, load: LoadBatch, seeds: list[int]) -> dict[str, np.ndarray]:
+        force_taxel = np.clip(load.pressure_pa, 0.0, None) * load.taxel_area_m2
+        return self.run(force_taxel.astype(np.float32), seeds)
+
+    def chain(self, load_n: np.ndarray, state: FabricState | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """[E,T,N] whole-sample-equivalent force -> effective load and taxel conductance (backend's kernel)."""
+        if self.backend == "numpy":
+            x, g, _ = fabric_chain_numpy(load_n, self.p, state)
+            return x, g
+        from sensors.fabric.kernels import FabricChainWarp
+
+        ch = FabricChainWarp(self.p, load_n.shape[0], load_n.shape[2], self.device)
+        if state is not None:
+            ch.reset(state)
+        return ch.run(load_n)
+
+    def run(self, force_taxel_n: np.ndarray, seeds: list[int]) -> dict[str, np.ndarray]:
+        """force_taxel_n [E,T,N] (N per taxel) -> outputs (see OUTPUTS), each [E, T, ...]."""
+        E, T, N = force_taxel_n.shape
+        if N != self.n_taxels:
+            raise ValueError(f"load has {N} taxels; the pad has {self.n_taxels}")
+        if len(seeds) != E:
+            raise ValueError(f"need one seed per episode ({E}); got {len(seeds)}")
+        x, g = self.chain(np.ascontiguousarray(force_taxel_n * np.float32(N), np.float32))
+        r = 1.0 / g.astype(np.float64).sum(-1) + self.cfg.sensor.stack.lead_resistance_ohm
+        dmm = multimeter_numpy(r, seeds, self.cfg.sensor.multimeter, self.cfg.sampling.sample_rate_hz)
+        return {
+            "force_taxel": force_taxel_n.astype(np.float32),
+            "force": force_taxel_n.astype(np.float64).sum(-1).astype(np.float32),
+            "load_effective": x.astype(np.float32),
+            "resistance": r[..., None].astype(np.float32),
+            "dmm_counts": dmm["counts"][..., None],
+            "dmm_range_ohm": dmm["range"][..., None].astype(np.float32),
+            "resistance_measured": dmm["reading"][..., None].astype(np.float32),
+        }
+
+    def attrs(self) -> dict:
+        s = self.cfg.sensor
+        return {
+            "family": self.family,
+            "paper": "fabric",
+            "layers": s.layers,
+            "sample_rate_hz": self.cfg.sampling.sample_rate_hz,
+            "n_taxels": self.n_taxels,
+            "n_channels": 1,
+            "taxel_area_m2": self.taxel_area_m2,
+            "multimeter_counts": s.multimeter.counts,
+            "multimeter_ranges_ohm": np.asarray(s.multimeter.ranges_ohm),
+            "multimeter_readings_per_s": s.multimeter.readings_per_s,
+            "lead_resistance_ohm": s.stack.lead_resistance_ohm,
+            "control": self.cfg.protocol.control,
+        }

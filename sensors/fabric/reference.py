@@ -1,0 +1,137 @@
+"""Numpy reference of the per-taxel fabric chain (paper key `fabric`); sensors/fabric/kernels.py must match it.
+
+Per taxel and sample step (dt = 1 / sample rate), with f the taxel's load scaled to the whole sample
+(f = n_taxels x taxel force, N, so a uniform press gives every taxel the sample's force):
+  creep      q_i' = a_i q_i + g_i (1 - a_i) f,  u = f + sum_i q_i       (Prony creep of the compaction,
+             exact for f held within a step; Ferry, Viscoelastic Properties of Polymers, 1980)
+  hysteresis z_k' = max(u - r_k, min(u + r_k, z_k)), then z_k' -> u + (z_k' - u) c  (slow recovery at rest);
+             x = max(0, (1 - sum w) u + sum w_k z_k')  (Prandtl-Ishlinskii play bank: return-point memory;
+             Brokate & Sprekels 1996). x is the effective compaction load (N).
+  stack      R_layer = r_inf + r_amp exp(-(x / F_l)^beta)                  (in-layer, knit compaction)
+             R_c     = R_c0 (1 + x / F_c)^(-m),  m in [1/3, 1/2]          (Holm, Electric Contacts 1967:
+             constriction resistance rho / 2a with the a-spot radius growing as F^m)
+             R_stack = n_layers R_layer + (n_layers + 1) R_c              (Kirchhoff: layers and contacts in series)
+  column     R_taxel = n_taxels R_stack   (taxel columns in parallel give R_stack under a uniform press)
+Outputs: effective load x and conductance 1 / R_taxel per taxel, float32 like the Warp kernel.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class FabricParams:
+    """Flat constants of the fabric chain (SI). Shapes in brackets; empty banks become one inert term."""
+
+    dt_s: float
+    n_taxels: int
+    layers: int
+    prony_decay: np.ndarray  # [P] a_i = exp(-dt / tau_i)
+    prony_fraction: np.ndarray  # [P] g_i
+    play_threshold_n: np.ndarray  # [K] r_k
+    play_weight: np.ndarray  # [K] w_k
+    recovery_decay: float  # c = exp(-dt / T_recovery)
+    layer_r_inf_ohm: float
+    layer_r_amp_ohm: float
+    layer_force_n: float
+    layer_beta: float
+    contact_r0_ohm: float
+    contact_force_n: float
+    contact_exponent: float
+
+    @property
+    def n_prony(self) -> int:
+        return len(self.prony_decay)
+
+    @property
+    def n_play(self) -> int:
+        return len(self.play_threshold_n)
+
+
+def fabric_params(cfg) -> FabricParams:
+    """SceneConfig with a fabric sensor -> FabricParams."""
+    s = cfg.sensor
+    dt = 1.0 / cfg.sampling.sample_rate_hz
+    tau = np.asarray(s.creep.prony_times_s or [1.0], np.float64)
+    g = np.asarray(s.creep.prony_fractions or [0.0], np.float64)
+    r = np.asarray(s.hysteresis.play_thresholds_n or [0.0], np.float64)
+    w = np.asarray(s.hysteresis.play_weights or [0.0], np.float64)
+    st = s.stack
+    return FabricParams(
+        dt_s=dt,
+        n_taxels=cfg.pad.n_taxels,
+        layers=s.layers,
+        prony_decay=np.exp(-dt / tau),
+        prony_fraction=g,
+        play_threshold_n=r,
+        play_weight=w,
+        recovery_decay=float(np.exp(-dt / s.hysteresis.recovery_time_s)),
+        layer_r_inf_ohm=st.layer_r_inf_ohm,
+        layer_r_amp_ohm=st.layer_r_amp_ohm,
+        layer_force_n=st.layer_force_n,
+        layer_beta=st.layer_beta,
+        contact_r0_ohm=st.contact_r0_ohm,
+        contact_force_n=st.contact_force_n,
+        contact_exponent=st.contact_exponent,
+    )
+
+
+def stack_resistance(x, p: FabricParams, layers: int | None = None):
+    """Static stack law R_stack(x) (ohm) at effective load x (N); float64 for calibration and plots."""
+    n = p.layers if layers is None else layers
+    x = np.maximum(np.asarray(x, np.float64), 0.0)
+    r_layer = p.layer_r_inf_ohm + p.layer_r_amp_ohm * np.exp(-np.power(x / p.layer_force_n, p.layer_beta))
+    r_c = p.contact_r0_ohm * np.power(1.0 + x / p.contact_force_n, -p.contact_exponent)
+    return n * r_layer + (n + 1) * r_c
+
+
+@dataclass
+class FabricState:
+    """State carried across calls (float32): prony [B, P], play [B, K]; B = episodes x taxels."""
+
+    prony_n: np.ndarray
+    play_n: np.ndarray
+
+    @classmethod
+    def zeros(cls, n: int, p: FabricParams) -> "FabricState":
+        return cls(np.zeros((n, p.n_prony), np.float32), np.zeros((n, p.n_play), np.float32))
+
+
+def fabric_chain_numpy(
+    load_n: np.ndarray, p: FabricParams, state: FabricState | None = None
+) -> tuple[np.ndarray, np.ndarray, FabricState]:
+    """load_n [E, T, N] float32 (whole-sample-equivalent force per taxel, N) -> effective load x [E,T,N] (N),
+    conductance [E,T,N] (S) per taxel column, final state."""
+    f32 = np.float32
+    E, T, N = load_n.shape
+    st = state if state is not None else FabricState.zeros(E * N, p)
+    q = st.prony_n.reshape(E, N, p.n_prony).astype(f32).copy()
+    z = st.play_n.reshape(E, N, p.n_play).astype(f32).copy()
+    a, g = p.prony_decay.astype(f32), p.prony_fraction.astype(f32)
+    r, w = p.play_threshold_n.astype(f32), p.play_weight.astype(f32)
+    w_direct = f32(1.0) - w.sum(dtype=f32)
+    c = f32(p.recovery_decay)
+    n_l = f32(p.layers)
+    n_c = f32(p.layers + 1)
+    n_t = f32(p.n_taxels)
+    r_inf, r_amp = f32(p.layer_r_inf_ohm), f32(p.layer_r_amp_ohm)
+    inv_fl, beta = f32(1.0 / p.layer_force_n), f32(p.layer_beta)
+    rc0, inv_fc, m = f32(p.contact_r0_ohm), f32(1.0 / p.contact_force_n), f32(p.contact_exponent)
+    xs = np.empty((E, T, N), f32)
+    cond = np.empty((E, T, N), f32)
+    for k in range(T):
+        f = load_n[:, k, :].astype(f32)
+        q = a * q + g * (f32(1.0) - a) * f[..., None]
+        u = f + q.sum(-1, dtype=f32)
+        z = np.maximum(u[..., None] - r, np.minimum(u[..., None] + r, z))
+        z = u[..., None] + (z - u[..., None]) * c
+        x = np.maximum(w_direct * u + (w * z).sum(-1, dtype=f32), f32(0.0))
+        r_layer = r_inf + r_amp * np.exp(-np.power(x * inv_fl, beta))
+        r_c = rc0 * np.power(f32(1.0) + x * inv_fc, -m)
+        r_taxel = n_t * (n_l * r_layer + n_c * r_c)
+        xs[:, k] = x
+        cond[:, k] = f32(1.0) / r_taxel
+    return xs, cond, FabricState(q.reshape(-1, p.n_prony), z.reshape(-1, p.n_play))

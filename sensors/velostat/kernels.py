@@ -1,0 +1,168 @@
+"""Warp kernels of the `velostat` chain: the same equations as sensors/velostat/reference.py (tests compare them).
+
+film kernel: one thread per (episode, taxel), the time loop inside the kernel with the K creep states in
+registers (TECH-NOTES: looping over time in one launch beats one launch per step); layout [E, T, N].
+readout kernel: one thread per (episode, sample), a loop over the taxels (parallel contact paths),
+then noise, clipping and ADC quantisation.
+"""
+
+# no `from __future__ import annotations`: Warp must see the closure types as real objects
+
+import functools
+
+import numpy as np
+import warp as wp
+
+from sensors.velostat.reference import FilmParams, ReadoutParams, finish
+from sensors.warp_setup import init_warp, resolve_device
+
+
+@functools.cache
+def film_kernel(n_creep: int):
+    vec_k = wp.types.vector(length=n_creep, dtype=wp.float32)
+
+    def film(
+        pressure: wp.array(dtype=wp.float32),  # [E*T*N]
+        n_steps: int,
+        n_taxels: int,
+        g_ref: wp.array(dtype=wp.float32),  # [N]
+        drive: wp.array(dtype=wp.float32),  # [N]
+        decay: vec_k,
+        w1: vec_k,
+        inv_pc: float,
+        inv_pref: float,
+        expo: float,
+        state: wp.array(dtype=vec_k),  # [E*N] in/out
+        out: wp.array(dtype=wp.float32),  # [E*T*N]
+    ):
+        tid = wp.tid()
+        ep = tid // n_taxels
+        n = tid - ep * n_taxels
+        c = state[tid]
+        gr = g_ref[n]
+        dr = drive[n]
+        base = ep * n_steps * n_taxels + n
+        for k in range(n_steps):
+            idx = base + k * n_taxels
+            p = wp.max(pressure[idx], 0.0)
+            phi = dr * wp.log(1.0 + p * inv_pc)
+            c = wp.cw_mul(decay, c) + w1 * phi
+            cs = float(0.0)
+            for j in range(n_creep):
+                cs += c[j]
+            g = float(0.0)
+            if p > 0.0:
+                g = gr * wp.pow((p + cs) * inv_pref, expo)
+            out[idx] = g
+        state[tid] = c
+
+    film.__name__ = film.__qualname__ = f"velostat_film_k{n_creep}"
+    return wp.kernel(film, module="unique", enable_backward=False), vec_k
+
+
+@wp.kernel(enable_backward=False)
+def velostat_readout(
+    cond: wp.array(dtype=wp.float32),  # [E*T*N]
+    noise: wp.array(dtype=wp.float32),  # [E*T*3]
+    n_taxels: int,
+    r_force: wp.array(dtype=wp.float32),  # [N]
+    v_x: wp.array(dtype=wp.float32),
+    r_x: wp.array(dtype=wp.float32),
+    v_y: wp.array(dtype=wp.float32),
+    r_y: wp.array(dtype=wp.float32),
+    current: float,
+    compliance: float,
+    gin: float,
+    lsb: float,
+    full: int,
+    range_v: float,
+    out_r: wp.array(dtype=wp.float32),  # [E*T*2]: film, true total
+    out_v: wp.array(dtype=wp.float32),  # [E*T*3]: true force, x, y voltages
+    out_code: wp.array(dtype=wp.int32),  # [E*T*3]
+    out_vadc: wp.array(dtype=wp.float32),  # [E*T*3]
+):
+    s = wp.tid()
+    base = s * n_taxels
+    g_f = float(0.0)
+    g_film = float(0.0)
+    gx = float(0.0)
+    sx = float(0.0)
+    gy = float(0.0)
+    sy = float(0.0)
+    for n in range(n_taxels):
+        g = cond[base + n]
+        if g > 0.0:
+            g_film += g
+            g_f += 1.0 / (1.0 / g + r_force[n])
+            a = 1.0 / (1.0 / g + r_x[n])
+            gx += a
+            sx += a * v_x[n]
+            b = 1.0 / (1.0 / g + r_y[n])
+            gy += b
+            sy += b * v_y[n]
+    r_true = float(1.0e12)
+    if g_f > 0.0:
+        r_true = 1.0 / g_f
+    r_film = float(1.0e12)
+    if g_film > 0.0:
+        r_film = 1.0 / g_film
+    vf = wp.min(current * r_true, compliance)
+    vx = sx / (gx + gin)
+    vy = sy / (gy + gin)
+    out_r[2 * s] = r_film
+    out_r[2 * s + 1] = r_true
+    out_v[3 * s] = vf
+    out_v[3 * s + 1] = vx
+    out_v[3 * s + 2] = vy
+    for c in range(3):
+        v = out_v[3 * s + c] + noise[3 * s + c]
+        v = wp.clamp(v, 0.0, range_v)
+        code = wp.min(int(wp.floor(v / lsb)), full - 1)
+        out_code[3 * s + c] = code
+        out_vadc[3 * s + c] = (float(code) + 0.5) * lsb
+
+
+def run_film_warp(pressure: np.ndarray, p: FilmParams, device: str = "cpu", state: np.ndarray | None = None):
+    """pressure [E, T, N] -> conductance [E, T, N] float32, final state [E*N, K]."""
+    init_warp()
+    device = resolve_device(device)
+    E, T, N = pressure.shape
+    kern, vec_k = film_kernel(p.n_creep)
+    st = np.zeros((E * N, p.n_creep), np.float32) if state is None else np.asarray(state, np.float32)
+    st_d = wp.array(st, dtype=vec_k, device=device)
+    pr = wp.array(np.ascontiguousarray(pressure, np.float32).reshape(-1), dtype=wp.float32, device=device)
+    out = wp.empty(E * T * N, dtype=wp.float32, device=device)
+    w1 = ((1.0 - p.decay) * p.weight).astype(np.float32)
+    wp.launch(
+        kern, dim=E * N, device=device,
+        inputs=[pr, T, N, wp.array(p.g_ref_s.astype(np.float32), dtype=wp.float32, device=device),
+                wp.array(p.creep_drive.astype(np.float32), dtype=wp.float32, device=device),
+                vec_k(*p.decay.astype(np.float32)), vec_k(*w1), float(1.0 / p.p_c_pa), float(1.0 / p.p_ref_pa),
+                float(p.exponent), st_d, out],
+    )
+    return out.numpy().reshape(E, T, N), st_d.numpy()
+
+
+def run_readout_warp(cond: np.ndarray, noise_v: np.ndarray, r: ReadoutParams, device: str = "cpu") -> dict[str, np.ndarray]:
+    init_warp()
+    device = resolve_device(device)
+    E, T, N = cond.shape
+
+    def arr(a, dtype=wp.float32):
+        return wp.array(np.ascontiguousarray(a, np.float32).reshape(-1), dtype=dtype, device=device)
+
+    S = E * T
+    out_r = wp.empty(2 * S, dtype=wp.float32, device=device)
+    out_v = wp.empty(3 * S, dtype=wp.float32, device=device)
+    out_c = wp.empty(3 * S, dtype=wp.int32, device=device)
+    out_a = wp.empty(3 * S, dtype=wp.float32, device=device)
+    full = 2**r.adc_bits
+    wp.launch(
+        velostat_readout, dim=S, device=device,
+        inputs=[arr(cond), arr(noise_v), N, arr(r.r_force_ohm), arr(r.v_x), arr(r.r_x_ohm), arr(r.v_y), arr(r.r_y_ohm),
+                float(r.current_a), float(r.compliance_v), float(1.0 / r.input_resistance_ohm),
+                float(np.float32(r.adc_range_v / full)), int(full), float(r.adc_range_v), out_r, out_v, out_c, out_a],
+    )
+    rr = out_r.numpy().reshape(E, T, 2)
+    return finish(rr[..., 0], rr[..., 1], out_v.numpy().reshape(E, T, 3), out_c.numpy().reshape(E, T, 3),
+                  out_a.numpy().reshape(E, T, 3), r)

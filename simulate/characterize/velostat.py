@@ -1,0 +1,265 @@
+"""Characterization of the `velostat` preset next to the paper (paper key `velostat`).
+
+Experiments (force control, compression tester protocols of simulate/protocols/compression_tester.py):
+  creep vs force   presses of 1-15 N at the centre E, 3 mm/min, 30 s hold (Fig. 3a); the resistance at the
+                   end of each ramp is the static calibration R(F) (the paper: creep during loading negligible)
+  creep vs speed   3 N at E at 1-6 mm/min, 30 s hold (Fig. 5)
+  creep error      a 7 N press held 30 s and a 1-7 N staircase (5 s per step, then 30 s at 7 N; Fig. 22a),
+                   read through the static calibration: the uncompensated force error (paper: up to 5 N)
+  clustering       the 36-unit grid, 1-15 N on each unit; Ward linkage (scipy) of the units' R(F) curves
+                   (eqs. 10-13); elbow of the merge distance vs number of groups (paper: about 5, Fig. 12)
+  position         4-wire and 5-wire decoding error vs force at the 36 unit centres (paper: max 3 mm)
+  two contacts     decoded position of two simultaneous presses vs the conductance-weighted mean
+load="mujoco" runs every episode through MuJoCo (simulate.contact.load_field.run_episodes); load="ideal" uses the
+commanded force with the same load-field distribution (fast; for tests).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from scenes import SceneConfig
+from sensors.base import LoadBatch
+from sensors.registry import make_sensor
+from simulate.protocols.indenter import EpisodeProtocol, target_waveform
+from simulate.characterize.report import Report, fmt
+from simulate.protocols.compression_tester import knots_staircase, knots_steps, ramp_s, site_xy_m, unit_centres_m
+
+PAPER = {
+    "creep_error_7n_n": 5.0,  # sect. 5.4: "the maximum error is up to 5 N after loading to 7 N"
+    "groups": 5,  # sect. 4.1, Fig. 12
+    "position_error_max_mm": 3.0,  # sect. 4.1
+    "silhouette": 0.931,  # sect. 3.2 (creep-stage clustering; not reproduced here)
+}
+MM_PER_MIN = 1e-3 / 60.0
+
+
+def _proto(cfg: SceneConfig, t, f, xy, duration_s: float) -> EpisodeProtocol:
+    n = int(round((cfg.protocol.settle_s + duration_s) * cfg.sampling.sample_rate_hz))
+    return EpisodeProtocol(
+        frequency_hz=0.1, amplitude=float(max(f)), offset_xy_m=np.asarray(xy, float), n_samples=n, control="force",
+        kind="velostat_steps", params={"knots_t_s": list(map(float, t)), "knots_f_n": list(map(float, f))},
+    )
+
+
+def ideal_load(cfg: SceneConfig, protos: list[EpisodeProtocol]) -> LoadBatch:
+    """The commanded force at the commanded position, spread by simulate.contact.load_field (no MuJoCo)."""
+    from simulate.contact.load_field import load_field
+    from simulate.contact.mjcf import contact_design
+    from sensors.taxels import taxel_area_m2, taxel_xy_m
+
+    n = protos[0].n_samples
+    t = np.arange(n) / cfg.sampling.sample_rate_hz
+    F = np.stack([target_waveform(p, cfg, t) for p in protos])
+    k = contact_design(cfg).pad_stiffness_n_per_m
+    pos = np.zeros((len(protos), n, 3))
+    pos[..., :2] = np.stack([p.offset_xy_m for p in protos])[:, None, :]
+    pos[..., 2] = -F / k
+    force = np.zeros_like(pos)
+    force[..., 2] = F
+    deform, pressure, shear = load_field(cfg, pos, force)
+    return LoadBatch(t, F, pos, force, (F > 0).astype(np.int64), deform, pressure, shear, taxel_xy_m(cfg),
+                     taxel_area_m2(cfg), "force")
+
+
+def run(cfg: SceneConfig, sensor, protos: list[EpisodeProtocol], load: str, seed: int = 0):
+    if load == "ideal":
+        batch = ideal_load(cfg, protos)
+    else:
+        from simulate.contact.load_field import run_episodes
+
+        batch = run_episodes(cfg, protos, threads=cfg.generation.threads)
+    return batch, sensor.run_load(batch, [seed + i for i in range(len(protos))])
+
+
+def _idx(cfg, t_s: float) -> int:
+    return int(round((cfg.protocol.settle_s + t_s) * cfg.sampling.sample_rate_hz))
+
+
+def elbow(heights: np.ndarray, kmax: int = 15) -> int:
+    """Number of groups at the elbow of the merge distance D(k) (distance of the merge that leaves k groups),
+    k = 1..kmax: the point farthest below the chord from (1, D(1)) to (kmax, D(kmax)) (kneedle)."""
+    h = np.sort(np.asarray(heights))[::-1]  # h[0] merges 2 -> 1 group
+    k = np.arange(1, kmax + 1)
+    d = h[: kmax]
+    x = (k - 1) / (kmax - 1)
+    y = (d - d[-1]) / max(d[0] - d[-1], 1e-12)
+    return int(k[np.argmax((1 - x) - y)])
+
+
+def smooth(r: np.ndarray, cfg: SceneConfig, window_s: float = 1.0) -> np.ndarray:
+    """Moving average over window_s (valid part): the error is read on the signal, not on one noise spike."""
+    w = max(1, int(round(window_s * cfg.sampling.sample_rate_hz)))
+    return np.convolve(r, np.ones(w) / w, mode="valid") if len(r) >= w else r
+
+
+def calibration(levels: np.ndarray, r_levels: np.ndarray):
+    """Static calibration F(R) by log-log interpolation of the resistance at the end of each ramp."""
+    lr, lf = np.log(r_levels[::-1]), np.log(levels[::-1])
+
+    def f_of_r(r):
+        return np.exp(np.interp(np.log(np.asarray(r, float)), lr, lf, left=lf[0], right=lf[-1]))
+
+    return f_of_r
+
+
+def characterize_velostat(cfg: SceneConfig, backend: str = "warp", device: str = "cpu", load: str = "mujoco") -> Report:
+    cfg = cfg.model_copy(deep=True)
+    sensor = make_sensor(cfg, backend, device)
+    v3 = 3 * MM_PER_MIN
+    E = site_xy_m(cfg, "E")
+    hold = 30.0
+
+    # --- creep vs force + static calibration (presses at E, 3 mm/min, 30 s hold)
+    levels = np.arange(1.0, 16.0)
+    dur = ramp_s(cfg, 15.0, v3) + hold + 1.0
+    protos = [_proto(cfg, *knots_steps(cfg, [lv], [hold], [v3], [0.0])[:2], E, dur) for lv in levels]
+    _, out = run(cfg, sensor, protos, load)
+    r = out["resistance_measured"].astype(float)
+    i0 = np.array([_idx(cfg, ramp_s(cfg, lv, v3)) for lv in levels])
+    i1 = np.array([_idx(cfg, ramp_s(cfg, lv, v3) + hold) - 1 for lv in levels])
+    r_load = r[np.arange(len(levels)), i0]
+    r_end = r[np.arange(len(levels)), i1]
+    creep_rel = (r_load - r_end) / r_load
+    f_of_r = calibration(levels, r_load)
+    j7 = 6
+    err_hold = float(np.max(f_of_r(smooth(r[j7, i0[j7]: i1[j7] + 1], cfg)) - 7.0))
+
+    # --- creep vs loading speed (3 N at E, 1-6 mm/min, 30 s hold)
+    speeds = np.arange(1, 7) * MM_PER_MIN
+    dur_s = ramp_s(cfg, 3.0, speeds[0]) + hold + 1.0
+    protos = [_proto(cfg, *knots_steps(cfg, [3.0], [hold], [v], [0.0])[:2], E, dur_s) for v in speeds]
+    _, out = run(cfg, sensor, protos, load)
+    rs = out["resistance_measured"].astype(float)
+    a0 = np.array([_idx(cfg, ramp_s(cfg, 3.0, v)) for v in speeds])
+    a1 = a0 + int(round(hold * cfg.sampling.sample_rate_hz)) - 1
+    r_full = rs[np.arange(6), a0]
+    speed_rel = (r_full - rs[np.arange(6), a1]) / r_full
+
+    # --- staircase 1-7 N, 5 s per step, then 30 s at 7 N (Fig. 22a)
+    t, f = knots_staircase(cfg, np.arange(1.0, 8.0), 5.0, v3, release=False)
+    t[-1] += hold - 5.0
+    _, out = run(cfg, sensor, [_proto(cfg, t, f, E, t[-1] + 1.0)], load)
+    at7 = np.where(out["force"][0] > 6.95)[0]
+    err_stair = float(np.max(f_of_r(smooth(out["resistance_measured"][0, at7].astype(float), cfg)) - 7.0))
+
+    # --- 36-unit calibration grid: 1-15 N staircase on each unit, R at the end of each ramp
+    centres = unit_centres_m(cfg)
+    vcal = 6 * MM_PER_MIN
+    t, f = knots_staircase(cfg, levels, 2.0, vcal)
+    protos = [_proto(cfg, t, f, xy, t[-1] + 1.0) for xy in centres]
+    _, out = run(cfg, sensor, protos, load)
+    ends = [_idx(cfg, t[1 + 2 * i]) for i in range(len(levels))]
+    R = out["resistance_measured"][:, ends].astype(float)  # (36, 15)
+    from scipy.cluster.hierarchy import fcluster, linkage
+
+    Z = linkage(R, method="ward")
+    k_elbow = elbow(Z[:, 2])
+    groups = fcluster(Z, k_elbow, criterion="maxclust")
+    spread = float(np.std(np.log(R[:, 6])))
+
+    # --- position error vs force, 4-wire and 5-wire, at the 36 unit centres
+    forces = np.array([0.5, 1.0, 2.0, 3.0, 5.0, 7.0, 10.0, 15.0])
+    pos_err, pos_decoded = {}, {}
+    for wiring in ("4-wire", "5-wire"):
+        c2 = cfg.model_copy(deep=True)
+        c2.sensor.readout.position_wiring = wiring
+        s2 = make_sensor(c2, backend, device)
+        protos, truth = [], []
+        dur_p = ramp_s(c2, 15.0, vcal) + 2.0
+        for F in forces:
+            for xy in centres:
+                tt, ff = knots_steps(c2, [F], [dur_p], [vcal], [0.0])[:2]
+                protos.append(_proto(c2, tt, ff, xy, dur_p))
+                truth.append(xy)
+        _, out = run(c2, s2, protos, load)
+        dec = out["position_measured"][:, -1].astype(float)
+        pos_decoded[wiring] = dec.reshape(len(forces), len(centres), 2)
+        e = np.linalg.norm(dec - np.asarray(truth), axis=-1) * 1e3
+        e = e.reshape(len(forces), len(centres))
+        pos_err[wiring] = (np.nanmean(e, axis=1), np.nanmax(e, axis=1))
+
+    # --- two simultaneous contacts (2 N at x = -30 mm, 6 N at x = +30 mm), ideal load fields added
+    xa, xb = np.array([-0.03, 0.0]), np.array([0.03, 0.0])
+    tt, fa = knots_steps(cfg, [2.0], [5.0], [vcal], [0.0])[:2]
+    pa = _proto(cfg, tt, fa, xa, 6.0)
+    tt, fb = knots_steps(cfg, [6.0], [5.0], [vcal], [0.0])[:2]
+    pb = _proto(cfg, tt, fb, xb, 6.0)
+    la, lb = ideal_load(cfg, [pa]), ideal_load(cfg, [pb])
+    pr = la.pressure_pa + lb.pressure_pa
+    both = sensor.run(pr, [0])
+    k = _idx(cfg, ramp_s(cfg, 2.0, vcal) + 2.0)
+    g = sensor.conductance(pr)[0, k]
+    x_meas = float(both["position_measured"][0, k, 0])
+    x_g = float((g * sensor.xy[:, 0]).sum() / g.sum())
+    x_f = float((pr[0, k] * sensor.xy[:, 0]).sum() / pr[0, k].sum())
+
+    m = {
+        "creep_rel_by_force": {f"{lv:g}N": float(c) for lv, c in zip(levels, creep_rel)},
+        "creep_rel_by_speed": {f"{i + 1}mm/min": float(c) for i, c in enumerate(speed_rel)},
+        "r_full_load_by_speed_ohm": {f"{i + 1}mm/min": float(c) for i, c in enumerate(r_full)},
+        "creep_error_7n_hold_n": err_hold,
+        "creep_error_7n_staircase_n": err_stair,
+        "cluster_elbow": k_elbow,
+        "cluster_sizes": sorted(np.bincount(groups)[1:].tolist(), reverse=True),
+        "merge_heights": sorted(Z[:, 2].tolist(), reverse=True)[:12],
+        "unit_log_r_std_7n": spread,
+        "position_error_mm": {w: {f"{F:g}N": [float(a), float(b)] for F, a, b in zip(forces, *pos_err[w])} for w in pos_err},
+        "two_contacts_x_mm": {"measured": x_meas * 1e3, "conductance_weighted": x_g * 1e3, "force_weighted": x_f * 1e3},
+        "paper": PAPER,
+    }
+    rows = [
+        ["creep error, 7 N held 30 s (static calibration)", fmt(err_hold, 2) + " N", "up to 5 N (sect. 5.4)"],
+        ["creep error, 1-7 N staircase 5 s/step + 30 s", fmt(err_stair, 2) + " N", "up to 5 N (Fig. 22a)"],
+        ["relative creep in 30 s: 1 / 3 / 5 / 7 / 15 N",
+         " / ".join(f"{100 * creep_rel[i]:.0f}%" for i in (0, 2, 4, 6, 14)), "falls with force (Fig. 3a)"],
+        ["relative creep in 30 s at 3 N, 1 / 3 / 6 mm/min",
+         " / ".join(f"{100 * speed_rel[i]:.0f}%" for i in (0, 2, 5)), "grows with speed (Fig. 5)"],
+        ["R at full load, 3 N, 1 / 6 mm/min", f"{r_full[0]:.0f} / {r_full[5]:.0f} ohm", "about equal (Fig. 5)"],
+        ["Ward clustering of 36 units: elbow", f"{k_elbow} groups {m['cluster_sizes']}", "about 5 (Fig. 12)"],
+        ["unit-to-unit spread of R at 7 N (std log R)", fmt(spread, 2), "inconsistent (Fig. 19)"],
+    ]
+    for w in pos_err:
+        mean, mx = pos_err[w]
+        rows.append([f"position error {w}, mean/max at 0.5 / 1 / 5 / 15 N",
+                     " | ".join(f"{mean[i]:.1f}/{mx[i]:.1f}" for i in (0, 1, 4, 7)) + " mm", "max 3 mm (sect. 4.1)"])
+    rows.append(["two contacts 2 N @ -30 mm + 6 N @ +30 mm: x", f"{x_meas * 1e3:.1f} mm (G-weighted {x_g * 1e3:.1f})",
+                 "conductance-weighted mean"])
+
+    def plot(path: str) -> None:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        from simulate.pictures.plots import position_error_maps, unit_dendrogram
+
+        fig, ax = plt.subplots(2, 3, figsize=(13, 7.4))
+        unit_dendrogram(ax[1, 0], R, Z=Z, n_groups=k_elbow, title=f"36 units, Ward on R(F): {k_elbow} groups")
+        sel = [0, len(forces) - 1]
+        position_error_maps(ax[1, 1:], centres, pos_decoded["4-wire"][sel], forces[sel],
+                            size_m=(cfg.pad.size_x_m, cfg.pad.size_y_m), label="4-wire")
+        ax = ax[0]
+        ax[0].semilogy(levels, r_load, "o-", label="end of ramp")
+        ax[0].semilogy(levels, r_end, "s--", label="after 30 s hold")
+        ax[0].set_xlabel("force (N)"), ax[0].set_ylabel("R measured (ohm)"), ax[0].legend()
+        for u in range(R.shape[0]):
+            ax[1].semilogy(levels, R[u], color=f"C{groups[u] % 10}", lw=0.8)
+        ax[1].set_title(f"36 units, Ward: {k_elbow} groups"), ax[1].set_xlabel("force (N)")
+        for w, st in zip(pos_err, ("o-", "s--")):
+            ax[2].plot(forces, pos_err[w][0], st, label=f"{w} mean")
+            ax[2].plot(forces, pos_err[w][1], st, alpha=0.5, label=f"{w} max")
+        ax[2].set_xlabel("force (N)"), ax[2].set_ylabel("position error (mm)"), ax[2].legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+
+    return Report(
+        title=f"{cfg.name}: creep, unit inconsistency and position decoding (load: {load})",
+        columns=["quantity", "piezotwin", "paper"],
+        rows=rows,
+        notes=["static calibration = R at the end of each loading ramp (1-15 N at the centre E, 3 mm/min); "
+               "clustering on R at the end of each ramp of a 1-15 N staircase (6 mm/min, 2 s per level) per unit."],
+        metrics=m,
+        plot=plot,
+    )

@@ -1,0 +1,281 @@
+"""Batched MuJoCo episodes -> per-taxel load field (deformation, pressure, shear).
+
+One `mujoco.rollout` call runs all episodes (open-loop controls, no Python stepping); the sensors of
+the MJCF (joint positions + the netforce contact sensor) are read at every `substeps`-th step.
+The taxel fields are then computed in vectorised numpy:
+
+- deformation: geometric overlap of the indenter (at its simulated pose) with the undeformed pad top,
+  averaged over each taxel cell (box: exact cell coverage; sphere: 4 x 4 supersampling), spread by a
+  row-normalised Gaussian elastic-layer kernel of width pad.spread_length_m
+  (Johnson, Contact Mechanics, 1985, sect. 5.8, thin elastic layer), and never less than the overlap
+  itself (the surface cannot stay inside the rigid indenter): max(overlap, kernel * overlap).
+- pressure: Winkler distribution of MuJoCo's net normal contact force, proportional to the
+  deformation, so that sum(pressure * taxel_area) == normal force exactly.
+- shear: MuJoCo's net tangential contact force distributed with the same weights.
+"""
+
+from __future__ import annotations
+
+from typing import Iterator
+
+import mujoco
+import mujoco.rollout
+import numpy as np
+
+from scenes.config import SceneConfig
+from sensors.base import LoadBatch
+from simulate.contact.mjcf import build_mjcf, contact_design
+from simulate.protocols.indenter import EpisodeProtocol, target_waveforms, xy_waveforms
+from sensors.taxels import (
+    interval_coverage,
+    spread_matrix,
+    sphere_overlap,
+    taxel_area_m2,
+    taxel_xy_m,
+)
+
+MAX_STEPS_PER_CHUNK = 4_000_000  # episodes x steps per rollout call (bounds the rollout's output memory)
+
+# sensordata layout of build_mjcf: jointpos x, y, z; contact netforce: found, force(3), torque(3), dist, pos(3), ...
+_POS = slice(0, 3)
+_FOUND = 3
+_FORCE = slice(4, 7)
+
+
+def build_model(cfg: SceneConfig) -> mujoco.MjModel:
+    return mujoco.MjModel.from_xml_string(build_mjcf(cfg))
+
+
+def episode_controls(
+    cfg: SceneConfig, protocols: list[EpisodeProtocol], nstep: int, steps: slice | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """(E, nstep, 3) actuator controls for steps i = 0..nstep-1 (evaluated at t = (i + 1) dt) and the
+    (E, nstep) commanded target at those times; with `steps` (i0:i1), only those rows, equal to the same
+    rows of the whole arrays (so the GPU path can make them chunk by chunk while the worlds step).
+
+    Displacement control: the z servo gets ctrl = q* + (kv / kp) dq*/dt with q* = -d (1 + k_pad / kp):
+    velocity feed-forward (no servo lag) and static feed-forward of the servo deflection under the
+    design pad stiffness. Force control: ctrl_z = -F (a force pushing the indenter down).
+    """
+    des = contact_design(cfg)
+    dt = cfg.sampling.physics_timestep_s
+    i0, i1 = (0, nstep) if steps is None else (steps.start, steps.stop)
+    a, b = max(0, i0 - 1), min(nstep, i1 + 1)  # one step of margin: the same central differences as the whole
+    t = (np.arange(a, b) + 1.0) * dt
+    E = len(protocols)
+    ctrl = np.zeros((E, b - a, 3))
+    target = target_waveforms(protocols, cfg, t)
+    ctrl[:, :, :2] = xy_waveforms(protocols, cfg, t)
+    if cfg.protocol.control == "displacement":
+        kp, kv = des.servo_kp_n_per_m, des.servo_kv_n_s_per_m
+        q = -target * (1.0 + des.pad_stiffness_n_per_m / kp)
+        dq = np.gradient(q, dt, axis=1) if b - a > 1 else np.zeros_like(q)
+        ctrl[:, :, 2] = q + (kv / kp) * dq
+    else:
+        ctrl[:, :, 2] = -target
+    return ctrl[:, i0 - a : i1 - a], target[:, i0 - a : i1 - a]
+
+
+def sample_targets(cfg: SceneConfig, protocols: list[EpisodeProtocol], n: int) -> np.ndarray:
+    """(E, n) commanded target at the sample times k * substeps * dt (the rows the sensors are read at)."""
+    t = (np.arange(n) * cfg.sampling.substeps).astype(float) * cfg.sampling.physics_timestep_s
+    return target_waveforms(protocols, cfg, t)
+
+
+def _initial_states(m: mujoco.MjModel, cfg: SceneConfig, protocols: list[EpisodeProtocol], ctrl0: np.ndarray):
+    """(E, nstate) full-physics initial states and (E, nsensordata) sensors at t = 0."""
+    d = mujoco.MjData(m)
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    nstate = mujoco.mj_stateSize(m, spec)
+    states = np.zeros((len(protocols), nstate))
+    sens = np.zeros((len(protocols), m.nsensordata))
+    for e, p in enumerate(protocols):
+        mujoco.mj_resetData(m, d)
+        d.qpos[:] = (p.offset_xy_m[0], p.offset_xy_m[1], cfg.indenter.start_gap_m)
+        d.ctrl[:] = ctrl0[e]
+        mujoco.mj_forward(m, d)
+        mujoco.mj_getState(m, d, states[e], spec)
+        sens[e] = d.sensordata
+    return states, sens
+
+
+def episode_length(protocols: list[EpisodeProtocol]) -> int:
+    """The common n_samples of a batch of episodes (>= 2)."""
+    ns = {p.n_samples for p in protocols}
+    if len(ns) != 1:
+        raise ValueError(f"run_episodes: all protocols must have the same n_samples (got {sorted(ns)})")
+    n = ns.pop()
+    if n < 2:
+        raise ValueError(f"run_episodes: n_samples must be >= 2 (got {n})")
+    return n
+
+
+def physics_engine(cfg: SceneConfig) -> tuple[str, str]:
+    """(engine, warp device) for generation.physics: "mujoco" (C, CPU threads) or "mujoco_warp" (batched
+    worlds on generation.device); "auto" = MuJoCo Warp when a CUDA device and mujoco_warp are present."""
+    g = cfg.generation
+    if g.physics == "mujoco":
+        return "mujoco", "cpu"
+    from sensors.warp_setup import resolve_device
+    from simulate.contact import mujoco_warp as contact_mjw
+
+    if g.physics == "auto":
+        dev = resolve_device("auto")
+        return ("mujoco_warp", dev) if dev != "cpu" and contact_mjw.available() else ("mujoco", "cpu")
+    if not contact_mjw.available():
+        raise ValueError("generation.physics: 'mujoco_warp' needs the mujoco_warp package "
+                         "(pip install 'piezotwin[gpu]'); allowed without it: mujoco, auto")
+    return "mujoco_warp", resolve_device("auto" if g.device == "auto" else g.device)
+
+
+def simulate_sensors(
+    cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1, alloc=None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Run the episodes; returns sensordata (E, T, nsensordata) at the sample times and target (E, T).
+    Stepping: C MuJoCo's rollout on `threads` threads, or MuJoCo Warp worlds (`physics_engine`).
+    alloc(shape) -> float64 array: where the sensordata goes (default np.zeros; the GPU feed's physics
+    process passes a view of a shared-memory block, so the worlds' output needs no second copy)."""
+    engine, device = physics_engine(cfg)
+    n = episode_length(protocols)
+    sub = cfg.sampling.substeps
+    nstep = (n - 1) * sub
+    mjcf = build_mjcf(cfg)
+    m = mujoco.MjModel.from_xml_string(mjcf)
+    E = len(protocols)
+    if engine == "mujoco_warp":
+        from simulate.contact.mujoco_warp import worlds_for
+
+        # controls are made chunk by chunk on a host thread while the worlds step (no (E, nstep, 3) array)
+        states0, sens0 = _initial_states(m, cfg, protocols, episode_controls(cfg, protocols, nstep, slice(0, 1))[0][:, 0])
+        qpos0 = states0[:, 1 : 1 + m.nq]  # full-physics state = (time, qpos, qvel, ...)
+        out = worlds_for(m, mjcf, E, device).run(qpos0, lambda sl, eps: episode_controls(cfg, protocols[eps], nstep, sl)[0], sens0, sub, n,
+                                                 out=None if alloc is None else alloc((E, n, m.nsensordata)))
+    else:
+        ctrl, _ = episode_controls(cfg, protocols, nstep)
+        states0, sens0 = _initial_states(m, cfg, protocols, ctrl[:, 0])
+        rows = np.arange(1, n) * sub - 1
+        out = np.zeros((E, n, m.nsensordata)) if alloc is None else alloc((E, n, m.nsensordata))
+        out[:, 0] = sens0
+        datas = [mujoco.MjData(m) for _ in range(max(1, threads))]
+        data_arg = datas if threads > 1 else datas[0]
+        chunk = max(max(1, threads), MAX_STEPS_PER_CHUNK // nstep)
+        for a in range(0, E, chunk):
+            b = min(E, a + chunk)
+            _, sd = mujoco.rollout.rollout(m, data_arg, states0[a:b], ctrl[a:b], nstep=nstep)
+            out[a:b, 1:] = sd[:, rows]
+    return out, sample_targets(cfg, protocols, n)
+
+
+def load_field(cfg: SceneConfig, pos_rel_m: np.ndarray, force_n: np.ndarray):
+    """Taxel fields from the indenter pose and net contact force.
+
+    pos_rel_m: (E, T, 3) indenter lowest point relative to (0, 0, pad top).
+    force_n: (E, T, 3) tangential x, y and normal compressive z contact force.
+    Returns deformation_m (E, T, N), pressure_pa (E, T, N), shear_pa (E, T, N, 2).
+    """
+    pad, ind = cfg.pad, cfg.indenter
+    E, T, _ = pos_rel_m.shape
+    nx, ny = pad.taxels_x, pad.taxels_y
+    sx = spread_matrix(pad.size_x_m, nx, pad.spread_length_m)
+    sy = spread_matrix(pad.size_y_m, ny, pad.spread_length_m)
+    pen = np.clip(-pos_rel_m[..., 2], 0.0, None)  # (E, T)
+    if ind.shape == "box":
+        cx = interval_coverage(pos_rel_m[..., 0], ind.size_x_m / 2, pad.size_x_m, nx)  # (E, T, nx)
+        cy = interval_coverage(pos_rel_m[..., 1], ind.size_y_m / 2, pad.size_y_m, ny)  # (E, T, ny)
+        overlap = pen[..., None, None] * cy[..., :, None] * cx[..., None, :]
+        spread = pen[..., None, None] * (cy @ sy.T)[..., :, None] * (cx @ sx.T)[..., None, :]
+    else:
+        overlap = sphere_overlap(cfg, pos_rel_m.reshape(-1, 3), ind.radius_m)  # (E T, ny, nx)
+        spread = np.einsum("ij,fjk,lk->fil", sy, overlap, sx, optimize=True).reshape(E, T, ny, nx)
+        overlap = overlap.reshape(E, T, ny, nx)
+    # the surface cannot stay inside the rigid indenter: under it the deflection is at least the overlap
+    deform = np.maximum(overlap, spread)
+    deform = deform.reshape(E, T, nx * ny)
+
+    area = taxel_area_m2(cfg)
+    weights = deform
+    wsum = weights.sum(axis=-1)
+    fn = np.clip(force_n[..., 2], 0.0, None)
+    loaded = fn > 0.0
+    fallback = loaded & (wsum <= 0.0)
+    if fallback.any():  # force without resolvable overlap (sub-sample depth): a kernel at the indenter centre
+        xy = taxel_xy_m(cfg)
+        c = pos_rel_m[fallback][:, :2]
+        g = np.exp(-((xy[None, :, :] - c[:, None, :]) ** 2).sum(-1) / (2 * pad.spread_length_m**2))
+        weights = weights.copy()
+        weights[fallback] = g
+        wsum = weights.sum(axis=-1)
+    scale = np.where(loaded, 1.0 / (area * np.where(wsum > 0, wsum, 1.0)), 0.0)  # (E, T)
+    share = weights * scale[..., None]  # (E, T, N), sums to 1 / area where loaded
+    pressure = share * fn[..., None]
+    shear = share[..., None] * force_n[..., None, :2]
+    return deform, pressure, shear
+
+
+# protocol kinds with their own contact stage: kind -> "module:function(cfg, protocols, threads) -> LoadBatch"
+CONTACT_STAGES: dict[str, str] = {
+    "press_stroke": "simulate.contact.press_stroke:run_press_stroke",
+}
+
+
+def run_episodes(cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1) -> LoadBatch:
+    """Simulate E episodes (same n_samples) in one batched rollout and return their load fields."""
+    return next(iter_load_batches(cfg, protocols, threads))[1]
+
+
+def iter_load_batches(
+    cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1, slice_episodes: int | None = None,
+    device_fields: str | None = None, physics: tuple[np.ndarray, np.ndarray] | None = None,
+) -> Iterator[tuple[slice, LoadBatch]]:
+    """Simulate E episodes (same n_samples) in one batch of worlds, then yield their load fields in slices
+    of at most `slice_episodes` episodes (default all): (slice of protocols, LoadBatch). physics: their
+    (sensordata, target) from `simulate_sensors`, already run elsewhere (the GPU feed's physics process).
+
+    The physics wants many worlds at once; the load field and the sensor chain after it need device memory
+    per episode, so they go slice by slice. device_fields: on the MuJoCo Warp path, leave deformation,
+    pressure and shear as Warp arrays on this device (see LoadBatch) for a sensor chain that runs there.
+    """
+    if cfg.protocol.kind in CONTACT_STAGES:
+        import importlib
+
+        module, fn = CONTACT_STAGES[cfg.protocol.kind].split(":")
+        yield slice(0, len(protocols)), getattr(importlib.import_module(module), fn)(cfg, protocols, threads)
+        return
+    sens, target = physics if physics is not None else simulate_sensors(cfg, protocols, threads)
+    E = len(protocols)
+    step = E if slice_episodes is None else max(1, slice_episodes)
+    for a in range(0, E, step):
+        sl = slice(a, min(E, a + step))
+        yield sl, load_batch(cfg, sens[sl], target[sl], device_fields)
+
+
+def load_batch(cfg: SceneConfig, sens: np.ndarray, target: np.ndarray, device_fields: str | None = None) -> LoadBatch:
+    """LoadBatch of episodes from their sensordata (E, T, nsensordata) and target (E, T): pose and net force
+    from the MJCF sensors, the taxel fields by `load_field` (numpy) or, on the MuJoCo Warp path, by Warp
+    kernels on the physics device (kept there as flat Warp arrays when device_fields names that device)."""
+    top = cfg.pad.thickness_m
+    q = sens[..., _POS]
+    pos_world = q + np.array([0.0, 0.0, top])
+    f_pad = sens[..., _FORCE]  # force on the pad, global frame
+    force = np.concatenate([f_pad[..., :2], -f_pad[..., 2:3]], axis=-1)
+    engine, device = physics_engine(cfg)
+    if engine == "mujoco_warp":  # the GPU path: the numpy field would be the host's largest cost
+        from simulate.contact.load_field_kernels import load_field_warp
+
+        deform, pressure, shear = load_field_warp(cfg, q, force, device, to_host=device_fields != device)
+    else:
+        deform, pressure, shear = load_field(cfg, q, force)
+    n = sens.shape[1]
+    return LoadBatch(
+        time_s=np.arange(n) / cfg.sampling.sample_rate_hz,
+        target=target,
+        indenter_pos_m=pos_world,
+        contact_force_n=force,
+        contact_points=sens[..., _FOUND].astype(np.int64),
+        deformation_m=deform,
+        pressure_pa=pressure,
+        shear_pa=shear,
+        taxel_xy_m=taxel_xy_m(cfg),
+        taxel_area_m2=taxel_area_m2(cfg),
+        control=cfg.protocol.control,
+    )

@@ -1,0 +1,150 @@
+"""Warp kernels of the taxel load field: the same fields as `simulate.contact.load_field` (its numpy
+reference, tested equal), for the GPU path where the numpy version would be the host's largest cost.
+
+Model (see simulate/contact/load_field.py): indenter overlap per taxel cell (box: exact cell coverage; sphere:
+supersampled), spread by the separable Gaussian thin-layer kernel (Johnson, Contact Mechanics, 1985,
+sect. 5.8), deformation = max(overlap, spread), Winkler pressure share of the net normal force, shear
+with the same weights; a force with no resolvable overlap goes to a Gaussian at the indenter centre.
+Frames F = E x T are flat; float64 throughout, like the reference.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from scenes.config import SceneConfig
+from sensors.taxels import SPHERE_SUPERSAMPLE, spread_matrix, taxel_area_m2, taxel_centres_1d, taxel_xy_m
+
+
+@wp.kernel
+def _overlap_box(pos: wp.array2d(dtype=wp.float64), xc: wp.array(dtype=wp.float64), yc: wp.array(dtype=wp.float64),
+                 px: wp.float64, py: wp.float64, hx: wp.float64, hy: wp.float64, out: wp.array2d(dtype=wp.float64)):
+    f, n = wp.tid()
+    nx = xc.shape[0]
+    ix = n % nx
+    iy = n // nx
+    pen = wp.max(-pos[f, 2], wp.float64(0.0))
+    half = wp.float64(0.5)
+    cx = wp.max(wp.min(pos[f, 0] + hx, xc[ix] + half * px) - wp.max(pos[f, 0] - hx, xc[ix] - half * px), wp.float64(0.0)) / px
+    cy = wp.max(wp.min(pos[f, 1] + hy, yc[iy] + half * py) - wp.max(pos[f, 1] - hy, yc[iy] - half * py), wp.float64(0.0)) / py
+    out[f, n] = pen * cy * cx
+
+
+@wp.kernel
+def _overlap_sphere(pos: wp.array2d(dtype=wp.float64), xs: wp.array(dtype=wp.float64), ys: wp.array(dtype=wp.float64),
+                    nx: int, s: int, radius: wp.float64, out: wp.array2d(dtype=wp.float64)):
+    f, n = wp.tid()
+    ix = n % nx
+    iy = n // nx
+    pen = -pos[f, 2]
+    r2 = radius * radius
+    acc = wp.float64(0.0)
+    for a in range(s):
+        dy = ys[iy * s + a] - pos[f, 1]
+        for b in range(s):
+            dx = xs[ix * s + b] - pos[f, 0]
+            rr = dy * dy + dx * dx
+            if rr < r2:
+                acc += wp.max(pen - radius + wp.sqrt(r2 - rr), wp.float64(0.0))
+    out[f, n] = acc / wp.float64(s * s)
+
+
+@wp.kernel
+def _spread_x(ov: wp.array2d(dtype=wp.float64), sx: wp.array2d(dtype=wp.float64), tmp: wp.array2d(dtype=wp.float64)):
+    """tmp[f, iy, ix] = sum_k ov[f, iy, k] sx[ix, k]"""
+    f, n = wp.tid()
+    nx = sx.shape[0]
+    ix = n % nx
+    row = n - ix
+    acc = wp.float64(0.0)
+    for k in range(nx):
+        acc += ov[f, row + k] * sx[ix, k]
+    tmp[f, n] = acc
+
+
+@wp.kernel
+def _spread_y_max(ov: wp.array2d(dtype=wp.float64), tmp: wp.array2d(dtype=wp.float64), sy: wp.array2d(dtype=wp.float64),
+                  nx: int, deform: wp.array2d(dtype=wp.float64)):
+    """deform = max(overlap, sum_j sy[iy, j] tmp[f, j, ix])"""
+    f, n = wp.tid()
+    ix = n % nx
+    iy = n // nx
+    acc = wp.float64(0.0)
+    for j in range(sy.shape[0]):
+        acc += sy[iy, j] * tmp[f, j * nx + ix]
+    deform[f, n] = wp.max(ov[f, n], acc)
+
+
+@wp.kernel
+def _distribute(deform: wp.array2d(dtype=wp.float64), pos: wp.array2d(dtype=wp.float64), force: wp.array2d(dtype=wp.float64),
+                txy: wp.array2d(dtype=wp.float64), area: wp.float64, sigma: wp.float64,
+                pressure: wp.array2d(dtype=wp.float64), shear: wp.array3d(dtype=wp.float64)):
+    """Per frame: Winkler share of the normal force (weights = deformation, or the centre Gaussian)."""
+    f = wp.tid()
+    N = deform.shape[1]
+    zero = wp.float64(0.0)
+    fn = wp.max(force[f, 2], zero)
+    wsum = zero
+    for n in range(N):
+        wsum += deform[f, n]
+    gauss = fn > zero and wsum <= zero
+    if gauss:
+        wsum = zero
+        for n in range(N):
+            dx = txy[n, 0] - pos[f, 0]
+            dy = txy[n, 1] - pos[f, 1]
+            wsum += wp.exp(-(dx * dx + dy * dy) / (wp.float64(2.0) * sigma * sigma))
+    scale = zero
+    if fn > zero:
+        if wsum > zero:
+            scale = wp.float64(1.0) / (area * wsum)
+        else:
+            scale = wp.float64(1.0) / area
+    for n in range(N):
+        w = deform[f, n]
+        if gauss:
+            dx = txy[n, 0] - pos[f, 0]
+            dy = txy[n, 1] - pos[f, 1]
+            w = wp.exp(-(dx * dx + dy * dy) / (wp.float64(2.0) * sigma * sigma))
+        share = w * scale
+        pressure[f, n] = share * fn
+        shear[f, n, 0] = share * force[f, 0]
+        shear[f, n, 1] = share * force[f, 1]
+
+
+def load_field_warp(cfg: SceneConfig, pos_rel_m: np.ndarray, force_n: np.ndarray, device: str, to_host: bool = True):
+    """Same contract as simulate.contact.load_field (shapes (E, T, 3) in; deformation_m, pressure_pa
+    (E, T, N) and shear_pa (E, T, N, 2) out, float64), computed by Warp kernels on `device`.
+    to_host=False: the outputs stay on the device as Warp arrays, flat over frames: (E T, N), (E T, N, 2)."""
+    pad, ind = cfg.pad, cfg.indenter
+    E, T, _ = pos_rel_m.shape
+    F, nx, ny = E * T, pad.taxels_x, pad.taxels_y
+    N = nx * ny
+    f64 = wp.float64
+
+    def arr(x, shape=None):
+        return wp.array(np.ascontiguousarray(x, np.float64).reshape(shape or np.shape(x)), dtype=f64, device=device)
+
+    with wp.ScopedDevice(device):
+        pos, force = arr(pos_rel_m, (F, 3)), arr(force_n, (F, 3))
+        ov = wp.empty((F, N), dtype=f64)
+        if ind.shape == "box":
+            xc, yc = arr(taxel_centres_1d(pad.size_x_m, nx)), arr(taxel_centres_1d(pad.size_y_m, ny))
+            wp.launch(_overlap_box, dim=(F, N), inputs=[pos, xc, yc, f64(pad.size_x_m / nx), f64(pad.size_y_m / ny),
+                                                        f64(ind.size_x_m / 2), f64(ind.size_y_m / 2), ov])
+        else:
+            s = SPHERE_SUPERSAMPLE
+            xs, ys = arr(taxel_centres_1d(pad.size_x_m, nx * s)), arr(taxel_centres_1d(pad.size_y_m, ny * s))
+            wp.launch(_overlap_sphere, dim=(F, N), inputs=[pos, xs, ys, nx, s, f64(ind.radius_m), ov])
+        sx = arr(spread_matrix(pad.size_x_m, nx, pad.spread_length_m))
+        sy = arr(spread_matrix(pad.size_y_m, ny, pad.spread_length_m))
+        tmp, deform = wp.empty((F, N), dtype=f64), wp.empty((F, N), dtype=f64)
+        wp.launch(_spread_x, dim=(F, N), inputs=[ov, sx, tmp])
+        wp.launch(_spread_y_max, dim=(F, N), inputs=[ov, tmp, sy, nx, deform])
+        pressure, shear = wp.empty((F, N), dtype=f64), wp.empty((F, N, 2), dtype=f64)
+        wp.launch(_distribute, dim=F, inputs=[deform, pos, force, arr(taxel_xy_m(cfg)), f64(taxel_area_m2(cfg)),
+                                              f64(pad.spread_length_m), pressure, shear])
+        if not to_host:
+            return deform, pressure, shear
+        return deform.numpy().reshape(E, T, N), pressure.numpy().reshape(E, T, N), shear.numpy().reshape(E, T, N, 2)

@@ -1,0 +1,180 @@
+"""The contact stage on MuJoCo Warp: all episodes as batched worlds on one device (GPU, or Warp's CPU).
+
+Same model, controls and outputs as the C MuJoCo `rollout` path of `simulate.contact.load_field.simulate_sensors`,
+which calls `WarpWorlds.run` when generation.physics picks MuJoCo Warp: sensordata (E, T, nsensordata) read
+after every `substeps`-th step, so everything downstream (load field, sensor chain, recording) is shared.
+Source of the engine: MuJoCo Warp 4.0 (`mujoco_warp`).
+
+On CUDA one sample period (substeps x [set ctrl, step] + record sensors) is captured once as a CUDA graph
+and replayed; per-step controls come from a device buffer indexed by a device-side step counter, so no
+Python runs per physics step. Sensors are computed only in the step that is recorded (the other substeps
+step a copy of the model with mjDSBL_SENSOR: sensors do not act on the dynamics, so the recorded values are
+the same). `worlds_for` keeps one set of worlds per process, with its buffers and graph, for the next batch.
+Controls are uploaded and sensors read back (through a page-locked buffer) in time chunks that bound
+device memory. MuJoCo Warp computes in float32 (C MuJoCo in float64) and its contact solver sums with
+atomics on the GPU, so results agree with the C path within float32 tolerances, not bit for bit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+
+CHUNK_BYTES = 256 * 2**20  # device memory for one chunk of controls + recorded sensors
+CONTROL_THREADS = 4  # host threads making the next chunk's controls (32k episodes: ~6 s of numpy per batch)
+
+
+@wp.kernel
+def _set_ctrl(seq: wp.array3d(dtype=wp.float32), counter: wp.array(dtype=wp.int32), ctrl: wp.array2d(dtype=wp.float32)):
+    w, j = wp.tid()
+    ctrl[w, j] = seq[w, counter[0], j]
+
+
+@wp.kernel
+def _record(sensordata: wp.array2d(dtype=wp.float32), counter: wp.array(dtype=wp.int32), out: wp.array3d(dtype=wp.float32)):
+    w, j = wp.tid()
+    out[w, counter[1], j] = sensordata[w, j]
+
+
+@wp.kernel
+def _advance(counter: wp.array(dtype=wp.int32), which: int):
+    counter[which] = counter[which] + 1
+
+
+def available() -> bool:
+    """True when mujoco_warp can be imported (it is an optional dependency: extra `gpu`)."""
+    try:
+        import mujoco_warp  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+class WarpWorlds:
+    """E batched MuJoCo Warp worlds of one scene on one device; run() replays the episodes' controls.
+
+    Shapes: ctrl (E, nstep, nu) float; returns sensordata (E, n_samples, nsensordata) float64.
+    """
+
+    def __init__(self, m, n_worlds: int, device: str, sensors_every_step: bool = False):
+        import copy
+
+        import mujoco
+        import mujoco_warp as mjw
+
+        self.mjm, self.E, self.device = m, n_worlds, device
+        self.mjd = mujoco.MjData(m)
+        quiet = copy.copy(m)  # the substeps between two records: same model, sensors off
+        quiet.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
+        self._buffers: tuple | None = None  # (chunk, substeps, seq, rec, rec_host, graph) of the last run, reused by the next
+        self._loaded = False
+        with wp.ScopedDevice(device):
+            self.m = mjw.put_model(m)
+            self.m_quiet = self.m if sensors_every_step else mjw.put_model(quiet)
+            # one indenter-pad pair: a box-box contact has at most 8 points, 3 rows each (elliptic, condim 3),
+            # plus slack for the actuated joints' rows
+            self.d = mjw.put_data(m, self.mjd, nworld=n_worlds, nconmax=8, njmax=8 * 3 + 2 * m.nu)
+            self.counter = wp.zeros(2, dtype=wp.int32)
+
+    def _step_sample(self, seq: wp.array3d, out: wp.array3d, substeps: int) -> None:
+        import mujoco_warp as mjw
+
+        E, nu, ns = self.E, self.mjm.nu, self.mjm.nsensordata
+        for i in range(substeps):
+            wp.launch(_set_ctrl, dim=(E, nu), inputs=[seq, self.counter, self.d.ctrl])
+            mjw.step(self.m if i == substeps - 1 else self.m_quiet, self.d)
+            wp.launch(_advance, dim=1, inputs=[self.counter, 0])
+        wp.launch(_record, dim=(E, ns), inputs=[self.d.sensordata, self.counter, out])
+        wp.launch(_advance, dim=1, inputs=[self.counter, 1])
+
+    def run(self, qpos0: np.ndarray, ctrl, sens0: np.ndarray, substeps: int, n_samples: int,
+            out: np.ndarray | None = None) -> np.ndarray:
+        """Reset the worlds to qpos0 (E, nq) at rest and replay the controls; sensors at samples 1..n-1 after
+        each substeps-th step (sample 0 = sens0, computed by the caller with mj_forward).
+
+        ctrl: (E, nstep, nu) array, or a function (steps, episodes) of two slices returning those rows; the
+        next chunk's controls are made on CONTROL_THREADS host threads (blocks of episodes; numpy releases the
+        GIL) while the device runs the current one. out: a (E, n_samples, nsensordata) float64 array to fill
+        (default a new one).
+        """
+        import mujoco_warp as mjw
+        from concurrent.futures import ThreadPoolExecutor
+
+        E, nu, ns = self.E, self.mjm.nu, self.mjm.nsensordata
+        ctrl_rows = ctrl if callable(ctrl) else (lambda sl, eps: ctrl[eps, sl])
+        out = np.zeros((E, n_samples, ns)) if out is None else out
+        out[:, 0] = sens0
+        per_sample = E * (substeps * nu + ns) * 4
+        chunk = int(max(1, min(n_samples - 1, CHUNK_BYTES // per_sample)))
+        starts = list(range(1, n_samples, chunk))
+
+        blocks = [slice(b, min(E, b + -(-E // CONTROL_THREADS))) for b in range(0, E, -(-E // CONTROL_THREADS))]
+
+        def host_chunk(a: int) -> np.ndarray:  # controls of samples a .. a + chunk - 1, zero-padded, float32
+            k = min(chunk, n_samples - a)
+            host = np.zeros((E, chunk * substeps, nu), np.float32)
+            steps = slice((a - 1) * substeps, (a - 1 + k) * substeps)
+
+            def fill(eps: slice) -> None:
+                host[eps, : k * substeps] = ctrl_rows(steps, eps)
+
+            list(workers.map(fill, blocks))
+            return host
+
+        cuda = wp.get_device(self.device).is_cuda
+        with wp.ScopedDevice(self.device), ThreadPoolExecutor(1, thread_name_prefix="chunk") as pool, \
+                ThreadPoolExecutor(CONTROL_THREADS, thread_name_prefix="controls") as workers:
+            nxt = pool.submit(host_chunk, starts[0])
+            if self._buffers is not None and self._buffers[:2] == (chunk, substeps):
+                seq, rec, rec_host, graph = self._buffers[2:]
+            else:
+                self._buffers = None  # free the old ones first
+                seq = wp.zeros((E, chunk * substeps, nu), dtype=wp.float32)
+                rec = wp.zeros((E, chunk, ns), dtype=wp.float32)
+                # sensors come back through a page-locked buffer (a fresh pageable array faults page by page)
+                rec_host = wp.empty(rec.shape, dtype=wp.float32, device="cpu", pinned=True) if cuda else rec
+                graph = None
+                self._buffers = (chunk, substeps, seq, rec, rec_host, graph)
+            if cuda and not self._loaded:  # load (compile) every kernel before a graph capture
+                self.counter.zero_()
+                self._step_sample(seq, rec, 2)
+                self._loaded = True
+            mjw.reset_data(self.m, self.d)
+            self.d.qpos.assign(np.ascontiguousarray(qpos0, np.float32))
+            for i, a in enumerate(starts):
+                k = min(chunk, n_samples - a)
+                seq.assign(nxt.result())
+                if i + 1 < len(starts):
+                    nxt = pool.submit(host_chunk, starts[i + 1])
+                self.counter.zero_()
+                if cuda:
+                    if graph is None:  # captured once (recorded, not run): its buffers are refilled in place
+                        with wp.ScopedCapture() as cap:
+                            self._step_sample(seq, rec, substeps)
+                        graph = cap.graph
+                        self._buffers = (chunk, substeps, seq, rec, rec_host, graph)
+                    for _ in range(k):
+                        wp.capture_launch(graph)
+                else:
+                    for _ in range(k):
+                        self._step_sample(seq, rec, substeps)
+                if cuda:
+                    wp.copy(rec_host, rec)
+                    wp.synchronize_device(self.device)
+                out[:, a : a + k] = rec_host.numpy()[:, :k]
+        return out
+
+
+_CACHED: dict = {}  # (MJCF, n_worlds, device) -> WarpWorlds: one set per process
+
+
+def worlds_for(m, mjcf: str, n_worlds: int, device: str) -> WarpWorlds:
+    """The process's worlds for this scene and batch size, made once (put_model, put_data for n_worlds, the
+    CUDA graph) and reused by the next batch of the same shape (the GPU feed's physics processes step one
+    batch after another); a different scene or size replaces them."""
+    key = (mjcf, n_worlds, device)
+    if key not in _CACHED:
+        _CACHED.clear()  # free the old worlds' device memory before allocating new ones
+        _CACHED[key] = WarpWorlds(m, n_worlds, device)
+    return _CACHED[key]

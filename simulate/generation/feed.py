@@ -1,0 +1,490 @@
+"""GPU feed: big batches of worlds on one GPU, a pool of writer processes for the shards.
+
+Why (bench/README.md): MuJoCo Warp runs near its peak only with 16k-32k worlds per batch, and HDF5 at that rate
+needs several host cores; worker processes that each simulate their own shard time-slice the GPU with smaller
+batches. Here a three-stage pipeline runs over batches of several shards' episodes (FEED_WORLDS):
+
+1. PHYSICS_PROCESSES processes step the next batches (`step_worlds`: protocols, controls, MuJoCo Warp; the
+   GPU time-slices between them, so one's host work overlaps the other's physics) and write the sensordata
+   straight into shared memory;
+2. the driver runs the load field and the sensor chain of batch b on the same GPU, slice by slice; each slice's
+   outputs come back into reused page-locked buffers and are packed into shared blocks that a `BlockPool`
+   lends until their shard is written (`produce`); the first batches are smaller (RAMP_BATCHES), so the
+   driver and writers start early;
+3. writer processes (spawned; one shard per task, at most PENDING_PER_WRITER queued each) write the shards and
+   make their manifest entries.
+
+The files are those of `simulate.generation.run.write_shard`: an episode's channels do not depend on the batch it ran in.
+A writer that dies is replaced and its shard resubmitted (up to max_retries); finished shards stay, so a
+rerun resumes at the missing ones. Where /dev/shm has no room, the arrays travel pickled instead.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from scenes import SceneConfig
+
+FEED_WORLDS = 32768  # episodes per batch of worlds: 2.4e7 world-steps/s on an H100 (bench/results/physics-profile-h100-s4.json)
+PENDING_PER_WRITER = 2  # shards handed to the writers and not yet written, per writer: one being written, one
+# queued, so no writer idles while the driver packs the next batch (~1.4 GB per shard of 8192 bench episodes) ...
+PENDING_RAM_FRACTION = 0.25  # ... and no more bytes pending than this fraction of the host's memory
+RAMP_BATCHES = 2  # batches of worlds / 4 and worlds / 2 episodes before the full ones (see _groups)
+PHYSICS_PROCESSES = 2  # each steps its own batch: one's host work (protocols, controls) overlaps the other's GPU work
+# where the driver's time went in the last generate_feed of this process (for bench/): "start-up" (Warp, the
+# sensor), "simulate" (load field, sensor chain, channel arrays; protocols and physics too for kinds with their
+# own contact stage), "pack", "wait for physics", "wait for writers", "shut down" (the process pools); and,
+# summed over the writer processes, "writers: episodes" (HDF5), "writers: close, fsync", "writers: sha256"; and
+# summed over the physics tasks, "physics: ..." (see step_worlds; the first batch's apart)
+LAST_RUN_SECONDS: dict[str, float] = {}
+
+
+def _shm_room(nbytes: int) -> bool:
+    """Whether /dev/shm can take a block of nbytes (a full tmpfs would kill the writer with SIGBUS)."""
+    import shutil
+
+    try:
+        return shutil.disk_usage("/dev/shm").free >= 2 * nbytes
+    except OSError:
+        return False
+
+
+def _attach(name: str):
+    """Attach a block another process of this run made. The feed's processes are spawned by the driver and share
+    its resource tracker, which keeps a set of names: the creator registered the block, attaching (which registers
+    it again before Python 3.13) adds nothing, and the one unlink unregisters it; were a process to unregister
+    on attaching, the unlink would find the name gone (a KeyError traceback from the tracker)."""
+    from multiprocessing import shared_memory
+
+    return shared_memory.SharedMemory(name=name)
+
+
+def _views(buf, where: list[tuple[int, str, tuple[int, ...]]]) -> list[np.ndarray]:
+    return [np.ndarray(shape, np.dtype(dt), buffer=buf, offset=off) for off, dt, shape in where]
+
+
+def step_worlds(cfg: SceneConfig, gids: list[int], threads: int = 1, submitted: float | None = None) -> tuple[list, dict, dict]:
+    """Physics task (in the feed's physics process): the protocols of episodes `gids` and, per length group,
+    their (sensordata, target) from `simulate_sensors`, written straight into a shared-memory block the
+    receiver unlinks: ({n_samples: (block name, layout)} or the arrays themselves where /dev/shm has no room);
+    and where the task's time went ("waiting to start" since `submitted`, a time.time(), "imports", "protocols",
+    "worlds": initial states, controls, MuJoCo Warp)."""
+    import time
+
+    t0 = time.time()
+    from multiprocessing import shared_memory
+
+    from sensors.data.manifest import episode_seed
+    from simulate.contact.load_field import simulate_sensors
+    from simulate.generation.run import episode_protocols, length_groups
+
+    t1 = time.time()
+    protos = episode_protocols(cfg, [episode_seed(cfg.generation.root_seed, k) for k in gids], gids)
+    t2 = time.time()
+    spent = {"waiting to start": t0 - (submitted or t0), "imports": t1 - t0, "protocols": t2 - t1}
+    out = {}
+    for n, idx in length_groups(protos):
+        made = []
+
+        def alloc(shape: tuple[int, ...]) -> np.ndarray:  # sensordata (E, n, ns) float64, then target (E, n)
+            nbytes = 8 * (int(np.prod(shape)) + shape[0] * shape[1])
+            if not _shm_room(nbytes):
+                return np.zeros(shape)
+            made.append(shared_memory.SharedMemory(create=True, size=nbytes))
+            return np.ndarray(shape, np.float64, buffer=made[0].buf)
+
+        sens, target = simulate_sensors(cfg, [protos[i] for i in idx], threads, alloc)
+        if not made:
+            out[n] = (sens, target)
+            continue
+        shm = made[0]  # the receiver unlinks it (the shared resource tracker has it registered until then)
+        np.ndarray(target.shape, np.float64, buffer=shm.buf, offset=sens.nbytes)[...] = target
+        out[n] = (shm.name, [(0, sens.dtype.str, sens.shape), (sens.nbytes, "<f8", target.shape)])
+        sens = None
+        shm.close()
+    spent["worlds"] = time.time() - t2
+    return protos, out, spent
+
+
+PACK_THREADS = 4  # threads copying a piece into its shared block (numpy copies release the GIL)
+_PACKERS = None
+
+
+def _pack_pool():
+    global _PACKERS
+    if _PACKERS is None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        _PACKERS = ThreadPoolExecutor(PACK_THREADS, thread_name_prefix="pack")
+    return _PACKERS
+
+
+class BlockPool:
+    """The driver's shared-memory blocks, reused batch after batch: a fresh tmpfs page costs a page fault on first
+    touch (copies into new blocks ran at ~1 GB/s, into reused ones at ~5 GB/s on a 2-core host). A block is lent
+    to one packed piece until its shard is written, then returned; close() unlinks them all."""
+
+    def __init__(self) -> None:
+        from multiprocessing import shared_memory
+
+        self._new = shared_memory.SharedMemory
+        self.blocks: dict = {}  # name -> SharedMemory
+        self.free: set[str] = set()
+        self.draining = False
+
+    def get(self, nbytes: int):
+        """A block of at least nbytes (the smallest free one that fits, else a new one), or None where /dev/shm
+        has no room even after dropping the free blocks (the caller then keeps its arrays in process memory)."""
+        fits = sorted((self.blocks[n].size, n) for n in self.free if self.blocks[n].size >= nbytes)
+        if fits:
+            self.free.discard(fits[0][1])
+            return self.blocks[fits[0][1]]
+        if not _shm_room(nbytes):
+            for name in list(self.free):
+                self._drop(name)
+            if not _shm_room(nbytes):
+                return None
+        shm = self._new(create=True, size=max(1, nbytes))
+        self.blocks[shm.name] = shm
+        return shm
+
+    def put(self, name: str) -> None:
+        if name in self.blocks:
+            self.free.add(name)
+            if self.draining:
+                self._drop(name)
+
+    def drain(self) -> None:
+        """No more gets: unlink the free blocks now and every block as it comes back (freeing the pages of a
+        large pool takes seconds; done while the last shards are written, not after)."""
+        self.draining = True
+        for name in list(self.free):
+            self._drop(name)
+
+    def _drop(self, name: str) -> None:
+        self.free.discard(name)
+        shm = self.blocks.pop(name)
+        try:
+            shm.close()
+        except BufferError:  # a view still alive (an error unwinding): the memory goes with the process
+            pass
+        shm.unlink()
+
+    def close(self) -> None:
+        for name in list(self.blocks):
+            self._drop(name)
+
+
+@dataclass
+class PackedShard:
+    """One shard's recorded channels, as the producer made them: pieces of stacked episodes (one per simulated
+    slice), and for each episode in file order its id, attrs and (piece, row). With a `BlockPool` the per-episode
+    arrays of each piece sit in a shared-memory block (`blocks[piece]` = (block name, name -> (offset, dtype,
+    shape))) and only this metadata crosses to the writer; without one (or without room) they travel pickled."""
+
+    shard: int
+    specs: dict[str, tuple[str, tuple[str, ...], str, bool]] = field(default_factory=dict)  # name -> units, dims, desc, per_episode
+    pieces: list[dict[str, np.ndarray]] = field(default_factory=list)  # arrays not in a block (time; all without room)
+    episodes: list[tuple[str, dict, int, int]] = field(default_factory=list)  # (id, attrs, piece, row), in global order
+    blocks: list[tuple[str, dict[str, tuple[int, str, tuple[int, ...]]]] | None] = field(default_factory=list)
+
+    @property
+    def n_episodes(self) -> int:
+        return len(self.episodes)
+
+    @property
+    def block_names(self) -> list[str]:
+        return [b[0] for b in self.blocks if b is not None]
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of its arrays held for the writer (in blocks or in process memory)."""
+        shared = sum(int(np.prod(shape)) * np.dtype(dt).itemsize for b in self.blocks if b for _, dt, shape in b[1].values())
+        return shared + sum(a.nbytes for piece in self.pieces for a in piece.values())
+
+    def add_piece(self, arrays: dict[str, np.ndarray], pool: BlockPool | None) -> None:
+        """Append a piece, copying its per-episode arrays into a block of `pool` (or into process memory: the
+        arrays given may be views of buffers the next slice overwrites)."""
+        per_ep = [n for n, spec in self.specs.items() if spec[3]]
+        shm = pool.get(sum(arrays[n].nbytes for n in per_ep)) if pool is not None else None
+        if shm is None:
+            self.pieces.append({n: np.array(a) for n, a in arrays.items()})
+            self.blocks.append(None)
+            return
+        layout, offset, copies = {}, 0, []
+        for n in per_ep:
+            a = arrays[n]
+            dst = np.ndarray(a.shape, a.dtype, buffer=shm.buf, offset=offset)
+            step = -(-len(a) // PACK_THREADS)  # rows per thread: the first touch of a block's pages is the cost
+            copies += [(dst[r : r + step], a[r : r + step]) for r in range(0, len(a), step)]
+            layout[n] = (offset, a.dtype.str, a.shape)
+            offset += a.nbytes
+        list(_pack_pool().map(lambda c: np.copyto(*c), copies))
+        copies = dst = None
+        self.pieces.append({n: np.array(a) for n, a in arrays.items() if n not in layout})
+        self.blocks.append((shm.name, layout))
+
+    def arrays(self, bufs: dict) -> list[dict[str, np.ndarray]]:
+        """The pieces with their shared arrays as views of the attached blocks (`bufs`: block name -> buffer)."""
+        out = []
+        for piece, block in zip(self.pieces, self.blocks):
+            shared = {} if block is None else dict(zip(block[1], _views(bufs[block[0]], list(block[1].values()))))
+            out.append({**piece, **shared})
+        return out
+
+
+def write_packed_shard(cfg: SceneConfig, out_dir: str, packed: PackedShard, sensor_attrs: dict, mjcf: str) -> tuple[dict, dict]:
+    """Writer task: write one packed shard atomically (what write_shard would write); returns its manifest
+    entry (sha256 of the file just written, from the page cache), so the driver need not read it back, and
+    the seconds this writer spent on "episodes" (HDF5), "close, fsync" and "sha256"."""
+    import time
+
+    from sensors.data.manifest import shard_entry
+    from sensors.data.recording import Channel
+    from simulate.generation.shards import maybe_inject_fault
+    from simulate.generation.run import config_sha256, shard_writer
+
+    maybe_inject_fault(packed.shard)
+    attached = {name: _attach(name) for name in dict.fromkeys(packed.block_names)}  # the driver owns them
+    try:
+        pieces = packed.arrays({name: shm.buf for name, shm in attached.items()})
+        t0 = time.perf_counter()
+        with shard_writer(cfg, Path(out_dir), packed.shard, sensor_attrs, mjcf) as w:
+            for ep_id, attrs, piece, row in packed.episodes:
+                arrays = pieces[piece]
+                ch = {name: Channel(arrays[name][row] if per_ep else arrays[name], units, dims, desc)
+                      for name, (units, dims, desc, per_ep) in packed.specs.items()}
+                w.add_episode(ep_id, ch, attrs)
+            t1 = time.perf_counter()
+        t2 = time.perf_counter()
+        pieces = arrays = ch = None  # drop the views before the blocks are closed
+    finally:
+        for shm in attached.values():
+            try:
+                shm.close()
+            except BufferError:  # views still held by a failing write's frames: the process cleans up
+                pass
+    entry = shard_entry(w.path, [e[0] for e in packed.episodes], [e[1]["seed"] for e in packed.episodes], config_sha256(cfg))
+    return entry, {"episodes": t1 - t0, "close, fsync": t2 - t1, "sha256": time.perf_counter() - t2}
+
+
+def _groups(cfg: SceneConfig, todo: list[int], worlds: int) -> list[list[int]]:
+    """Consecutive runs of the shards to make, each with >= `worlds` episodes where the shards allow, after a
+    ramp (worlds / 4, then worlds / 2): the driver and the writers start on a small first batch instead of
+    idling while the first full one steps."""
+    from simulate.generation.run import episode_ids_of_shard
+
+    groups: list[list[int]] = [[]]
+    n = 0
+    for s in todo:
+        if n >= worlds >> max(0, RAMP_BATCHES - len(groups) + 1):
+            groups.append([])
+            n = 0
+        groups[-1].append(s)
+        n += len(episode_ids_of_shard(cfg, s))
+    return [g for g in groups if g]
+
+
+def produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, seconds: dict | None = None,
+            stepped: tuple[list, dict] | None = None, pool: BlockPool | None = None) -> list[PackedShard]:
+    """Simulate the episodes of `shards` as one batch and pack each shard's recorded channels (seconds: adds
+    the time spent simulating and packing). stepped: `step_worlds` of these episodes, run in the physics
+    process; this process then runs only the load field and the sensor chain. pool: pack into its shared
+    blocks. Each slice's outputs come back from the GPU into reused page-locked buffers (`host_staging`)
+    and are packed before the next slice runs."""
+    import time
+
+    from sensors.data.manifest import episode_seed
+    from sensors.warp_setup import host_staging
+    from simulate.generation.run import episode_attrs, episode_ids_of_shard, simulate_slices
+
+    gids = [k for s in shards for k in episode_ids_of_shard(cfg, s)]
+    owner = {k: s for s in shards for k in episode_ids_of_shard(cfg, s)}
+    seeds = [episode_seed(cfg.generation.root_seed, k) for k in gids]
+    packs = {s: PackedShard(s) for s in shards}
+    placed: dict[int, tuple[str, dict, int, int]] = {}
+    seconds = {} if seconds is None else seconds
+    protos, physics, blocks = None, None, []
+    if stepped is not None:
+        protos, physics = stepped[0], {}
+        for n, handed in stepped[1].items():
+            if isinstance(handed[0], str):  # (block name, layout): views of the block, unlinked below
+                blocks.append(_attach(handed[0]))
+                handed = tuple(_views(blocks[-1].buf, handed[1]))
+            physics[n] = handed
+    try:
+        with host_staging():
+            t0 = time.perf_counter()
+            for pos, protos_s, arrays in simulate_slices(cfg, seeds, sensor, threads, gids, protos, physics):
+                t1 = time.perf_counter()
+                seconds["simulate"] = seconds.get("simulate", 0.0) + t1 - t0
+                runs: dict[int, list[int]] = {}
+                for j, i in enumerate(pos):
+                    runs.setdefault(owner[gids[i]], []).append(j)
+                for s, rows in runs.items():
+                    p = packs[s]
+                    p.specs = {n: (c.units, c.dims, c.description, c.per_episode) for n, c in arrays.items()}
+                    take = slice(rows[0], rows[-1] + 1) if rows[-1] - rows[0] + 1 == len(rows) else rows
+                    p.add_piece({n: (c.data[take] if c.per_episode else c.data) for n, c in arrays.items()}, pool)
+                    for r, j in enumerate(rows):
+                        i = pos[j]
+                        placed[gids[i]] = (f"ep-{gids[i]:06d}", episode_attrs(seeds[i], protos_s[j], gids[i]), len(p.pieces) - 1, r)
+                t0 = time.perf_counter()
+                seconds["pack"] = seconds.get("pack", 0.0) + t0 - t1
+    finally:
+        physics = None
+        for shm in blocks:
+            try:
+                shm.close()
+            except BufferError:  # a view still alive (an error unwinding): the memory goes with it
+                pass
+            shm.unlink()
+    for k in gids:
+        packs[owner[k]].episodes.append(placed[k])
+    return [packs[s] for s in shards]
+
+
+def generate_feed(
+    cfg: SceneConfig, out: Path, todo: list[int], writers: int, *, backend: str = "warp", device: str = "cpu",
+    threads: int = 1, max_retries: int = 3, on_shard: Callable[[int, int, bool], None] | None = None,
+    worlds: int | None = None,
+) -> dict[int, dict]:
+    """Make the shards `todo` of cfg's dataset in `out`: simulate here, write in `writers` processes.
+    Returns the writers' manifest entries by shard."""
+    import multiprocessing as mp
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures.process import BrokenProcessPool
+
+    import time
+
+    from sensors.registry import make_sensor
+    from sensors.warp_setup import init_warp
+    from simulate.contact.load_field import CONTACT_STAGES
+    from simulate.generation.shards import ShardFailedError, check_written
+    from simulate.contact.mjcf import build_mjcf
+    from simulate.generation.run import config_sha256, episode_ids_of_shard, shard_sensor_attrs
+
+    LAST_RUN_SECONDS.clear()
+    seconds = LAST_RUN_SECONDS
+    t_start = time.perf_counter()
+
+    def add(key: str, t0: float) -> None:
+        seconds[key] = seconds.get(key, 0.0) + time.perf_counter() - t0
+
+    ctx = mp.get_context("spawn")
+    groups = _groups(cfg, todo, worlds or FEED_WORLDS)
+    # the worlds step in their own processes, batches ahead of the load field + sensor chain here (kinds with
+    # their own contact stage run it here); they start first, so their start-up overlaps the driver's
+    physics = None if cfg.protocol.kind in CONTACT_STAGES else ProcessPoolExecutor(PHYSICS_PROCESSES, mp_context=ctx)
+
+    def step(b: int):
+        return physics.submit(step_worlds, cfg, [k for s in groups[b] for k in episode_ids_of_shard(cfg, s)], threads, time.time())
+
+    ahead = [step(b) for b in range(min(PHYSICS_PROCESSES, len(groups)))] if physics else []
+    try:
+        if backend == "warp":
+            init_warp()
+        sensor = make_sensor(cfg, backend, device)
+        mjcf, sha = build_mjcf(cfg), config_sha256(cfg)
+        sensor_attrs = shard_sensor_attrs(cfg, sensor)
+    except BaseException:
+        if physics:
+            physics.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool = ProcessPoolExecutor(writers, mp_context=ctx)
+    pending: dict = {}  # future -> packed shard (kept until its file is checked, for a resubmit)
+    shared = BlockPool()  # the packed pieces' blocks, lent until their shard is written
+    ram_budget = PENDING_RAM_FRACTION * os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    entries: dict[int, dict] = {}
+    attempts: dict[int, int] = {}
+
+    def release(p: PackedShard) -> None:
+        for name in p.block_names:
+            shared.put(name)
+
+    def submit(p: PackedShard) -> None:
+        attempts[p.shard] = attempts.get(p.shard, 0) + 1
+        pending[pool.submit(write_packed_shard, cfg, str(out), p, sensor_attrs, mjcf)] = p
+
+    def collect(room_for: int | None) -> None:
+        """Handle finished writes; wait until `room_for` more shards fit under PENDING_PER_WRITER per writer
+        (a batch larger than that waits for every write), or with None until every write is done."""
+        nonlocal pool
+        while pending:
+            waiting = (room_for is None or len(pending) + room_for > max(PENDING_PER_WRITER * writers, room_for)
+                       or sum(p.nbytes for p in pending.values()) > ram_budget)
+            done, _ = wait(list(pending), timeout=None if waiting else 0, return_when=FIRST_COMPLETED)
+            if not done:
+                return
+            broken = []
+            for f in done:
+                p = pending.pop(f)
+                try:
+                    entries[p.shard], spent = f.result()
+                    for k, v in spent.items():
+                        seconds[f"writers: {k}"] = seconds.get(f"writers: {k}", 0.0) + v
+                    check_written(out, p.shard, sha)
+                except BrokenProcessPool:
+                    broken.append(p)
+                    continue
+                except Exception as exc:  # noqa: BLE001 - retried, then reported
+                    if attempts[p.shard] > max_retries:
+                        raise ShardFailedError(f"shard {p.shard}: failed {attempts[p.shard]} time(s); last error: "
+                                               f"{type(exc).__name__}: {exc} (complete shards are kept: rerun to resume)") from exc
+                    submit(p)
+                    continue
+                release(p)
+                if on_shard:
+                    on_shard(p.shard, p.n_episodes, False)
+            if broken:  # a writer died: every write still in the pool is lost with it
+                broken += list(pending.values())
+                pending.clear()
+                pool.shutdown(wait=False, cancel_futures=True)
+                pool = ProcessPoolExecutor(writers, mp_context=ctx)
+                for p in sorted(broken, key=lambda p: p.shard):
+                    if attempts[p.shard] > max_retries:
+                        raise ShardFailedError(f"shard {p.shard}: failed {attempts[p.shard]} time(s); last error: the "
+                                               "writer process died (complete shards are kept: rerun to resume)")
+                    submit(p)
+
+    add("start-up", t_start)
+    try:
+        for b, group in enumerate(groups):
+            t0 = time.perf_counter()
+            collect(len(group))  # bounded memory: at most PENDING_PER_WRITER shards per writer not yet written
+            add("wait for writers", t0)
+            stepped = None
+            if physics:
+                t0 = time.perf_counter()
+                try:
+                    stepped = ahead.pop(0).result()
+                except BrokenProcessPool:
+                    raise RuntimeError(f"the physics process died stepping shards {group} (complete shards are kept: "
+                                       "rerun to resume)") from None
+                add("wait for physics (first batch)" if b == 0 else "wait for physics", t0)
+                for k, v in stepped[2].items():  # the physics processes' own split (summed over batches)
+                    key = f"physics{' (first batch)' if b == 0 else ''}: {k}"
+                    seconds[key] = seconds.get(key, 0.0) + v
+                if b + PHYSICS_PROCESSES < len(groups):
+                    ahead.append(step(b + PHYSICS_PROCESSES))
+                elif not ahead:  # the last batch is here: the physics processes exit (free the GPU) meanwhile
+                    physics.shutdown(wait=False)
+            for p in produce(cfg, group, sensor, threads, seconds, stepped, shared):
+                submit(p)
+        shared.drain()
+        t0 = time.perf_counter()
+        collect(None)
+        add("wait for writers", t0)
+    finally:
+        t0 = time.perf_counter()
+        pool.shutdown(wait=True, cancel_futures=True)
+        if physics:
+            physics.shutdown(wait=True, cancel_futures=True)
+        shared.close()
+        add("shut down", t0)
+    return entries
