@@ -236,6 +236,7 @@ from piezotwin import cmd_learn  # noqa: E402,F401
 from piezotwin import cmd_viz  # noqa: E402,F401
 from piezotwin import cmd_serial  # noqa: E402,F401
 from piezotwin import cmd_real  # noqa: E402,F401
+from piezotwin import cmd_calibrate  # noqa: E402,F401
 
 
 def main() -> None:  # pragma: no cover

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+from pathlib import Path
+
 import numpy as np
 
 KOHM = 1e3  # the paper's resistance unit (not printed in the paper)  # estimate
@@ -121,20 +123,42 @@ def calibrate(cfg) -> dict:
     return fit_stack(x, curve.r_ohm(levels), cfg.sensor.layers, cfg.sensor.stack.lead_resistance_ohm)
 
 
-def main() -> None:  # pragma: no cover - rewrites the presets' `stack:` lines
-    import re
-    from pathlib import Path
+EQUATION = {1: 6, 3: 7, 6: 8, 12: 9}  # fabric eqs. 6-9, one per layer count
 
+
+def run() -> "CalibrationResult":
+    """Fit every layer count's stack law to its paper curve (eqs. 6-9); rows: rms error of the fitted
+    curve against the paper's inside its monotone range, % of the paper curve's span there."""
     from scenes import load_scene
     from scenes.loader import PRESET_DIR
+    from sensors.calibration import CalibrationResult, TargetRow
+    from sensors.fabric.reference import fabric_params, stack_resistance
 
+    res = CalibrationResult("fabric")
     for n in sorted(PAPER_CURVES):
         path = Path(PRESET_DIR) / f"fabric_{n}.yaml"
-        fit = calibrate(load_scene(path))
-        line = "  stack: {" + ", ".join(f"{k}: {(v if v > 1e-6 else 0.0):.6g}" for k, v in fit.items()) + "}  # fit: python -m sensors.fabric.calibrate"
-        text = re.sub(r"^  stack: .*$", line, path.read_text(), count=1, flags=re.M)
-        path.write_text(text)
-        print(path.name, fit)
+        cfg = load_scene(path)
+        fit = calibrate(cfg)
+        curve = PAPER_CURVES[n]
+        levels, x = loading_branch_x(cfg, curve.monotone_range_n)
+        target = curve.r_ohm(levels)
+        model = stack_resistance(x, replace(fabric_params(cfg), **fit)) + cfg.sensor.stack.lead_resistance_ohm
+        span = float(np.ptp(target)) or 1.0
+        rms = float(np.sqrt(np.mean((model - target) ** 2)) / span * 100.0)
+        res.rows.append(TargetRow(f"{n} layer(s): stack law vs eq. {EQUATION[n]} (rms, % of span)", "<= 2", rms, "%", rms <= 2.0))
+        res.preset_fields[str(path)] = {f"sensor.stack.{k}": (v if v > 1e-6 else 0.0) for k, v in fit.items()}
+    return res
+
+
+def main() -> None:  # pragma: no cover - rewrites the presets' `stack:` lines
+    import re
+
+    for path, fields in run().preset_fields.items():
+        fit = {k.rsplit(".", 1)[1]: v for k, v in fields.items()}
+        line = "  stack: {" + ", ".join(f"{k}: {v:.6g}" for k, v in fit.items()) + "}  # fit: piezotwin calibrate fabric --write"
+        p = Path(path)
+        p.write_text(re.sub(r"^  stack: .*$", line, p.read_text(), count=1, flags=re.M))
+        print(p.name, fit)
 
 
 if __name__ == "__main__":  # pragma: no cover
