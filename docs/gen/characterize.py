@@ -1,7 +1,7 @@
 """Run `piezotwin characterize` on every preset and write its table, notes and numbers as JSON.
 
-    PYTHONPATH=. python docs/gen/characterize.py                  # every preset -> bench/results/characterize-<preset>.json
-    PYTHONPATH=. python docs/gen/characterize.py cnt_pdms fabric_1 # some presets
+    python docs/gen/characterize.py                  # every preset -> bench/results/characterize-<preset>.json
+    python docs/gen/characterize.py cnt_pdms fabric_1 # some presets
 
 The docs generator (docs/gen/generate.py) renders these files on the family pages; a family whose file is
 missing says "not run yet". Rerun this after a physics change (it takes a few minutes on 2 cores:
@@ -19,6 +19,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "bench" / "results"
+if str(ROOT) not in sys.path:  # run from anywhere, installed or not
+    sys.path.insert(0, str(ROOT))
 
 
 def presets() -> list[str]:

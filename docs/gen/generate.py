@@ -1,7 +1,7 @@
 """The docs generator: every number in a docs table (and the README's headline table) comes from here.
 
-    PYTHONPATH=. python docs/gen/generate.py          # write docs/_generated/*.md and the README block
-    PYTHONPATH=. python docs/gen/generate.py --check  # exit 1 (naming the files) when anything is stale
+    python docs/gen/generate.py          # write docs/_generated/*.md and the README block
+    python docs/gen/generate.py --check  # exit 1 (naming the files) when anything is stale
 
 Sources, read as they are on disk:
 
@@ -32,6 +32,8 @@ RESULTS = ROOT / "bench" / "results"
 EXPERIMENTS = RESULTS / "experiments"
 GEN = ROOT / "docs" / "_generated"
 README = ROOT / "README.md"
+if str(ROOT) not in sys.path:  # run from anywhere, installed or not
+    sys.path.insert(0, str(ROOT))
 BEGIN = "<!-- BEGIN GENERATED: headline (docs/gen/generate.py; edit the generator, not this table) -->"
 END = "<!-- END GENERATED: headline -->"
 
@@ -236,7 +238,7 @@ def characterization(preset: str) -> str:
     d = load(f"characterize-{preset}.json")
     if not d:
         return missing(f"The characterization of `{preset}`",
-                       f"Run `PYTHONPATH=. python docs/gen/characterize.py {preset}` and commit `bench/results/characterize-{preset}.json`.")
+                       f"Run `python docs/gen/characterize.py {preset}` and commit `bench/results/characterize-{preset}.json`.")
     m = d.get("machine", {})
     lines = [f"**{d['title']}** (`piezotwin characterize {preset}`; `bench/results/characterize-{preset}.json`, "
              f"commit `{m.get('git_commit', '?')}`, {m.get('date_utc', '?')}, {num(d.get('seconds'))} s on {m.get('cpus', '?')} CPUs)\n",
@@ -292,7 +294,7 @@ def experiment(family: str) -> str:
             out.append(f"### `{p.name}`\n\n`{rel(p)}` is not valid JSON.\n")
             continue
         mach = m.get("machine")
-        mach_s = ", ".join(f"{k} {v}" for k, v in mach.items()) if isinstance(mach, dict) else str(mach or "not recorded")
+        mach_s = "; ".join(f"{k}: {v}" for k, v in mach.items()) if isinstance(mach, dict) else str(mach or "not recorded")
         out.append(f"### {m.get('mode', p.stem.split('-', 1)[-1])} run (`{rel(p)}`)\n\nMachine: {mach_s}. Seed {m.get('seed', '–')}.\n")
         try:
             import importlib
@@ -693,7 +695,7 @@ def main(argv: list[str]) -> int:
     if "--check" in argv:
         bad = stale(files)
         if bad:
-            print("stale (run PYTHONPATH=. python docs/gen/generate.py):\n  " + "\n  ".join(bad))
+            print("stale (run python docs/gen/generate.py):\n  " + "\n  ".join(bad))
             return 1
         print("docs are current")
         return 0
