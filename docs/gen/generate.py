@@ -500,7 +500,7 @@ def _walk(model: Any, prefix: str, comments_yaml: dict[str, str], rows: list[lis
         elif set_in_preset:
             source = "preset" + (f" (default: {cls_src})" if cls_src else "")
         else:
-            source = cls_src or "default"
+            source = cls_src or "code default (no source comment)"
         rows.append([f"`{path}`", _val(v), _unit(name), source])
 
 
@@ -578,6 +578,17 @@ def _root_attrs() -> list[tuple[str, str]]:
     return []
 
 
+def _local_dict(path: Path, func: str, var: str) -> list[tuple[str, str]]:
+    """(key, value source) of the dict literal assigned to `var` inside function `func` of `path`."""
+    tree = ast.parse(path.read_text())
+    fn = next((n for n in ast.walk(tree) if isinstance(n, ast.FunctionDef) and n.name == func), None)
+    for node in ast.walk(fn) if fn else []:
+        if (isinstance(node, ast.Assign) and isinstance(node.targets[0], ast.Name) and node.targets[0].id == var
+                and isinstance(node.value, ast.Dict)):
+            return [(k.value, ast.unparse(v)) for k, v in zip(node.value.keys, node.value.values) if isinstance(k, ast.Constant)]
+    return []
+
+
 def _extra_attrs() -> list[tuple[str, str]]:
     tree = ast.parse((ROOT / "simulate" / "generation" / "run.py").read_text())
     for node in ast.walk(tree):
@@ -612,6 +623,9 @@ def channels_common() -> str:
     rows = [[f"`{k}`", f"`{v}`"] for k, v in _returned_dict_keys(ROOT / "simulate" / "generation" / "run.py", "episode_attrs")]
     out += ["Attributes of each `/episodes/<id>` group (`episode_attrs` in `simulate/generation/run.py`):\n",
             table(["attribute", "set from"], rows)]
+    rows = [[f"`{k}`", f"`{v}`"] for k, v in _local_dict(ROOT / "sensors" / "data" / "manifest.py", "write_manifest", "manifest")]
+    out += ["Keys of `manifest.json` (`write_manifest` in `sensors/data/manifest.py`; `generate` adds more with `extra`):\n",
+            table(["key", "set from"], rows)]
     return "\n".join(out)
 
 
