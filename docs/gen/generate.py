@@ -387,24 +387,25 @@ def headline_rows() -> list[list[str]]:
                      f"{num(st['results']['tcn']['median_ms'])} ms (paper's LSTM: {num(st['paper_ms'].get('lstm'))} ms)",
                      link("streaming-cpu.json")])
     ch = load("characterize-cnt_pdms.json")
-    if ch:
-        r = ch["metrics"].get("0.5Hz", {})
-        rows.append(["cnt_pdms uncompensated hysteresis at 0.5 Hz, ours vs paper",
-                     f"{num(r.get('hysteresis_fso_pct'))} vs {num(r.get('paper_hysteresis_fso_pct'))} % FSO", link("characterize-cnt_pdms.json")])
+    if ch:  # the frequency the paper gives a figure for
+        f, r = next(((f, r) for f, r in ch["metrics"].items() if r.get("paper_hysteresis_fso_pct") is not None), (None, {}))
+        if f:
+            rows.append([f"cnt_pdms uncompensated hysteresis at {f.replace('Hz', ' Hz')}, ours vs paper",
+                         f"{num(r['hysteresis_fso_pct'])} vs {num(r['paper_hysteresis_fso_pct'])} % FSO", link("characterize-cnt_pdms.json")])
     ch = load("characterize-fabric_1.json")
-    if ch:
+    if ch and ch["metrics"].get("paper_hysteresis_fso_pct") is not None:
         r = ch["metrics"]
         rows.append(["fabric (1 layer) max hysteresis error, ours vs paper",
-                     f"{num(r.get('hysteresis_fso_pct'))} vs {num(r.get('paper_hysteresis_fso_pct'))} % FSO", link("characterize-fabric_1.json")])
+                     f"{num(r['hysteresis_fso_pct'])} vs {num(r['paper_hysteresis_fso_pct'])} % FSO", link("characterize-fabric_1.json")])
     ch = load("characterize-ntype.json")
-    if ch:
-        fz = ch["metrics"]["pure_crosstalk"]["pure"]["Fz"]["r_kohm"][2]
-        rows.append(["ntype normal column under 4.8 N, ours vs paper", f"{num(fz)} vs 16 kOhm", link("characterize-ntype.json")])
+    if ch:  # first row: pure normal load; columns case, R_x, R_y, R_z, paper
+        row = ch["rows"][0]
+        rows.append([f"ntype under {row[0]}: normal column R_z (change), ours; paper's readings", f"{row[3]} kOhm; paper {row[-1]} kOhm",
+                     link("characterize-ntype.json")])
     ch = load("characterize-velostat.json")
-    if ch:
-        ce = ch["metrics"].get("creep_error_7n_hold_n")
-        if ce is not None:
-            rows.append(["velostat creep error, 7 N held 30 s, ours vs paper", f"{num(ce)} vs up to 5 N", link("characterize-velostat.json")])
+    if ch:  # first row: creep error of the static calibration
+        row = ch["rows"][0]
+        rows.append([f"velostat {row[0]}, ours vs paper", f"{row[1]} vs {row[2]}", link("characterize-velostat.json")])
     for fam in FAMILIES:
         rows += _exp_headline(fam)
     return rows
