@@ -75,6 +75,17 @@ def test_notes_hook_adds_unlisted_pages(tmp_path):
     assert cfg["nav"][2] == {"Notes": [{"CNT calibration notes": "pages/cnt.md"}]}
 
 
+def test_notes_hook_drops_nav_entries_of_pages_not_merged_yet(tmp_path):
+    hooks = _load("hooks")
+    (tmp_path / "pages").mkdir()
+    (tmp_path / "pages" / "gpu.md").write_text("# GPU notes\n")
+    nav = [{"Real sensors": ["real-sensors.md", {"Import": "pages/import.md"}]},
+           {"GPU": ["gpu.md", {"GPU notes": "pages/gpu.md"}]}, {"Only missing": [{"x": "pages/x.md"}]},
+           {"Broken elsewhere": "nope.md"}]
+    assert hooks.prune(tmp_path, nav) == [{"Real sensors": ["real-sensors.md"]}, {"GPU": ["gpu.md", {"GPU notes": "pages/gpu.md"}]},
+                                          {"Broken elsewhere": "nope.md"}]  # outside pages/ strict mode still reports it
+
+
 def test_characterization_json_has_what_the_page_needs():
     for p in sorted((ROOT / "bench" / "results").glob("characterize-*.json")):
         d = json.loads(p.read_text())
