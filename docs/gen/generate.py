@@ -648,16 +648,14 @@ def channels(family: str) -> str:
 
 # ----------------------------------------------------------------------------------------------- CLI
 def cli() -> str:
-    import click
     import typer
     import typer.cli
 
-    if str(ROOT) not in sys.path:
-        sys.path.insert(0, str(ROOT))
     from piezotwin.cli import app
 
+    # what `typer piezotwin.cli utils docs` prints, on the app with every command module registered
     cmd = typer.main.get_command(app)
-    md = typer.cli.get_docs_for_click(obj=cmd, ctx=click.Context(cmd, info_name="piezotwin"), name="piezotwin",
+    md = typer.cli.get_docs_for_click(obj=cmd, ctx=typer.Context(cmd, info_name="piezotwin"), name="piezotwin",
                                       title="piezotwin")
     md = "\n".join(md.splitlines()[1:]).strip() + "\n"  # the page has its own title
     return re.sub(r"\n{3,}", "\n\n", md)
