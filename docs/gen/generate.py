@@ -136,7 +136,7 @@ def bench_cpu() -> str:
             key = (r["batch"], r.get("pipeline_parts"))
             first.setdefault(key, r["samples_per_s"] / r["workers"])
             eff = r["samples_per_s"] / (r["workers"] * first[key])
-            rows.append([r["batch"], _val(r.get("rollout_batches", "–")), r["workers"], num(r["samples_per_s"]), num(r["taxel_steps_per_s"]),
+            rows.append([r["batch"], "yes" if r.get("pipeline_parts", 1) > 1 else "no", _val(r.get("rollout_batches", "–")), r["workers"], num(r["samples_per_s"]), num(r["taxel_steps_per_s"]),
                          num(r["episodes_per_s"]), num(r["file_MB_per_s"]), num(r.get("cpu_us_per_sample")),
                          "–" if r["workers"] == 1 else pct(eff)])
         la = d.get("loadavg_at_end", [None])[0]
@@ -145,7 +145,7 @@ def bench_cpu() -> str:
         out += [f"Generation at scale on {title} (`bench/bench_scale.py`, `{name}`: {d['cpus']} CPUs, {d['cpu_model']}, "
                 f"load average {num(la, 2)} at the end; default preset, {d['samples_per_episode']} samples x "
                 f"{d['taxels']} taxels per episode, written to disk):\n",
-                table(["shard (episodes)", "rollout batches (several = pipelined write)", "workers", "sensor samples/s", "taxel-steps/s", "episodes/s", "MB/s to disk",
+                table(["shard (episodes)", "pipelined write", "rollout batches", "workers", "sensor samples/s", "taxel-steps/s", "episodes/s", "MB/s to disk",
                        "CPU-us per sample", "efficiency vs 1 worker"], rows),
                 f"Time per stage in one process ({sp['episodes']} episodes): {share}. Memory per episode: "
                 + ", ".join(f"{num(v['peak_heap_MB_per_episode'])} MB with batches {v['batches']}" for v in sp["write_shard"].values())
