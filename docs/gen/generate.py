@@ -608,7 +608,7 @@ def _extra_attrs() -> list[tuple[str, str]]:
 
 
 def _sensor_class(family: str) -> tuple[Path, str]:
-    d = _module_dicts(ROOT / "sensors" / "registry.py")  # FAMILIES maps to "module:Class" strings, not tuples
+    """(model file, class name) of a family, from the "module:Class" strings of sensors/registry.py."""
     tree = ast.parse((ROOT / "sensors" / "registry.py").read_text())
     for node in tree.body:
         if isinstance(node, (ast.Assign, ast.AnnAssign)) and isinstance(node.value, ast.Dict):
@@ -616,7 +616,6 @@ def _sensor_class(family: str) -> tuple[Path, str]:
                 if isinstance(k, ast.Constant) and k.value == family and isinstance(v, ast.Constant):
                     mod, cls = v.value.split(":")
                     return ROOT / (mod.replace(".", "/") + ".py"), cls
-    del d
     return ROOT / "sensors" / family / "model.py", ""
 
 
