@@ -12,7 +12,7 @@ from typing import Annotated, Optional
 import typer
 
 
-from piezotwin.cli import SetOpt, _check_writable, app, console, err, fail  # noqa: E402
+from piezotwin.common import SetOpt, _check_writable, app, console, err, fail  # noqa: E402
 
 
 @app.command()

@@ -13,7 +13,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from piezotwin.cli import _check_writable, app, console, err, fail  # noqa: E402
+from piezotwin.common import _check_writable, app, console, err, fail  # noqa: E402
 
 
 def _need_file(p: Path, what: str) -> None:

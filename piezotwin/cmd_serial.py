@@ -19,8 +19,7 @@ import typer
 from sensors.serial.codec import PROTOCOLS
 
 
-from piezotwin import cli as _cli  # noqa: E402  (commands register on the named module's app)
-from piezotwin.cli import app, console, err, fail  # noqa: E402
+from piezotwin.common import _check_writable, _print_summary, app, console, err, fail  # noqa: E402
 
 _PROTO_HELP = "Framing: " + " | ".join(PROTOCOLS) + "."
 
@@ -68,7 +67,6 @@ def capture(
         fail("--port is required (or --rebuild)")
     if duration is not None and duration <= 0:
         fail(f"--duration must be > 0 s, got {duration}")
-    _check_writable = _cli._check_writable
 
     _check_writable(out.parent if str(out.parent) else Path("."))
     streams = [StreamSpec(port, protocol, name, baudrate, n_values, units, poll_hz)]
@@ -119,7 +117,6 @@ def import_(
     family: Annotated[str, typer.Option(help="Sensor family recorded in /sensor.")] = "velostat",
 ) -> None:
     """Import a sensor log and a load-cell log (host unix time) into a recording with source="real"."""
-    _check_writable, _print_summary = _cli._check_writable, _cli._print_summary
     from sensors.data.real_import import ImportLogError, import_runs, lupasic_pairs
 
     n_logs = (sensor_log is not None) + (force_log is not None)

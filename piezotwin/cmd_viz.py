@@ -12,7 +12,7 @@ from typing import Annotated, Iterator, Optional
 
 import typer
 
-from piezotwin.cli import _check_writable, app, console, err, fail
+from piezotwin.common import _check_writable, app, console, err, fail
 
 
 @contextmanager

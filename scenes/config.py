@@ -11,26 +11,13 @@ import math
 
 from typing import Annotated, Literal, Optional, Union
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
-
-from scenes.units import parse_quantity
-
-PositiveFloat = Annotated[float, Field(gt=0)]
-NonNegFloat = Annotated[float, Field(ge=0)]
-Fraction = Annotated[float, Field(ge=0, le=1)]
+from pydantic import Field, field_validator, model_validator
 
 
-class Strict(BaseModel):
-    """Base: unknown fields are errors, values with units are converted to SI before validation."""
-
-    model_config = ConfigDict(extra="forbid", validate_assignment=True, frozen=False)
-
-    @model_validator(mode="before")
-    @classmethod
-    def _units(cls, data: object) -> object:
-        if isinstance(data, dict):
-            return {k: parse_quantity(k, v) if isinstance(k, str) else v for k, v in data.items()}
-        return data
+from scenes.base import Fraction, NonNegFloat, PositiveFloat, Strict  # noqa: F401  (re-exported)
+from scenes.fabric_config import FabricSensorConfig
+from scenes.ntype_config import NtypeSensorConfig
+from scenes.velostat_config import VelostatSensorConfig
 
 
 class PadConfig(Strict):
@@ -233,9 +220,6 @@ class CntPdmsSensorConfig(Strict):
         return self
 
 
-from scenes.fabric_config import FabricSensorConfig  # noqa: E402  (needs Strict above)
-from scenes.ntype_config import NtypeSensorConfig  # noqa: E402  (after Strict: it builds on it)
-from scenes.velostat_config import VelostatSensorConfig  # noqa: E402  (needs Strict above)
 
 # one member per sensor family, told apart by its `family` literal (SceneConfig fills in cnt_pdms when missing)
 SensorConfig = Annotated[

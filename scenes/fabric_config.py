@@ -14,7 +14,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
-from scenes.config import NonNegFloat, PositiveFloat, Strict
+from scenes.base import NonNegFloat, PositiveFloat, Strict
 
 
 class FabricStackConfig(Strict):

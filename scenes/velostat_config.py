@@ -10,7 +10,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
-from scenes.config import Fraction, NonNegFloat, PositiveFloat, Strict
+from scenes.base import Fraction, NonNegFloat, PositiveFloat, Strict
 
 
 class VelostatFilmConfig(Strict):
