@@ -1,11 +1,25 @@
 """Fixtures shared by several test files: the rendering tests (tests/test_viz*.py) and the device under test
-of the gpu-marked tests (tests/test_gpu*.py)."""
+of the gpu-marked tests (tests/test_gpu*.py); the hypothesis profiles of the fuzz tests."""
 
 import os
 
 import pytest
+from hypothesis import settings
 
 GPU_DEVICE_ENV = "PIEZOTWIN_TEST_GPU_DEVICE"
+HYPOTHESIS_PROFILE_ENV = "PIEZOTWIN_HYPOTHESIS_PROFILE"
+
+# Hypothesis profiles, loaded here (before the test modules are imported, so their settings inherit them):
+# "default": derandomized (the examples are a fixed function of each test) and no example database, so the
+#            default run is deterministic: it passes or fails the same way on every machine and every run;
+# "fuzz":    randomized, 20x the examples (PIEZOTWIN_HYPOTHESIS_PROFILE=fuzz pytest tests/test_serial_codec.py);
+#            a failure prints the @reproduce_failure blob that replays it.
+# The slow-marked fuzz tests (pytest -m slow) are randomized with many examples whatever the profile.
+settings.register_profile("default", derandomize=True, database=None, max_examples=150, deadline=None,
+                          print_blob=True)
+settings.register_profile("fuzz", derandomize=False, database=None, max_examples=3000, deadline=None,
+                          print_blob=True)
+settings.load_profile(os.environ.get(HYPOTHESIS_PROFILE_ENV, "default"))
 
 
 @pytest.fixture(scope="session")

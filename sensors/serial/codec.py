@@ -27,10 +27,12 @@ bad input, and resynchronises on its own. ``stats()`` gives cumulative counters:
   no complete reply (``poll``); 0 for ``text`` (no sequence number);
 * ``garbage_bytes``: bytes that were not part of a decoded frame.
 
-Frames resynchronisation: a 0x00-delimited chunk that fails is scanned for a valid frame ending at
-any COBS code-chain landing point from any start offset, so a good frame survives garbage glued in
-front of it or a lost delimiter between it and a corrupted neighbour; the sequence numbers then say
-how many frames were lost.
+Frames resynchronisation: a 0x00-delimited chunk that fails is searched for frames. An intact frame
+is always a suffix of its chunk (it ends at its own delimiter), so the shortest suffix that is a valid
+frame is taken first; the bytes before it are then scanned for a valid frame ending at any COBS
+code-chain landing point from any start offset. So no intact frame is lost to garbage glued in front
+of it or to a damaged neighbour that lost its delimiter, and a frame that lost only its delimiter is
+still recovered; the sequence numbers then say how many frames were lost.
 """
 
 from __future__ import annotations
@@ -348,13 +350,60 @@ class FrameDecoder(_Decoder):
 
     # a chunk: the bytes between two delimiters
     def _chunk(self, chunk: bytes, out: list[Frame]) -> None:
+        """Decode one delimiter-to-delimiter chunk: its shortest suffix that is a valid frame, and before it
+        the frames that lost their delimiter (searched left to right); the rest is counted as bad.
+
+        An intact frame (its bytes and its delimiter) is always a suffix of its chunk, so the suffixes are
+        tried first, shortest first: a longer valid suffix would contain it (a CRC collision, or a frame
+        rebuilt from bytes borrowed from it), and the search before it never overlaps it. Searching left to
+        right only can lose the intact frame: a truncated frame whose lost bytes happen to equal the first
+        bytes of the next frame decodes with those borrowed bytes, and the next (intact) frame then has no
+        start left (issue 17, item 1). The common case, a chunk that is one valid frame, is taken as is."""
         f = self._try(chunk)
         if f is not None:
             self._emit(f, out)
             return
-        n, s, bad_from = len(chunk), 0, None
+        tail = self._valid_suffix(chunk)
+        n = len(chunk) if tail is None else tail[0]
+        if n:
+            self._scan(chunk, n, out)
+        if tail is not None:
+            self._emit(tail[1], out)
+
+    def _valid_suffix(self, chunk: bytes) -> tuple[int, Frame] | None:
+        """``(start, frame)`` of the shortest suffix of ``chunk`` that is a valid frame, or None.
+
+        Only starts whose COBS encoding decodes to the version byte first are tried (found with
+        ``bytes.rfind``), and of those only the ones whose code chain lands exactly on the chunk's end."""
+        n = len(chunk)
+        lo = max(0, n - MAX_FRAME_BYTES)
+        if self.version == 0:  # the first decoded byte is 0: the first code is 1
+            needle, shift = b"\x01", 0
+        else:  # the first code is >= 2 and the next byte is the version
+            needle, shift = bytes([self.version]), 1
+        i = chunk.rfind(needle, lo + shift, n)
+        while i >= lo + shift:
+            s = i - shift
+            if n - s > _MIN_FRAME and (shift == 0 or chunk[s] >= 2) and self._lands_at_end(chunk, s):
+                f = self._try(chunk[s:])
+                if f is not None:
+                    return s, f
+            i = chunk.rfind(needle, lo + shift, i)
+        return None
+
+    @staticmethod
+    def _lands_at_end(chunk: bytes, s: int) -> bool:
+        """Whether the COBS code chain from ``s`` ends exactly at the end of ``chunk``."""
+        n, p = len(chunk), s
+        while p < n:
+            p += chunk[p]
+        return p == n
+
+    def _scan(self, chunk: bytes, n: int, out: list[Frame]) -> None:
+        """Emit the frames found in ``chunk[:n]`` left to right (each start tried in turn); count the rest."""
+        s, bad_from = 0, None
         while s < n:
-            end = self._scan_from(chunk, s)
+            end = self._scan_from(chunk, s, n)
             if end is None:
                 if bad_from is None:
                     bad_from = s
@@ -368,13 +417,21 @@ class FrameDecoder(_Decoder):
         if bad_from is not None:
             self._bad(n - bad_from)
 
-    def _scan_from(self, chunk: bytes, s: int) -> int | None:
-        """The first COBS code-chain landing point from ``s`` that closes a valid frame."""
-        n, p = len(chunk), s
-        while p < n:
+    def _first_byte_ok(self, chunk: bytes, s: int) -> bool:
+        """Whether a COBS encoding starting at ``s`` decodes to a first byte equal to the version (cheap filter)."""
+        code = chunk[s]
+        first = chunk[s + 1] if code >= 2 and s + 1 < len(chunk) else 0
+        return first == self.version
+
+    def _scan_from(self, chunk: bytes, s: int, n: int) -> int | None:
+        """The first COBS code-chain landing point from ``s`` (at most ``n``) that closes a valid frame."""
+        if not self._first_byte_ok(chunk, s):
+            return None
+        p, limit = s, min(n, s + MAX_FRAME_BYTES)
+        while p < limit:
             code = chunk[p]
             p += code
-            if p > n:
+            if p > limit:
                 return None
             if p - s > _MIN_FRAME and self._try(chunk[s:p]) is not None:
                 return p
