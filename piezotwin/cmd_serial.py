@@ -159,15 +159,28 @@ def serve(
     frames: Annotated[Optional[int], typer.Option(help="Stop after this many samples.")] = None,
     baudrate: Annotated[int, typer.Option(help="Baud rate (real ports).")] = 115200,
     fault_log: Annotated[Optional[Path], typer.Option(help="Write what was sent, corrupted or unsent (JSON) here.")] = None,
-    start_delay: Annotated[float, typer.Option(help="Wait this long (s) after the client appears before streaming.")] = 0.0,
+    start_delay: Annotated[float, typer.Option(help="Wait this long (s) after a client appears before streaming.")] = 0.0,
+    client_timeout: Annotated[float, typer.Option(help="Stop when no client has come for this long (s), at the start or after a client left.")] = 30.0,
 ) -> None:
-    """Play a simulated sensor as a real board would, over text, poll or frames, with injectable faults."""
-    from sensors.serial.board import DeviceError, Faults
+    """Play a simulated sensor as a real board would, over text, poll or frames, with injectable faults.
+
+    Over socket:// it serves one client at a time, for as many clients as come (a restarted capture gets
+    the stream again, from the next sample on); each client's arrival and departure is printed."""
+    from sensors.serial.board import DeviceError, Faults, check_rate
     from simulate.generation.board_source import load_source
     from sensors.serial.board import serve as run_serve
 
     _check_protocol(protocol, "--protocol")
+    if duration is not None and not duration > 0:
+        fail(f"--duration must be > 0 s, got {duration:g}")
+    if frames is not None and frames < 1:
+        fail(f"--frames must be >= 1, got {frames}")
+    if not 0 <= start_delay <= 60:
+        fail(f"--start-delay must be in [0, 60] s, got {start_delay:g}")
+    if not client_timeout > 0:
+        fail(f"--client-timeout must be > 0 s, got {client_timeout:g}")
     try:
+        check_rate(rate)
         faults = Faults(drop_bytes, bit_flips, stall_s, stall_every_s, disconnect_every_s, fault_seed)
         src = load_source(source, channel, set_, seed=episode)
     except DeviceError as exc:
@@ -180,10 +193,14 @@ def serve(
                       f"from {src.origin} on {u} as {protocol} at {rate or src.rate_hz:g} Hz", highlight=False)
         sys.stdout.flush()
 
+    def event(msg: str) -> None:
+        console.print(msg, highlight=False)
+        sys.stdout.flush()
+
     try:
         log = run_serve(src, url, protocol, rate_hz=rate, faults=faults, duration_s=duration, max_frames=frames,
                         baudrate=baudrate, on_ready=ready, should_stop=stop.is_set,
-                        start_delay_s=start_delay)
+                        start_delay_s=start_delay, client_timeout_s=client_timeout, on_event=event)
     except DeviceError as exc:
         fail(str(exc))
     except KeyboardInterrupt:
@@ -192,5 +209,5 @@ def serve(
         signal.signal(signal.SIGTERM, old)
     if fault_log:
         fault_log.write_text(log.to_json())
-    console.print(f"sent {len(log.sent)} intact, {len(log.corrupted)} corrupted, {len(log.unsent)} unsent; "
-                  f"{log.disconnects} disconnects, {log.stalls} stalls", highlight=False)
+    console.print(f"sent {len(log.sent)} intact, {len(log.corrupted)} corrupted, {len(log.unsent)} unsent "
+                  f"to {log.clients} client(s); {log.disconnects} disconnects, {log.stalls} stalls", highlight=False)

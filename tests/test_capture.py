@@ -17,7 +17,7 @@ from typer.testing import CliRunner
 from piezotwin.cli import app
 from sensors.serial.capture import RAW, CaptureError, StreamSpec, build_recording, capture, rawlog_path, read_records
 from sensors.data.recording import Recording
-from sensors.serial.board import Faults, Source, serve
+from sensors.serial.board import DeviceError, Faults, Source, serve
 
 ROOT = Path(__file__).resolve().parents[1]
 runner = CliRunner()
@@ -183,9 +183,11 @@ def test_restart_appends_and_torn_tail_is_dropped(tmp_path):
 
 def test_disconnect_and_reconnect(tmp_path):
     src = ramp_source(1000, rate=500.0)
-    sv = Served(src, "socket://127.0.0.1:0", "frames", duration_s=1.0, faults=Faults(disconnect_every_s=0.25),
+    # a link cycle takes 0.6 s: 0.25 s streaming, then pyserial's close of a socket sleeps 0.3 s before the
+    # capture reconnects; the board accepts no client once its duration is over
+    sv = Served(src, "socket://127.0.0.1:0", "frames", duration_s=1.4, faults=Faults(disconnect_every_s=0.25),
                 start_delay_s=0.05)
-    res = capture([StreamSpec(sv.url, "frames", "b")], tmp_path / "d.h5", duration_s=1.6, reconnect_s=1.0)
+    res = capture([StreamSpec(sv.url, "frames", "b")], tmp_path / "d.h5", duration_s=2.0, reconnect_s=1.0)
     log = sv.join()
     assert log.disconnects >= 2
     with Recording(tmp_path / "d.h5") as rec:
@@ -214,6 +216,14 @@ def test_cli_capture_port_vanishes_and_bad_input(tmp_path):
         (["serve", "cnt_pdms", "--url", "pty", "--protocol", "morse"], "unknown protocol 'morse'"),
         (["serve", "cnt_pdm", "--url", "pty"], "unknown preset"),
         (["serve", "cnt_pdms", "--url", "pty", "--bit-flips", "2"], "probability"),
+        # 0 is not "unset": out of range, one line naming the option and the allowed range
+        (["serve", "cnt_pdms", "--url", "pty", "--rate", "0"], "--rate must be in (0, 100000] Hz, got 0"),
+        (["serve", "cnt_pdms", "--url", "pty", "--rate", "-5"], "--rate must be in (0, 100000] Hz, got -5"),
+        (["serve", "cnt_pdms", "--url", "pty", "--rate", "1e9"], "--rate must be in (0, 100000] Hz"),
+        (["serve", "cnt_pdms", "--url", "pty", "--rate", "nan"], "--rate must be in (0, 100000] Hz, got nan"),
+        (["serve", "cnt_pdms", "--url", "pty", "--frames", "0"], "--frames must be >= 1"),
+        (["serve", "cnt_pdms", "--url", "pty", "--duration", "0"], "--duration must be > 0 s"),
+        (["serve", "cnt_pdms", "--url", "pty", "--client-timeout", "0"], "--client-timeout must be > 0 s"),
     ]:
         res = runner.invoke(app, args + (["-o", str(tmp_path / "x.h5")] if args[0] == "capture" else []))
         assert res.exit_code == 2, (args, res.output)
@@ -284,3 +294,30 @@ def test_capture_errors():
         StreamSpec("loop://", "json")
     with pytest.raises(CaptureError, match="no raw log"):
         build_recording("/nonexistent/x.rawlog", "/nonexistent/x.h5")
+
+
+def test_serve_rate_zero_is_an_error_not_the_default():
+    with pytest.raises(DeviceError, match=r"--rate must be in \(0, 100000\] Hz, got 0"):
+        serve(ramp_source(10), "socket://127.0.0.1:0", "frames", rate_hz=0.0)
+
+
+def test_serve_takes_the_next_client_after_a_capture_disconnects(tmp_path):
+    """The crash-recovery flow: capture, stop, capture again into the same file: the second capture gets the
+    stream (from the next sample on), and the board says in its log who came and went (issue 17, item 2)."""
+    events = []
+    src = ramp_source(5000, rate=500.0)
+    sv = Served(src, "socket://127.0.0.1:0", "frames", start_delay_s=0.0, on_event=events.append)
+    out = tmp_path / "again.h5"
+    for _ in range(2):
+        res = capture([StreamSpec(sv.url, "frames", "b")], out, duration_s=0.5)
+        assert res.reason == "duration" and res.stats[0].get("frames", 0) > 20, res.stats
+    log = sv.join()
+    assert log.clients == 2
+    assert any("client 1 disconnected; waiting for the next client" in e for e in events), events
+    assert any(e.startswith("client 2 connected") for e in events), events
+    with Recording(out) as rec:
+        seqs = [rec.read(ep, "seq") for ep in rec.episode_ids]
+        dropped = [rec.episode_attrs(ep)["frames_dropped"] for ep in rec.episode_ids]
+    assert len(seqs) == 2 and dropped == [0, 0]
+    assert seqs[1][0] > seqs[0][-1]  # the board paused while no one was connected, and went on from there
+    assert set(np.concatenate(seqs).tolist()) <= set(log.sent)

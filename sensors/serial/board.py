@@ -4,7 +4,9 @@ Where it serves (``url``):
 
 * ``socket://HOST:PORT`` or ``tcp://HOST:PORT``: listens (PORT 0 picks a free one) and streams to one
   client at a time; a capture connects with ``socket://HOST:PORT``. Streaming starts when a client
-  connects, as a board behind a serial-to-TCP bridge that powers up with the link.
+  connects, as a board behind a serial-to-TCP bridge that powers up with the link, and pauses while
+  no client is connected: when a client disconnects, the board waits for the next one (up to
+  ``client_timeout_s``) and goes on with the next sample, so a restarted capture gets the stream again.
 * ``pty`` or ``pty:LINK``: creates a pseudo-terminal (raw mode) and serves on its master; the capture
   opens the slave path (printed, and symlinked at LINK when given, re-pointed after a disconnect).
 * anything else: opened with ``serial.serial_for_url`` and written to (a real port, a null modem).
@@ -116,6 +118,16 @@ class _Transport:
     def wait_client(self, timeout: float) -> bool:
         return True
 
+    @property
+    def connected(self) -> bool:
+        """Whether a client is connected (always, for transports that cannot tell)."""
+        return True
+
+    @property
+    def peer(self) -> str:
+        """Who is connected, in words (for the log)."""
+        return self.url
+
     def write(self, data: bytes) -> bool:
         raise NotImplementedError
 
@@ -143,15 +155,25 @@ class _TcpTransport(_Transport):
         self.srv.listen(1)
         self.url = f"socket://{host}:{self.srv.getsockname()[1]}"
         self.conn: socket.socket | None = None
+        self._peer = "nobody"
 
     def wait_client(self, timeout: float) -> bool:
         if self.conn is not None:
             return True
         r, _, _ = select.select([self.srv], [], [], timeout)
         if r:
-            self.conn, _ = self.srv.accept()
+            self.conn, addr = self.srv.accept()
             self.conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            self._peer = f"{addr[0]}:{addr[1]}"
         return self.conn is not None
+
+    @property
+    def connected(self) -> bool:
+        return self.conn is not None
+
+    @property
+    def peer(self) -> str:
+        return self._peer if self.conn is not None else "nobody"
 
     def write(self, data: bytes) -> bool:
         if self.conn is None:
@@ -300,6 +322,9 @@ def open_transport(url: str, baudrate: int = 115200) -> _Transport:
 # --------------------------------------------------------------------------- serving
 
 
+MAX_RATE_HZ = 100_000.0  # samples per second a virtual board may be asked for
+
+
 @dataclass
 class ServeLog:
     url: str = ""
@@ -307,8 +332,9 @@ class ServeLog:
     corrupted: list[int] = field(default_factory=list)  # written with a fault applied
     unsent: list[int] = field(default_factory=list)  # no client / buffer full
     polls: int = 0
-    disconnects: int = 0
+    disconnects: int = 0  # links dropped by the disconnect fault
     stalls: int = 0
+    clients: int = 0  # clients served (one at a time)
 
     def to_json(self) -> str:
         return json.dumps(self.__dict__)
@@ -328,25 +354,50 @@ def serve(
     should_stop: Callable[[], bool] | None = None,
     client_timeout_s: float = 30.0,
     start_delay_s: float = 0.0,
+    on_event: Callable[[str], None] | None = None,
 ) -> ServeLog:
-    """Serve ``src`` until duration, max_frames or should_stop(); returns what was sent."""
+    """Serve ``src`` until duration, max_frames or should_stop(); returns what was sent.
+
+    Over ``socket://`` one client is served at a time, for as many clients as come: when one disconnects
+    the board pauses and waits (``client_timeout_s`` at most, then it stops) for the next, which gets the
+    stream from the next sample on. ``on_event`` gets a line for each client that comes or goes."""
     if protocol not in PROTOCOLS:
         raise DeviceError(f"unknown protocol '{protocol}' (allowed: {', '.join(PROTOCOLS)})")
-    rate = float(rate_hz or src.rate_hz)
-    if not rate > 0:
-        raise DeviceError(f"--rate must be > 0 Hz, got {rate}")
+    check_rate(rate_hz)
+    rate = float(rate_hz if rate_hz is not None else src.rate_hz)
+    check_rate(rate)
     faults = faults or Faults()
     rng = np.random.default_rng(faults.seed)
     tr = open_transport(url, baudrate)
     log = ServeLog(url=tr.url)
+    say = on_event or (lambda _msg: None)
     if on_ready:
         on_ready(tr.url)
     T = len(src.values)
-    try:
-        if not tr.wait_client(client_timeout_s):
-            return log
+    t0 = float("inf")  # set when the first client connects: the duration runs from then on
+
+    def over(now: float, k: int) -> bool:
+        return ((duration_s is not None and now - t0 >= duration_s) or (max_frames is not None and k >= max_frames)
+                or bool(should_stop and should_stop()))
+
+    def next_client(k: int) -> bool:
+        """Wait for a client (stop, duration and client_timeout_s end the wait); False if none came."""
+        deadline = time.monotonic() + client_timeout_s
+        while not tr.wait_client(min(0.1, max(0.0, deadline - time.monotonic()))):
+            if over(time.monotonic(), k):
+                return False
+            if time.monotonic() >= deadline:
+                say(f"no client within {client_timeout_s:g} s: stopping")
+                return False
+        log.clients += 1
+        say(f"client {log.clients} connected ({tr.peer}); streaming from sample {k}")
         if start_delay_s:  # e.g. a pty: give the host time to open the port (opening flushes its input)
             time.sleep(start_delay_s)
+        return True
+
+    try:
+        if not next_client(0):
+            return log
         t0 = time.monotonic()
         base_t, base_k = t0, 0  # schedule anchor: sample k is due at base_t + (k - base_k) / rate
         next_stall = t0 + faults.stall_every_s if faults.stall_s else None
@@ -354,16 +405,21 @@ def serve(
         k = 0
         while True:
             now = time.monotonic()
-            if (duration_s is not None and now - t0 >= duration_s) or (max_frames is not None and k >= max_frames):
+            if over(now, k):
                 break
-            if should_stop and should_stop():
-                break
+            if not tr.connected:  # the client went away: serve the next one, from sample k on
+                say(f"client {log.clients} disconnected; waiting for the next client")
+                if not next_client(k):
+                    break
+                base_t, base_k = time.monotonic(), k
+                continue
             if next_disc is not None and now >= next_disc:
                 tr.disconnect()
                 log.disconnects += 1
+                say(f"client {log.clients}: link dropped (fault); waiting for a client")
                 time.sleep(0.05)
-                tr.wait_client(client_timeout_s)
-                time.sleep(start_delay_s)
+                if not next_client(k):
+                    break
                 next_disc = time.monotonic() + faults.disconnect_every_s
                 base_t, base_k = time.monotonic(), k
                 continue
@@ -389,17 +445,25 @@ def serve(
             if now < due:
                 time.sleep(min(due - now, 0.01))
                 continue
+            tr.read()  # drain what the host sent (and notice a client that has gone)
+            if not tr.connected:
+                continue
             if protocol == "frames":
                 data = encode_frame(k & 0xFFFF, int(k * 1e6 / rate), vals)
             else:
                 data = encode_text(vals)
             _send(tr, data, k, faults, rng, log)
-            tr.read()  # drain what the host sent
             k += 1
         tr.linger()
     finally:
         tr.close()
     return log
+
+
+def check_rate(rate_hz: float | None) -> None:
+    """Raise DeviceError unless ``rate_hz`` is None (the source's rate) or in (0, MAX_RATE_HZ] Hz."""
+    if rate_hz is not None and not 0 < rate_hz <= MAX_RATE_HZ:
+        raise DeviceError(f"--rate must be in (0, {MAX_RATE_HZ:g}] Hz, got {rate_hz:g}")
 
 
 def _send(tr: _Transport, data: bytes, k: int, faults: Faults, rng: np.random.Generator, log: ServeLog) -> None:
