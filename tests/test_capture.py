@@ -321,3 +321,52 @@ def test_serve_takes_the_next_client_after_a_capture_disconnects(tmp_path):
     assert len(seqs) == 2 and dropped == [0, 0]
     assert seqs[1][0] > seqs[0][-1]  # the board paused while no one was connected, and went on from there
     assert set(np.concatenate(seqs).tolist()) <= set(log.sent)
+
+
+def _capture_served(tmp_path, name, n=60):
+    """A board that streams n frames at 1 kHz as soon as a client connects (no start delay), captured."""
+    sv = Served(ramp_source(n, rate=1000.0), "socket://127.0.0.1:0", "frames", max_frames=n, start_delay_s=0.0)
+    res = capture([StreamSpec(sv.url, "frames", "b")], tmp_path / name, duration_s=10)
+    log = sv.join()
+    with Recording(tmp_path / name) as rec:
+        ep = rec.episode_ids[0]
+        return res, log, rec.read(ep, "seq"), rec.episode_attrs(ep)
+
+
+def test_first_frame_is_not_lost_while_the_capture_opens(tmp_path, monkeypatch):
+    """pyserial clears a socket's input at the end of open(): frame 0, sent when the board accepts, was thrown
+    away when it arrived before that (issue 17, item 4). A slow open (as on a busy machine) makes it certain."""
+    from serial.urlhandler import protocol_socket
+
+    reconfigure = protocol_socket.Serial._reconfigure_port
+
+    def slow_reconfigure(self, *a, **kw):
+        time.sleep(0.2)  # the board's first frames arrive meanwhile
+        return reconfigure(self, *a, **kw)
+
+    monkeypatch.setattr(protocol_socket.Serial, "_reconfigure_port", slow_reconfigure)
+    res, log, seq, a = _capture_served(tmp_path, "slow.h5")
+    assert res.reason.startswith("port vanished")  # the board hung up after its frames
+    assert seq.tolist() == list(range(60)) == log.sent and a["frames_dropped"] == 0
+
+
+def test_first_frame_arrives_in_every_run(tmp_path):
+    for run in range(5):
+        res, log, seq, a = _capture_served(tmp_path, f"run{run}.h5", n=30)
+        assert seq.tolist() == list(range(30)) == log.sent, (run, seq[:3])
+
+
+def test_capture_reads_in_blocks_over_loopback(tmp_path):
+    """Over socket:// a read took one byte (in_waiting is 1 there): 41 KB/s and a raw log 21x the data (issue
+    17, item 5). 2 MB of frames must come in at >= 1 MB/s end to end (read, logged, decoded live) even on a busy
+    2-core machine (it does 5 MB/s there, and 40-100 MB/s reading alone; bench/bench_serial.py)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("bench_serial", ROOT / "bench" / "bench_serial.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    data, n_frames = bench.board_bytes(2_000_000, width=64)
+    r = bench.loopback_capture(data, tmp_path, timeout_s=8.0)
+    assert r["bytes"] == len(data) and r["frames"] == n_frames and r["crc_errors"] == 0, r
+    assert r["bytes_per_s"] >= 1e6, r
+    assert r["bytes_per_read"] >= 1000 and r["rawlog_over_data"] < 1.01, r

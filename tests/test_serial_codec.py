@@ -12,6 +12,7 @@ from sensors.serial.codec import (
     FrameDecoder,
     PollDecoder,
     TextDecoder,
+    _crc16_reference,
     cobs_decode,
     cobs_encode,
     crc16_ccitt_false,
@@ -32,6 +33,11 @@ f32 = st.floats(width=32, allow_nan=False, allow_infinity=False)
 def test_crc16_ccitt_false_check_value():
     assert crc16_ccitt_false(b"123456789") == 0x29B1
     assert crc16_ccitt_false(b"") == 0xFFFF
+
+
+@given(st.binary(max_size=300), st.integers(0, 0xFFFF))
+def test_crc16_equals_the_table_driven_reference(data, init):
+    assert crc16_ccitt_false(data, init) == _crc16_reference(data, init)
 
 
 @pytest.mark.parametrize("n", [0, 1, 253, 254, 255, 508, 509, 700])

@@ -34,6 +34,7 @@ from __future__ import annotations
 import json
 import os
 import queue
+import select
 import struct
 import threading
 import time
@@ -327,13 +328,55 @@ def build_recording(log: str | os.PathLike, out: str | os.PathLike) -> Path:
 # --------------------------------------------------------------------------- capturing
 
 
-def open_port(spec: StreamSpec, timeout: float = 0.05):
+POLL_READ_TIMEOUT_S = 0.05  # poll: a read waits this long for more of the reply
+WAIT_S = 0.05  # streaming: how long a reader waits for data before checking whether to stop
+
+
+def open_port(spec: StreamSpec, timeout: float | None = None):
+    """Open a stream's port; one-line CaptureError if it cannot be opened.
+
+    Streaming framings (``text``, ``frames``) open the port non-blocking (timeout 0: a read returns what
+    is there, for every URL kind; ``_read_available`` does the waiting), ``poll`` with a read timeout of
+    POLL_READ_TIMEOUT_S. A ``socket://`` port keeps what arrived while it was being opened: pyserial
+    clears its input at the end of ``open()``, which on a fresh connection throws away the first bytes
+    the board sent (the first frame; issue 17, item 4), not stale ones."""
     import serial
 
+    if timeout is None:
+        timeout = POLL_READ_TIMEOUT_S if spec.protocol == "poll" else 0.0
     try:
-        return serial.serial_for_url(spec.url, baudrate=spec.baudrate, timeout=timeout, write_timeout=1.0)
+        ser = serial.serial_for_url(spec.url, baudrate=spec.baudrate, timeout=timeout, write_timeout=1.0,
+                                    do_not_open=True)
+        if spec.url.startswith("socket://"):
+            ser.reset_input_buffer = lambda: None  # only for open(): a new connection has no stale input
+            try:
+                ser.open()
+            finally:
+                del ser.reset_input_buffer
+        else:
+            ser.open()
+        return ser
     except (serial.SerialException, ValueError, OSError) as exc:
         raise CaptureError(f"cannot open port '{spec.url}': {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
+
+
+def _read_available(ser, wait_s: float = WAIT_S) -> bytes:
+    """What the port has now, in one block (a non-blocking port); if nothing, wait up to ``wait_s`` for data.
+
+    Waits on the port's file descriptor where it has one (a serial device, a pty, ``socket://``), else
+    (``loop://``, other URL handlers) polls every millisecond. Raises what the port raises on a lost link."""
+    b = ser.read(65536)
+    if b:
+        return b
+    try:
+        fd = ser.fileno()
+    except Exception:  # noqa: BLE001 - URL handlers without a file descriptor
+        fd = None
+    if fd is None:
+        time.sleep(0.001)
+    else:
+        select.select([fd], [], [], wait_s)
+    return ser.read(65536)
 
 
 def _read_reply(i: int, ser, size: int, timeout_s: float, q: queue.Queue, stop: threading.Event) -> int:
@@ -380,7 +423,7 @@ def _reader(i: int, spec: StreamSpec, ser, q: queue.Queue, stop: threading.Event
                     _read_reply(i, ser, size - got, spec.late_reply_s, q, stop)
         else:
             while not stop.is_set():
-                b = ser.read(max(1, min(ser.in_waiting, 65536)))
+                b = _read_available(ser)
                 if b:
                     q.put((RAW, i, time.monotonic_ns(), b))
     except (serial.SerialException, OSError) as exc:
@@ -459,12 +502,14 @@ def capture(
                 break
             if stop.is_set():
                 break
+            items = []  # what the readers handed over: one item (waited for), then what else is queued
             try:
-                item = q.get(timeout=0.05)
+                items.append(q.get(timeout=0.05))
+                while len(items) < 1000:
+                    items.append(q.get_nowait())
             except queue.Empty:
-                item = None
-            if item is not None:
-                typ, i, host_ns, payload = item
+                pass
+            for typ, i, host_ns, payload in items:
                 if typ == "gone":
                     ev = {"event": "disconnected", "stream": i, "message": payload}
                     log.write(EVENT, i, host_ns, json.dumps(ev).encode())
