@@ -86,8 +86,8 @@ class FabricPressConfig(Strict):
       Contacts 1967: conductance of n parallel a-spots ~ n a); per press kappa = exp(area_sigma N(0, 1)).
     - knit set: on release the loops do not slide back (inter-fibre friction; the compression resilience RC of
       knits is 40-60 %, Kawabata, The Standardization and Analysis of Hand Evaluation, 1980); the compaction
-      seen by the stack is x + psi (x_peak - x), psi per press uniform in set_fraction_mean +- set_fraction_spread
-      (clipped to [0, 1]); the peak relaxes toward x with set_recovery_time_s (fibre stress relaxation), so
+      seen by the stack is x + psi (x_peak - x), psi per press lognormal of mean set_fraction_mean and log-sd
+      set_fraction_sigma (clipped to [0, 1]: a product of many factors, loop geometry times fibre friction); the peak relaxes toward x with set_recovery_time_s (fibre stress relaxation), so
       the set carries into the next press.
     Draws come from the episode seed (stream 2), press by press; without seeds every press is the mean one.
     """
@@ -96,7 +96,7 @@ class FabricPressConfig(Strict):
     release_force_n: NonNegFloat = 0.02  # estimate: below it the plate has left the sample
     area_sigma: Annotated[float, Field(ge=0, le=1)] = 0.05  # estimate: a hand-placed plate engages a few % more or less of a 1 x 1 cm knit
     set_fraction_mean: Annotated[float, Field(ge=0, le=1)] = 0.3  # estimate, fit: piezotwin calibrate fabric (1-layer hysteresis 24.2 %)
-    set_fraction_spread: Annotated[float, Field(ge=0, le=1)] = 0.3  # estimate: resilience of knits varies from press to press by +- its own size
+    set_fraction_sigma: Annotated[float, Field(ge=0, le=2)] = 1.0  # estimate: the set of a hand press varies by about its own size (Kawabata RC spread)
     set_recovery_time_s: PositiveFloat = 60.0  # estimate: fibre stress relaxation of polyamide/spandex knits, ~1 min
     max_presses: Annotated[int, Field(ge=1, le=4096)] = 256  # draws per episode; press k uses draw k mod max_presses
 

@@ -54,7 +54,7 @@ class FabricParams:
     press_off_n: float = 0.02
     area_sigma: float = 0.0
     set_mean: float = 0.0
-    set_spread: float = 0.0
+    set_sigma: float = 0.0
     set_decay: float = 1.0  # c_set = exp(-dt / T_set)
     max_presses: int = 1
 
@@ -96,16 +96,16 @@ def fabric_params(cfg) -> FabricParams:
         press_off_n=s.press.release_force_n,
         area_sigma=s.press.area_sigma,
         set_mean=s.press.set_fraction_mean,
-        set_spread=s.press.set_fraction_spread,
+        set_sigma=s.press.set_fraction_sigma,
         set_decay=float(np.exp(-dt / s.press.set_recovery_time_s)),
         max_presses=s.press.max_presses,
     )
 
 
 def press_draws(seeds: list[int] | None, p: FabricParams, n_episodes: int | None = None) -> np.ndarray:
-    """[E, M, 2] float32 per-press draws (kappa, psi), M = p.max_presses: kappa = exp(sigma N(0,1)), psi uniform
-    in set_mean +- set_spread clipped to [0, 1], from np.random.default_rng([seed, 2]). seeds None: the mean press
-    (kappa 1, psi set_mean) for n_episodes episodes."""
+    """[E, M, 2] float32 per-press draws (kappa, psi), M = p.max_presses: kappa = exp(area_sigma N(0,1)),
+    psi = set_mean exp(set_sigma N(0,1) - set_sigma^2 / 2) clipped to [0, 1] (lognormal of mean set_mean), from
+    np.random.default_rng([seed, 2]). seeds None: the mean press (kappa 1, psi set_mean) for n_episodes episodes."""
     M = p.max_presses
     if seeds is None:
         out = np.empty((n_episodes or 1, M, 2), np.float32)
@@ -115,7 +115,8 @@ def press_draws(seeds: list[int] | None, p: FabricParams, n_episodes: int | None
     for e, s in enumerate(seeds):
         rng = np.random.default_rng([int(s), 2])
         out[e, :, 0] = np.exp(p.area_sigma * rng.standard_normal(M))
-        out[e, :, 1] = np.clip(p.set_mean + p.set_spread * rng.uniform(-1.0, 1.0, M), 0.0, 1.0)
+        n = rng.standard_normal(M)
+        out[e, :, 1] = np.clip(p.set_mean * np.exp(p.set_sigma * n - 0.5 * p.set_sigma**2), 0.0, 1.0)
     return out.astype(np.float32)
 
 
