@@ -20,7 +20,9 @@ from sensors.warp_setup import init_warp, resolve_device
 
 
 @functools.cache
-def fabric_kernels(n_prony: int, n_play: int):
+def fabric_kernels(n_prony: int, n_play: int, with_press: bool = True):
+    """Kernels for (Prony terms, play operators). with_press=False drops the per-press area and knit set (the
+    chain before issue 13; bench/bench_transduction.py times both in one run)."""
     vec_p = wp.types.vector(length=n_prony, dtype=wp.float32)
     vec_k = wp.types.vector(length=n_play, dtype=wp.float32)
     vec5 = wp.types.vector(length=5, dtype=wp.float32)
@@ -64,15 +66,19 @@ def fabric_kernels(n_prony: int, n_play: int):
             acc += p.play_w[j] * zj
         x = wp.max((1.0 - w_sum) * u + acc, 0.0)
         s_new = s
-        xpk = wp.max(x, x + (s[4] - x) * p.c_set)
-        s_new[4] = xpk
-        x = x + s[3] * (xpk - x)
+        kappa = float(1.0)
+        if wp.static(with_press):
+            xpk = wp.max(x, x + (s[4] - x) * p.c_set)
+            s_new[4] = xpk
+            x = x + s[3] * (xpk - x)
+            kappa = s[2]
         r_layer = p.r_inf + p.r_amp * wp.exp(-wp.pow(x * p.inv_fl, p.beta))
         r_c = p.rc0 * wp.pow(1.0 + x * p.inv_fc, -p.m)
-        r_taxel = p.n_taxels * (p.n_layers * r_layer + p.n_contacts * r_c) / s[2]
+        r_taxel = p.n_taxels * (p.n_layers * r_layer + p.n_contacts * r_c) / kappa
         return q_new, z_new, s_new, x, 1.0 / r_taxel
 
-    step.__name__ = step.__qualname__ = f"fabric_step_p{n_prony}_k{n_play}"
+    tag = f"p{n_prony}_k{n_play}" + ("" if with_press else "_nopress")
+    step.__name__ = step.__qualname__ = f"fabric_step_{tag}"
     step_f = wp.func(step)
 
     def chain(
@@ -98,14 +104,15 @@ def fabric_kernels(n_prony: int, n_play: int):
         for k in range(n_steps):
             idx = base + k * n_taxels
             f = load[idx]
-            if s[0] == 0.0 and f > p.f_on:  # a new press: the episode's next draw
-                j = int(s[1]) % n_draws
-                s[2] = draws[(ep * n_draws + j) * 2]
-                s[3] = draws[(ep * n_draws + j) * 2 + 1]
-                s[1] = s[1] + 1.0
-                s[0] = 1.0
-            elif s[0] == 1.0 and f < p.f_off:
-                s[0] = 0.0
+            if wp.static(with_press):
+                if s[0] == 0.0 and f > p.f_on:  # a new press: the episode's next draw
+                    j = int(s[1]) % n_draws
+                    s[2] = draws[(ep * n_draws + j) * 2]
+                    s[3] = draws[(ep * n_draws + j) * 2 + 1]
+                    s[1] = s[1] + 1.0
+                    s[0] = 1.0
+                elif s[0] == 1.0 and f < p.f_off:
+                    s[0] = 0.0
             q, z, s, x, g = step_f(p, f, q, z, s)
             out_x[idx] = x
             out_cond[idx] = g
@@ -113,7 +120,7 @@ def fabric_kernels(n_prony: int, n_play: int):
         st_play[tid] = z
         st_press[tid] = s
 
-    chain.__name__ = chain.__qualname__ = f"fabric_chain_p{n_prony}_k{n_play}"
+    chain.__name__ = chain.__qualname__ = f"fabric_chain_{tag}"
     k_chain = wp.kernel(chain, module="unique", enable_backward=False)
     return {"chain": k_chain, "Params": Params, "vec_p": vec_p, "vec_k": vec_k, "vec5": vec5}
 
@@ -121,10 +128,10 @@ def fabric_kernels(n_prony: int, n_play: int):
 class FabricChainWarp:
     """Device state for one batch shape; `run` may be called repeatedly (streaming: state carries over)."""
 
-    def __init__(self, p: FabricParams, n_episodes: int, n_taxels: int, device: str = "cpu"):
+    def __init__(self, p: FabricParams, n_episodes: int, n_taxels: int, device: str = "cpu", with_press: bool = True):
         init_warp()
         self.p, self.E, self.N, self.device = p, n_episodes, n_taxels, resolve_device(device)
-        self.k = fabric_kernels(p.n_prony, p.n_play)
+        self.k = fabric_kernels(p.n_prony, p.n_play, with_press)
         k, f32 = self.k, np.float32
         s = k["Params"]()
         s.prony_a = k["vec_p"](*p.prony_decay.astype(f32))
