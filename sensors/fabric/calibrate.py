@@ -140,13 +140,13 @@ def repeat_readings(cfg, peaks: list[float], seeds: list[int] = REPEAT_SEEDS) ->
     """The characterization series (0 -> p1 -> 0 -> p2 ...) repeated once per seed through the chain (numpy, no
     MuJoCo, true resistance): levels [L] and the readings at the end of each dwell [len(seeds), L] (ohm)."""
     from sensors.fabric.reference import fabric_chain_numpy, fabric_params, press_draws
-    from simulate.protocols.indenter import staircase_levels
 
     p = replace(fabric_params(cfg), n_taxels=1)
-    pts = [0.0]
-    for v in peaks:
-        pts += [float(v), 0.0]
-    levels = staircase_levels(pts, cfg.protocol.stair_step_n)
+    levels = [0.0]
+    for v in peaks:  # 0 -> peak -> 0 on the step grid, the peak itself even off the grid (as the protocol)
+        up = list(loading_levels(float(v), cfg.protocol.stair_step_n)[1:])
+        levels += up + up[::-1][1:] + [0.0]
+    levels = np.round(np.asarray(levels), 9)
     dwell = int(round(cfg.protocol.stair_dwell_s * cfg.sampling.sample_rate_hz))
     f = np.repeat(levels, dwell).astype(np.float32)[None, :, None].repeat(len(seeds), 0)
     _, g, _ = fabric_chain_numpy(f, p, None, press_draws(seeds, p))
@@ -217,7 +217,7 @@ def run() -> "CalibrationResult":
     h1 = repeat_hysteresis(_with(cfg1, fit1, set_mean))
     lo, hi = HYSTERESIS_BAND_PCT
     res.rows.append(TargetRow("1 layer: max hysteresis, % of highest output (paper's def.; mean loop of 32 repeats), paper 24.2",
-                              f"{lo:g}-{hi:g}", h1["hysteresis_of_max_pct"], "%", lo <= h1["hysteresis_of_max_pct"] <= hi))
+                              f"{lo:g}-{hi:g}", h1["hysteresis_of_max_pct"], "%", bool(lo <= h1["hysteresis_of_max_pct"] <= hi)))
     res.rows.append(TargetRow("  same, % of output span (ours)", "-", h1["hysteresis_fso_pct"], "%", None))
     h5 = repeat_hysteresis(_with(cfg1, fit1, set_mean), REPEAT_SEEDS)
     res.rows.append(TargetRow("  same, % of highest output, average of the paper's 5 repeats (seeds 0-4)", "-",
