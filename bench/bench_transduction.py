@@ -79,6 +79,40 @@ def bench_warp(cfg, E, T, N, device, repeats=3):
     return {"kernel": E * T * N / best, "chain": E * T * N / best_full, "h2d_s": h2d, "device": chain.device}
 
 
+def bench_fabric(E: int, T: int, N: int, device: str = "cpu", repeats: int = 7) -> dict:
+    """fabric_1 kernel with the per-press area and knit set (issue 13) and without (the chain before), same run."""
+    from dataclasses import replace
+
+    import warp as wp
+
+    from scenes import load_scene
+    from sensors.fabric.kernels import FabricChainWarp
+    from sensors.fabric.reference import fabric_params, press_draws
+
+    p = replace(fabric_params(load_scene("fabric_1")), n_taxels=N)
+    t = np.arange(T, dtype=np.float32) / 10.0
+    amp = np.random.default_rng(0).uniform(0.5, 2.0, (E, 1, N)).astype(np.float32)
+    drive = np.clip(amp * np.sin(2 * np.pi * 0.05 * t)[None, :, None], 0.0, None).astype(np.float32)  # presses
+    chains = {}
+    for name, press in (("before", False), ("after", True)):
+        ch = FabricChainWarp(p, E, N, device, with_press=press)
+        ch.set_draws(press_draws(list(range(E)), p))
+        ch.run(drive)  # compile
+        chains[name] = ch
+    best = {name: float("inf") for name in chains}
+    for _ in range(repeats):  # interleaved, best of each: a shared machine's load hits both alike
+        for name, ch in chains.items():
+            ch.reset()
+            wp.synchronize_device(ch.device)
+            t0 = time.perf_counter()
+            ch.run(drive)
+            wp.synchronize_device(ch.device)
+            best[name] = min(best[name], time.perf_counter() - t0)
+    out = {name: E * T * N / b for name, b in best.items()}
+    out["cost_after_over_before"] = out["before"] / out["after"]
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--episodes", type=int, default=16, help="CPU batch (the numpy reference runs on the same)")
@@ -112,6 +146,17 @@ def main() -> None:
         print(f"warp cuda ({res['warp_cuda']['device_name']}): kernel {g['kernel']:.3g}, whole chain {g['chain']:.3g} "
               f"taxel-steps/s ({a.gpu_episodes} x {N} x {a.steps}); h2d of the drive {g['h2d_s']:.2f} s")
         print(f"  ratio cuda / warp-cpu: {g['chain'] / w['chain']:.0f}x; cuda / numpy: {g['chain'] / res['numpy_ref']['taxel_steps_per_s']:.0f}x")
+    fe = min(a.episodes, 4)
+    fb = bench_fabric(fe, a.steps, N, "cpu")
+    res["fabric_warp_cpu"] = {"episodes": fe, "taxel_steps_per_s_before": fb["before"], "taxel_steps_per_s_after": fb["after"],
+                              "cost_after_over_before": fb["cost_after_over_before"]}
+    print(f"fabric warp cpu : {fb['before']:.3g} taxel-steps/s without the press state, {fb['after']:.3g} with "
+          f"(cost {fb['cost_after_over_before']:.2f}x; issue 13 allows 1.5x)")
+    if wp.get_cuda_device_count() > 0:
+        fg = bench_fabric(a.gpu_episodes, a.steps, N, "cuda:0")
+        res["fabric_warp_cuda"] = {"episodes": a.gpu_episodes, "taxel_steps_per_s_before": fg["before"],
+                                   "taxel_steps_per_s_after": fg["after"], "cost_after_over_before": fg["cost_after_over_before"]}
+        print(f"fabric warp cuda: cost of the press state {fg['cost_after_over_before']:.2f}x")
     a.out.mkdir(parents=True, exist_ok=True)
     tag = "gpu" if "warp_cuda" in res else "cpu"
     path = a.out / f"transduction-{tag}.json"

@@ -77,6 +77,36 @@ class FabricHysteresisConfig(Strict):
         return self
 
 
+class FabricPressConfig(Strict):
+    """Repeat-to-repeat variation of a hand-loaded knitted stack: every press (the load rising through
+    onset_force_n after it fell below release_force_n) seats the plate differently and the knit keeps a different
+    part of its compaction on release, so a repeated cycle does not retrace itself.
+
+    - engaged contact area: the stack's conductance scales with the area a press engages (Holm, Electric
+      Contacts 1967: conductance of n parallel a-spots ~ n a); per press kappa = exp(area_sigma N(0, 1)).
+    - knit set: on release the loops do not slide back (inter-fibre friction; the compression resilience RC of
+      knits is 40-60 %, Kawabata, The Standardization and Analysis of Hand Evaluation, 1980); the compaction
+      seen by the stack is x + psi (x_peak - x), psi per press lognormal of mean set_fraction_mean and log-sd
+      set_fraction_sigma (clipped to [0, 1]: a product of many factors, loop geometry times fibre friction); the peak relaxes toward x with set_recovery_time_s (fibre stress relaxation), so
+      the set carries into the next press.
+    Draws come from the episode seed (stream 2), press by press; without seeds every press is the mean one.
+    """
+
+    onset_force_n: NonNegFloat = 0.05  # estimate: half the paper's 0.1 N step, a touch of the hand on the sample
+    release_force_n: NonNegFloat = 0.02  # estimate: below it the plate has left the sample
+    area_sigma: Annotated[float, Field(ge=0, le=1)] = 0.05  # estimate: a hand-placed plate engages a few % more or less of a 1 x 1 cm knit
+    set_fraction_mean: Annotated[float, Field(ge=0, le=1)] = 0.3  # estimate, fit: piezotwin calibrate fabric (1-layer hysteresis 24.2 %)
+    set_fraction_sigma: Annotated[float, Field(ge=0, le=2)] = 1.0  # estimate: the set of a hand press varies by about its own size (Kawabata RC spread)
+    set_recovery_time_s: PositiveFloat = 60.0  # estimate: fibre stress relaxation of polyamide/spandex knits, ~1 min
+    max_presses: Annotated[int, Field(ge=1, le=4096)] = 256  # draws per episode; press k uses draw k mod max_presses
+
+    @model_validator(mode="after")
+    def _check(self) -> "FabricPressConfig":
+        if self.release_force_n > self.onset_force_n:
+            raise ValueError("sensor.press.release_force_n must not exceed onset_force_n")
+        return self
+
+
 class MultimeterConfig(Strict):
     """2-wire handheld multimeter (fabric sect. 3.3): autoranging, finite counts, a few readings per second,
     sample-and-hold between readings. Reading = round(R (1 + gain_error) / resolution + noise) counts."""
@@ -100,4 +130,5 @@ class FabricSensorConfig(Strict):
     stack: FabricStackConfig = Field(default_factory=FabricStackConfig)
     creep: FabricCreepConfig = Field(default_factory=FabricCreepConfig)
     hysteresis: FabricHysteresisConfig = Field(default_factory=FabricHysteresisConfig)
+    press: FabricPressConfig = Field(default_factory=FabricPressConfig)
     multimeter: MultimeterConfig = Field(default_factory=MultimeterConfig)

@@ -6,8 +6,8 @@ import pytest
 
 from scenes import ConfigError, load_scene
 from sensors.fabric.model import FabricSensor, multimeter_numpy
-from sensors.fabric.calibrate import PAPER_CURVES, loading_branch_x
-from sensors.fabric.reference import fabric_chain_numpy, fabric_params, stack_resistance
+from sensors.fabric.calibrate import HYSTERESIS_BAND_PCT, PAPER_CURVES, loading_branch_x, repeat_hysteresis, repeat_readings
+from sensors.fabric.reference import fabric_chain_numpy, fabric_params, press_draws, stack_resistance
 from simulate.protocols.indenter import make_episode_protocol, staircase_levels, target_waveform
 
 PRESETS = {n: f"fabric_{n}" for n in (1, 3, 6, 12)}
@@ -68,10 +68,67 @@ def test_minor_loops_return_at_different_points(cfgs):
 
 
 def test_hysteresis_error_of_one_layer_in_paper_band(cfgs):
-    lv, r = readings(cfgs[1], [0.0, 2.0, 0.0])
-    k = int(np.argmax(lv))
-    gap = np.abs(r[: k + 1] - r[k:][::-1]).max()
-    assert 20.0 <= 100 * gap / np.ptp(r) <= 28.0  # paper 24.2 % FSO
+    lo, hi = HYSTERESIS_BAND_PCT
+    h = repeat_hysteresis(cfgs[1])  # mean loop of repeated full-range cycles, referenced to the highest output
+    assert lo <= h["hysteresis_of_max_pct"] <= hi  # paper 24.2 % (sect. 3.3)
+    assert h["hysteresis_fso_pct"] > h["hysteresis_of_max_pct"]  # the span is smaller than the highest output
+
+
+def test_repeated_cycles_do_not_retrace_but_stay_bounded(cfgs):
+    """Hand-loaded knit: each press draws its own contact area and set, so repeats of one cycle differ; the
+    variation stays physical (every repeat still a loop with R falling under load, above the lead)."""
+    cfg = cfgs[1]
+    lv, r = repeat_readings(cfg, [2.0, 2.0, 2.0], seeds=list(range(8)))  # 8 episodes x 3 identical presses
+    cyc = np.cumsum(np.r_[0, (lv[1:] > 0) & (lv[:-1] == 0)])
+    peak = [r[:, np.flatnonzero((cyc == c) & np.isclose(lv, 2.0))[0]] for c in (1, 2, 3)]
+    # within an episode the three presses differ (area draws): no exact retrace
+    assert np.all(np.abs(peak[1] - peak[2]) > 0) and np.all(np.abs(peak[0] - peak[1]) > 0)
+    # and so do episodes (seeds) on the same press, by a few % of the reading
+    spread = np.ptp(peak[1]) / np.mean(peak[1])
+    assert 0.01 < spread < 0.5
+    # bounded: every reading between the lead and ~1.5x the virgin value, R at 2 N well below R at 0 N
+    assert np.all(r > cfg.sensor.stack.lead_resistance_ohm) and np.all(r < 1.5 * r[:, :1])
+    assert np.all(np.stack(peak) < 0.5 * r[:, :1].T)
+    # the per-repeat hysteresis (paper's definition) varies from press to press but is finite
+    from sensors.fabric.calibrate import cycle_gap
+
+    first = cyc <= 1
+    h = [cycle_gap(lv[first], x[first])["hysteresis_of_max_pct"] for x in r]
+    assert np.ptp(h) > 2.0 and max(h) < 80.0
+
+
+def test_press_draws_from_the_episode_seed(cfgs):
+    p = fabric_params(cfgs[1])
+    a, b = press_draws([7, 8], p), press_draws([7, 8], p)
+    np.testing.assert_array_equal(a, b)  # deterministic per seed
+    assert not np.array_equal(a[0], a[1])  # episodes differ
+    assert np.all(a[..., 1] >= 0) and np.all(a[..., 1] <= 1) and np.all(a[..., 0] > 0)
+    m = press_draws(None, p, 3)
+    assert np.all(m[..., 0] == 1.0) and np.allclose(m[..., 1], p.set_mean)
+    # psi is lognormal of mean set_mean (clipping at 1 trims the tail a little)
+    big = press_draws(list(range(40)), p)[..., 1]
+    assert 0.8 * p.set_mean < big.mean() < 1.1 * p.set_mean
+
+
+def test_knit_set_carries_into_the_next_press_and_recovers_at_rest(cfgs):
+    from dataclasses import replace
+
+    p = replace(fabric_params(cfgs[1]), area_sigma=0.0)
+    d = press_draws(None, p, 1)
+    d[0, :, 1] = 0.5
+    lv, f = staircase([0.0, 2.0, 0.0])
+    rest = np.zeros((1, 3000, 1), np.float32)  # 300 s at rest
+    x, g, st = fabric_chain_numpy(np.concatenate([f, rest], 1), p, None, d)
+    assert st.press[0, 1] == 1.0 and st.press[0, 0] == 0.0  # one press, released
+    n = f.shape[1]
+    x_release = x[0, n - 1, 0]
+    assert x_release > 0.05  # at 0 N the knit keeps part of its compaction
+    assert x[0, -1, 0] < 0.2 * x_release  # and recovers it over minutes at rest
+    # without the set the same press releases further
+    d0 = d.copy()
+    d0[0, :, 1] = 0.0
+    x0, _, _ = fabric_chain_numpy(f, p, None, d0)
+    assert x0[0, -1, 0] < x_release
 
 
 def test_creep_under_held_force(cfgs):
@@ -91,16 +148,20 @@ def test_warp_matches_numpy_and_state_streams(cfgs):
     cfg = load_scene("fabric_3", ["pad.taxels_x=2", "pad.taxels_y=2"])
     p = fabric_params(cfg)
     rng = np.random.default_rng(3)
-    _, base = staircase([0.0, 6.0, 1.0, 4.0, 0.0], step=0.5, dwell=5)
+    _, base = staircase([0.0, 6.0, 1.0, 4.0, 0.0, 5.0, 0.0], step=0.5, dwell=5)
     load = (base * rng.uniform(0.5, 1.5, size=(3, 1, 4))).astype(np.float32)  # 3 episodes x 4 taxels
-    x_np, g_np, st_np = fabric_chain_numpy(load, p)
+    draws = press_draws([5, 6, 7], p)
+    x_np, g_np, st_np = fabric_chain_numpy(load, p, None, draws)
+    assert st_np.press[:, 1].min() >= 2  # the drive makes at least two presses per taxel
     ch = FabricChainWarp(p, 3, 4, "cpu")
+    ch.set_draws(draws)
     T = load.shape[1]
     x1, g1 = ch.run(load[:, : T // 2])
     x2, g2 = ch.run(load[:, T // 2 :])  # streaming: state carried across calls
     np.testing.assert_allclose(np.concatenate([x1, x2], 1), x_np, rtol=2e-5, atol=1e-6)
     np.testing.assert_allclose(np.concatenate([g1, g2], 1), g_np, rtol=2e-5)
     np.testing.assert_allclose(ch.state().play_n, st_np.play_n, rtol=2e-5, atol=1e-6)
+    np.testing.assert_allclose(ch.state().press, st_np.press, rtol=2e-5, atol=1e-6)
     # whole sensor: same readings from both backends
     seeds = [1, 2, 3]
     a = FabricSensor(cfg, "numpy").run(load / 4, seeds)
@@ -156,7 +217,10 @@ def test_characterize_fabric_1_through_mujoco(cfgs):
     from simulate.characterize import characterize
 
     m = characterize(cfgs[1]).metrics
-    assert 20.0 <= m["hysteresis_fso_pct"] <= 28.0  # paper 24.2 % FSO
+    lo, hi = HYSTERESIS_BAND_PCT
+    assert lo <= m["hysteresis_paper_pct"] <= hi  # paper 24.2 %, referenced to the highest output (sect. 3.3)
+    assert m["hysteresis_fso_pct"] > m["hysteresis_paper_pct"]  # ours, over the span, beside it
+    assert m["hysteresis_paper_single_pct"][0] < m["hysteresis_paper_single_pct"][2]  # repeats differ
     assert m["loading_vs_paper_fso_pct"] < 10.0
     assert m["r0_ohm"] == pytest.approx(3170.3, rel=0.05)
     assert np.ptp(m["return_r_ohm"]) > 0

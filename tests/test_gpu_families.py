@@ -72,13 +72,16 @@ def devices(gpu_device):
 
 def _fabric_kernel(p, load, device):
     from sensors.fabric.kernels import FabricChainWarp
+    from sensors.fabric.reference import press_draws
 
     E, T, N = load.shape
     ch = FabricChainWarp(p, E, N, device)
+    ch.set_draws(press_draws(list(range(E)), p))  # per-press contact area and knit set from the episode seeds
     x1, g1 = ch.run(load[:, : T // 2])
-    x2, g2 = ch.run(load[:, T // 2 :])  # streaming: the Prony and play states carried on the device
+    x2, g2 = ch.run(load[:, T // 2 :])  # streaming: the Prony, play and press states carried on the device
     st = ch.state()
-    return {"x": np.concatenate([x1, x2], 1), "g": np.concatenate([g1, g2], 1), "prony": st.prony_n, "play": st.play_n}
+    return {"x": np.concatenate([x1, x2], 1), "g": np.concatenate([g1, g2], 1), "prony": st.prony_n, "play": st.play_n,
+            "press": st.press}
 
 
 @pytest.mark.parametrize("layers", [1, 3, 6, 12])

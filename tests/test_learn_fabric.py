@@ -208,7 +208,11 @@ def test_experiment_fabric_tiny(tmp_path):
             assert k in bp and k in raw
         assert bp["hyst_full_mean"] < raw["hyst_full_mean"]  # the BP net reduces the max hysteresis error
         assert bp["mse"] < L["models"]["mean"]["test"]["mse"]
-        assert 15 < raw["hyst_full_mean"] < 40  # the simulated sensor's loop (paper, 1 layer: 24.2 %)
+        # the simulated sensor's loop, referenced to the highest output (paper, 1 layer: 24.2 %); every press draws
+        # its own knit set, so single cycles scatter around the calibrated mean loop
+        assert 12 < raw["hyst_paper_mean"] < 60 and raw["hyst_paper_mean"] < raw["hyst_full_mean"]
+        if n == "1":  # the press-to-press variation is invisible to (R_t, R_t-1): the BP net cannot remove it all
+            assert bp["hyst_paper_mean"] > 3.0
         assert {"6", "21", "46"} == set(L["table2"])
         assert L["models"]["bp_lm"]["latency"]["stream_vs_batch_max_abs"] < 1e-6
     assert all(m["findings"]["bp_reduces_full_range_hysteresis"].values())

@@ -202,18 +202,21 @@ def loops(level: np.ndarray) -> list[tuple[int, int, int]]:
 
 def hysteresis(level: np.ndarray, y: np.ndarray) -> dict[str, Any]:
     """Per loop: max |y_up(F) - y_down(F)| at equal nominal force, % of the output span of the episode's first
-    (full-range) loop. Returns full_range (the first loop), loops (all) and fso (the span)."""
+    (full-range) loop. Returns full_range (the first loop), loops (all), fso (the span), and full_range_paper:
+    the first loop's gap over its highest output value (the paper's definition, sect. 3.3)."""
     lp = loops(level)
     if not lp:
-        return {"full_range": float("nan"), "loops": [], "fso": float("nan")}
+        return {"full_range": float("nan"), "loops": [], "fso": float("nan"), "full_range_paper": float("nan")}
     a0, _, b0 = lp[0]
     fso = float(np.ptp(y[a0 : b0 + 1]))
+    top = float(np.max(y[a0 : b0 + 1]))
     errs = []
     for a, p, b in lp:
         up = {float(level[i]): float(y[i]) for i in range(a, p + 1)}
         gaps = [abs(up[float(level[i])] - float(y[i])) for i in range(p, b + 1) if float(level[i]) in up]
         errs.append(100.0 * max(gaps) / fso if gaps and fso > 0 else float("nan"))
-    return {"full_range": errs[0], "loops": errs, "fso": fso}
+    paper = errs[0] * fso / top if top > 0 else float("nan")
+    return {"full_range": errs[0], "loops": errs, "fso": fso, "full_range_paper": paper}
 
 
 def score(seqs: list[Sequence], preds: list[np.ndarray]) -> dict[str, Any]:
@@ -224,12 +227,15 @@ def score(seqs: list[Sequence], preds: list[np.ndarray]) -> dict[str, Any]:
     out["n_observations"] = int(len(ref))
     h = [hysteresis(s.extra["level"], np.asarray(p).reshape(len(s), -1)[:, 0]) for s, p in zip(seqs, preds)]
     full = [x["full_range"] for x in h if np.isfinite(x["full_range"])]
+    paper = [x["full_range_paper"] for x in h if np.isfinite(x["full_range_paper"])]
     allk = [v for x in h for v in x["loops"] if np.isfinite(v)]
     out.update(hyst_full_mean=float(np.mean(full)) if full else float("nan"),
                hyst_full_worst=float(np.max(full)) if full else float("nan"),
                hyst_loops_max=float(np.max(allk)) if allk else float("nan"),
                hyst_loops_mean=float(np.mean(allk)) if allk else float("nan"), n_loops=len(allk),
-               hyst_full_per_episode=full)
+               hyst_full_per_episode=full,
+               hyst_paper_mean=float(np.mean(paper)) if paper else float("nan"),
+               hyst_paper_worst=float(np.max(paper)) if paper else float("nan"))
     return out
 
 
@@ -384,7 +390,8 @@ def table2(md: Mode, xs, ys, valid, test, seed, units) -> dict[str, Any]:
             yt = np.concatenate([s.y[:, 0] for s in te])
             runs.append({"train_mse": M.mse(Y[idx] / KOHM, P[idx] / KOHM), "train_r": M.pearson_r(Y[idx], P[idx]),
                          "test_mse": M.mse(yt / KOHM, pt / KOHM), "test_r": M.pearson_r(yt, pt),
-                         "test_hyst_full": score(te, pt_list)["hyst_full_mean"]})
+                         **{k: v for k, v in zip(("test_hyst_full", "test_hyst_paper"),
+                                                 (lambda sc: (sc["hyst_full_mean"], sc["hyst_paper_mean"]))(score(te, pt_list)))}})
         agg = {k: float(np.nanmedian([r_[k] for r_ in runs])) for k in runs[0]}
         out[str(nobs)] = {**agg, "runs": runs}
     return out
@@ -539,7 +546,22 @@ def report(m: dict[str, Any]) -> str:
                                                                       for k in kinds],
                            "worst loop: " + " / ".join(["raw", *kinds])], rows))
     lines += ["", "Full-range cycle (0 -> F_max -> 0, the paper's figure), mean over test episodes; the last column is "
-              "the worst of all loops (random minor loops included) of the test episodes.", ""]
+              "the worst of all loops (random minor loops included) of the test episodes. % FSO here is over the "
+              "output span (ours); the paper's definition (over the highest output value) follows.", ""]
+    rows = []
+    for n in ns:
+        r = L[n]
+        p = PAPER_HYST.get(int(n))
+        row = [n, f"{fmt(r['raw'].get('hyst_paper_mean'), 1)} / {fmt(p[0], 1) if p else '–'}"]
+        for k in kinds:
+            t = r["models"].get(k, {}).get("test")
+            pp = f" / {fmt(p[1], 1)}" if (p and k == "bp_lm") else (" / –" if k == "bp_lm" else "")
+            row.append(f"{fmt(t.get('hyst_paper_mean'), 1)}{pp}" if t else "–")
+        rows.append(row)
+    lines += ["### Same, referenced to the highest output value (the paper's definition, sect. 3.3; %)", ""]
+    lines.append(md_table(["layers", "uncompensated ours / paper", *[f"{LABELS[k]}" + (" ours / paper" if k == "bp_lm" else "")
+                                                                      for k in kinds]], rows))
+    lines.append("")
     lines += ["## Models on the test episodes (MSE in kOhm^2, R Pearson)", ""]
     rows = []
     for n in ns:
@@ -599,12 +621,18 @@ DIFFERENCES = """
 - **What "max hysteresis error" is.** Ours: max |y_up - y_down| at equal nominal force over the output span of the
   full-range cycle, for the raw reading and for the network's output alike (the paper refers the error to "the
   highest output value"; see the fabric section of README.md). Taken on held-out test episodes.
-- **Far below the paper's 13.5 % with all our data, close to it with the paper's amount.** Trained on ~1000-2000
-  observations per sensor, the BP network leaves a few % FSO on new force sequences; trained on 46 observations
-  (Table 2's largest, and about the 41 samples behind eq. 6) it leaves ~10-20 % (column "test max hyst." of
-  Table 2), where the paper's 13.5 % lies. Our readings are also cleaner than a hand-loaded sample on a kitchen
-  scale read off a multimeter (no placement or operator variation; the multimeter's counts and noise only), and
-  the loop repeats from episode to episode, which makes it learnable.
+- **Every press differs (issue 13).** A hand-loaded knit is seated differently at every press: each press draws
+  its engaged contact area (lognormal, sigma 5 %) and the part of its peak compaction the knit keeps on release
+  (the knit set, lognormal of mean ~0.2, log-sd 1; Kawabata's compression resilience), from the episode seed; the
+  set relaxes over ~1 min and carries into the next press (`sensor.press`, scenes/fabric_config.py). The mean set
+  fraction is fitted so that the mean loop of repeated 1-layer cycles has the paper's 24.2 % (`piezotwin calibrate
+  fabric`). The loop a press will draw is not visible in (R_t, R_{t-1}), so the paper's BP net keeps part of it:
+  with all our training data it leaves ~9 % of the highest output on the 1-layer full-range cycle (paper 13.5 %),
+  where it left ~1 % when every press was alike. No noise is added to the output beyond the multimeter's.
+- **Uncompensated figure.** Characterization reports the paper's figure on the mean loop of repeats (the paper
+  averages 5); this table reports the mean over test episodes of each single cycle's figure, which scatters with
+  the press's draw (single 1-layer repeats range ~11-66 %). 3-12 layers carry the 1-layer set fraction (same
+  fabric; the paper gives no hysteresis figure for them), which gives them wider loops than 1 layer.
 - **How much the BP network can remove.** Its only memory is one previous reading. At equal (R_t, R_{t-1}) a
   loading and an unloading observation differ only in the sign of the last step, so the net can undo the part of
   the loop that the last step reveals (branch direction, creep since the last level); the rest of the
@@ -613,7 +641,17 @@ DIFFERENCES = """
 - **Quick mode** uses coarser force steps for 3, 6 and 12 layers (0.2 / 0.4 / 0.5 N, ~40 levels up the full
   range): fewer dwells mean less creep per newton, so the uncompensated loop is wider there than at the paper's
   0.1 N steps (e.g. 6 layers: ~34 % against ~25 %). The full mode uses 0.1 N everywhere.
-- **Table 2.** The paper does not define "observation"; we read it as the number of training observations (random
+- **Table 2 is not self-consistent in the paper.** For a least-squares fit MSE ~ (1 - R^2) var(target); with the
+  1-layer target's variance (~0.4 kOhm^2 over 0-2 N, eq. 6) R = 0.996-0.9997 implies MSE 1e-4 to 3e-3, but the
+  printed MSEs range 1e-4 to 5e-2 with no relation to R (14 observations: MSE 0.0515 with R 0.9992, 80x apart;
+  6 and 29 observations: MSE ~1e-4 with R 0.996 / 0.999, 30x / 8x apart; the 3-layer 14-observation row repeats
+  the 1-layer one; 12 layers, 18 observations prints MSE 0.9985 beside R 0.9993). Within a factor 3 only the
+  rows 1 layer / 11 observations, 3 layers / 6 and 11, 6 layers / 11 and 46, 12 layers / 6 are consistent, if
+  the MSE is on the paper's kOhm. R >= 0.997 is also inconsistent with the paper's own 13.5 % residual
+  hysteresis (an error of ~0.4 kOhm at mid-force gives R ~ 0.98 on the 1-layer target), so Table 2 reads as
+  in-sample fits on few points; our in-sample R (column "ours, on its observations") sits at 0.88-0.999, lower
+  where the per-press variation enters, and our MSE is within ~3-4x of the consistent 1-layer row.
+- **Table 2, definitions.** The paper does not define "observation"; we read it as the number of training observations (random
   (R_t, R_{t-1}) -> target pairs drawn from the training episodes), with LM's validation checks on separate
   episodes, and report MSE/R both on those observations (comparable to the paper's, which look in-sample: R near 1)
   and on the test episodes. MSE is in kOhm^2 (the paper prints no unit; we read R as kOhm).

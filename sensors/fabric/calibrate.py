@@ -4,7 +4,10 @@ PAPER_CURVES: eqs. 6-9, R (kOhm in the paper, read as kOhm; see scenes/fabric_co
 F (N), with the fitted range and the monotone range inside it (the polynomials turn upward past it:
 non-physical; eq. 8 past 9.09 N, eq. 9 past 7.54 N). They are calibration targets, not the model.
 `fit_stack` fits the stack law's parameters so that the *simulated loading branch* (x at the readings,
-after creep and hysteresis) lands on a paper curve; the presets hold its results.
+after creep and hysteresis) lands on a paper curve; `fit_set_fraction` fits the knit set's mean fraction
+(sensor.press.set_fraction_mean) so that the 1-layer max hysteresis error by the paper's definition (referenced
+to the highest output value, sect. 3.3) of the mean loop over repeated cycles (the paper averages 5 repeats;
+we average 32 for the expectation) is 24.2 %; the presets hold both. `piezotwin calibrate fabric` runs `run`.
 """
 
 from __future__ import annotations
@@ -37,7 +40,13 @@ PAPER_CURVES: dict[int, PaperCurve] = {
     6: PaperCurve(6, (0.0125, -0.3329, 3.3176, -15.345, 30.41), 15.0, 9.09, 142, "eq. 8"),
     12: PaperCurve(12, (0.0056, -0.2296, 3.431, -22.182, 54.944), 20.0, 7.54, 240, "eq. 9"),
 }
-PAPER_HYSTERESIS_FSO_PCT = {1: 24.2}  # fabric abstract and sect. 3.3: max hysteresis error, 1 layer
+PAPER_HYSTERESIS_FSO_PCT = {1: 24.2}  # fabric abstract and sect. 3.3: max hysteresis error, 1 layer, "referenced to the highest output value"
+HYSTERESIS_BAND_PCT = (20.5, 28.0)  # our acceptance band around the paper's 24.2 % (issue 13)
+PAPER_REPEATS = 5  # fabric sect. 3.3: "the average output ... after repeating each cycle five times"
+REPEAT_SEEDS = list(range(PAPER_REPEATS))  # episode seeds of the paper's 5 repeats (characterization)
+# The per-press knit set is random, so the average of 5 repeats scatters (+- ~15 % of its value); the fit and
+# the characterization's headline use the mean loop of many repeats (the expectation the paper's 5 estimate).
+MEAN_REPEAT_SEEDS = list(range(32))
 PAPER_COMPENSATED_FSO_PCT = {1: 13.5}  # after the BP network (not simulated here)
 PAPER_FORCE_RANGES_N = {  # fabric sect. 3.3
     1: [2.0, 1.27, 1.0, 1.96, 0.5, 1.7],
@@ -116,6 +125,60 @@ def loading_branch_x(cfg, f_max: float) -> tuple[np.ndarray, np.ndarray]:
     return levels, x[0, dwell - 1 :: dwell, 0].astype(np.float64)
 
 
+def cycle_gap(levels: np.ndarray, r: np.ndarray) -> dict:
+    """One 0 -> peak -> 0 cycle of readings: max |R_up - R_down| at equal nominal force over the highest output
+    (the paper's definition, sect. 3.3) and over the output span (%)."""
+    k = int(np.argmax(levels))
+    up = {round(float(f), 6): v for f, v in zip(levels[: k + 1], r[: k + 1])}
+    gaps = [abs(up[round(float(f), 6)] - v) for f, v in zip(levels[k:], r[k:]) if round(float(f), 6) in up]
+    g = max(gaps)
+    return {"hysteresis_of_max_pct": 100 * g / float(r.max()), "hysteresis_fso_pct": 100 * g / float(np.ptp(r)),
+            "gap_ohm": float(g)}
+
+
+def repeat_readings(cfg, peaks: list[float], seeds: list[int] = REPEAT_SEEDS) -> tuple[np.ndarray, np.ndarray]:
+    """The characterization series (0 -> p1 -> 0 -> p2 ...) repeated once per seed through the chain (numpy, no
+    MuJoCo, true resistance): levels [L] and the readings at the end of each dwell [len(seeds), L] (ohm)."""
+    from sensors.fabric.reference import fabric_chain_numpy, fabric_params, press_draws
+
+    p = replace(fabric_params(cfg), n_taxels=1)
+    levels = [0.0]
+    for v in peaks:  # 0 -> peak -> 0 on the step grid, the peak itself even off the grid (as the protocol)
+        up = list(loading_levels(float(v), cfg.protocol.stair_step_n)[1:])
+        levels += up + up[::-1][1:] + [0.0]
+    levels = np.round(np.asarray(levels), 9)
+    dwell = int(round(cfg.protocol.stair_dwell_s * cfg.sampling.sample_rate_hz))
+    f = np.repeat(levels, dwell).astype(np.float32)[None, :, None].repeat(len(seeds), 0)
+    _, g, _ = fabric_chain_numpy(f, p, None, press_draws(seeds, p))
+    r = 1.0 / g[:, dwell - 1 :: dwell, 0].astype(np.float64) + cfg.sensor.stack.lead_resistance_ohm
+    return levels, r
+
+
+def repeat_hysteresis(cfg, seeds: list[int] = MEAN_REPEAT_SEEDS) -> dict:
+    """Max hysteresis error of the full-range cycle (the first) of the average over repeats (one per seed), as
+    the paper reports it (it averages 5)."""
+    peaks = characterization_series(cfg)
+    levels, r = repeat_readings(cfg, peaks[:1], seeds)
+    return cycle_gap(levels, r.mean(0))
+
+
+def fit_set_fraction(cfg, target_pct: float) -> float:
+    """sensor.press.set_fraction_mean that gives target_pct (paper's definition) on the mean loop of repeats."""
+    from scipy.optimize import brentq
+
+    def h(v):
+        c = cfg.model_copy(deep=True)
+        c.sensor.press.set_fraction_mean = float(v)
+        return repeat_hysteresis(c)["hysteresis_of_max_pct"] - target_pct
+
+    lo, hi = 0.0, 1.0
+    if h(lo) >= 0:
+        return lo
+    if h(hi) <= 0:
+        return hi
+    return float(brentq(h, lo, hi, xtol=1e-5))
+
+
 def calibrate(cfg) -> dict:
     """Fitted stack-law fields for this preset's layer count, against the paper curve inside its monotone range."""
     curve = PAPER_CURVES[cfg.sensor.layers]
@@ -126,19 +189,45 @@ def calibrate(cfg) -> dict:
 EQUATION = {1: 6, 3: 7, 6: 8, 12: 9}  # fabric eqs. 6-9, one per layer count
 
 
+def _with(cfg, stack: dict | None = None, set_mean: float | None = None):
+    c = cfg.model_copy(deep=True)
+    for k, v in (stack or {}).items():
+        setattr(c.sensor.stack, k, float(v))
+    if set_mean is not None:
+        c.sensor.press.set_fraction_mean = float(set_mean)
+    return c
+
+
 def run() -> "CalibrationResult":
-    """Fit every layer count's stack law to its paper curve (eqs. 6-9); rows: rms error of the fitted
-    curve against the paper's inside its monotone range, % of the paper curve's span there."""
+    """1 layer: alternate the stack-law fit (eq. 6) and the knit set's mean fraction (24.2 % by the paper's
+    definition, 5-repeat average) until both hold; the set fraction is a property of the fabric, so 3, 6 and
+    12 layers take the 1-layer value and fit their stack laws to eqs. 7-9. Rows: rms error of each fitted
+    curve against the paper's inside its monotone range (% of its span), and the 1-layer hysteresis."""
     from scenes import load_scene
     from scenes.loader import PRESET_DIR
     from sensors.calibration import CalibrationResult, TargetRow
     from sensors.fabric.reference import fabric_params, stack_resistance
 
     res = CalibrationResult("fabric")
+    cfg1 = load_scene(Path(PRESET_DIR) / "fabric_1.yaml")
+    set_mean = cfg1.sensor.press.set_fraction_mean
+    for _ in range(3):  # the stack law and the set fraction depend on each other a little
+        fit1 = calibrate(_with(cfg1, set_mean=set_mean))
+        set_mean = fit_set_fraction(_with(cfg1, fit1), PAPER_HYSTERESIS_FSO_PCT[1])
+    h1 = repeat_hysteresis(_with(cfg1, fit1, set_mean))
+    lo, hi = HYSTERESIS_BAND_PCT
+    res.rows.append(TargetRow("1 layer: max hysteresis, % of highest output (paper's def.; mean loop of 32 repeats), paper 24.2",
+                              f"{lo:g}-{hi:g}", h1["hysteresis_of_max_pct"], "%", bool(lo <= h1["hysteresis_of_max_pct"] <= hi)))
+    res.rows.append(TargetRow("  same, % of output span (ours)", "-", h1["hysteresis_fso_pct"], "%", None))
+    h5 = repeat_hysteresis(_with(cfg1, fit1, set_mean), REPEAT_SEEDS)
+    res.rows.append(TargetRow("  same, % of highest output, average of the paper's 5 repeats (seeds 0-4)", "-",
+                              h5["hysteresis_of_max_pct"], "%", None))
+    res.notes.append(f"knit set fraction (mean of the per-press lognormal) fitted on 1 layer: {set_mean:.4g}; "
+                     "3, 6 and 12 layers take the same (same fabric)")
     for n in sorted(PAPER_CURVES):
         path = Path(PRESET_DIR) / f"fabric_{n}.yaml"
-        cfg = load_scene(path)
-        fit = calibrate(cfg)
+        cfg = _with(load_scene(path), set_mean=set_mean)
+        fit = fit1 if n == 1 else calibrate(cfg)
         curve = PAPER_CURVES[n]
         levels, x = loading_branch_x(cfg, curve.monotone_range_n)
         target = curve.r_ohm(levels)
@@ -147,6 +236,7 @@ def run() -> "CalibrationResult":
         rms = float(np.sqrt(np.mean((model - target) ** 2)) / span * 100.0)
         res.rows.append(TargetRow(f"{n} layer(s): stack law vs eq. {EQUATION[n]} (rms, % of span)", "<= 2", rms, "%", rms <= 2.0))
         res.preset_fields[str(path)] = {f"sensor.stack.{k}": (v if v > 1e-6 else 0.0) for k, v in fit.items()}
+        res.preset_fields[str(path)]["sensor.press.set_fraction_mean"] = float(set_mean)
     return res
 
 
@@ -154,7 +244,7 @@ def main() -> None:  # pragma: no cover - rewrites the presets' `stack:` lines
     import re
 
     for path, fields in run().preset_fields.items():
-        fit = {k.rsplit(".", 1)[1]: v for k, v in fields.items()}
+        fit = {k.rsplit(".", 1)[1]: v for k, v in fields.items() if k.startswith("sensor.stack.")}
         line = "  stack: {" + ", ".join(f"{k}: {v:.6g}" for k, v in fit.items()) + "}  # fit: piezotwin calibrate fabric --write"
         p = Path(path)
         p.write_text(re.sub(r"^  stack: .*$", line, p.read_text(), count=1, flags=re.M))

@@ -5,7 +5,8 @@ read by a 2-wire multimeter.
 Pipeline (ground truth and measurement both kept):
   pressure field [E,T,N] -> whole-sample-equivalent force per taxel f = N p A_taxel (N) -> taxel chain
   (sensors/fabric/kernels.py, reference sensors/fabric/reference.py): Prony creep -> Prandtl-Ishlinskii play bank
-  (return-point memory, slow recovery) -> Kirchhoff stack of in-layer resistances and Holm contact
+  (return-point memory, slow recovery) -> knit set (per-press, from the episode seed; slow fibre relaxation)
+  -> Kirchhoff stack of in-layer resistances and Holm contact
   resistances (Holm, Electric Contacts, 1967) -> taxel columns in parallel + lead resistance (2-wire)
   -> multimeter (autorange, finite counts, a reading every 1/readings_per_s, held between readings).
 The multimeter runs in numpy for both backends (integer counts: identical by construction).
@@ -16,12 +17,12 @@ from __future__ import annotations
 import numpy as np
 
 from sensors.base import ChannelSpec, LoadBatch, resolve_backend
-from sensors.fabric.reference import FabricState, fabric_chain_numpy, fabric_params
+from sensors.fabric.reference import FabricState, fabric_chain_numpy, fabric_params, press_draws
 
 OUTPUTS: dict[str, ChannelSpec] = {
     "force_taxel": ChannelSpec("N", ("time", "taxel"), "applied normal force per taxel (ground truth)"),
     "force": ChannelSpec("N", ("time",), "applied normal force on the sample (reference label)"),
-    "load_effective": ChannelSpec("N", ("time", "taxel"), "compaction load after creep and hysteresis (model state)"),
+    "load_effective": ChannelSpec("N", ("time", "taxel"), "compaction load after creep, hysteresis and knit set (model state)"),
     "resistance": ChannelSpec("ohm", ("time", "channel"), "true 2-wire resistance: stack + leads"),
     "dmm_counts": ChannelSpec("counts", ("time", "channel"), "multimeter display counts (held between readings)"),
     "dmm_range_ohm": ChannelSpec("ohm", ("time", "channel"), "multimeter range (full scale) of the reading"),
@@ -69,16 +70,20 @@ class FabricSensor:
         force_taxel = np.clip(load.pressure_pa, 0.0, None) * load.taxel_area_m2
         return self.run(force_taxel.astype(np.float32), seeds)
 
-    def chain(self, load_n: np.ndarray, state: FabricState | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """[E,T,N] whole-sample-equivalent force -> effective load and taxel conductance (backend's kernel)."""
+    def chain(self, load_n: np.ndarray, state: FabricState | None = None,
+              seeds: list[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """[E,T,N] whole-sample-equivalent force -> effective load and taxel conductance (backend's kernel);
+        seeds (one per episode) draw each press's contact area and knit set (None: the mean press)."""
+        draws = press_draws(seeds, self.p, load_n.shape[0])
         if self.backend == "numpy":
-            x, g, _ = fabric_chain_numpy(load_n, self.p, state)
+            x, g, _ = fabric_chain_numpy(load_n, self.p, state, draws)
             return x, g
         from sensors.fabric.kernels import FabricChainWarp
 
         ch = FabricChainWarp(self.p, load_n.shape[0], load_n.shape[2], self.device)
         if state is not None:
             ch.reset(state)
+        ch.set_draws(draws)
         return ch.run(load_n)
 
     def run(self, force_taxel_n: np.ndarray, seeds: list[int]) -> dict[str, np.ndarray]:
@@ -88,7 +93,7 @@ class FabricSensor:
             raise ValueError(f"load has {N} taxels; the pad has {self.n_taxels}")
         if len(seeds) != E:
             raise ValueError(f"need one seed per episode ({E}); got {len(seeds)}")
-        x, g = self.chain(np.ascontiguousarray(force_taxel_n * np.float32(N), np.float32))
+        x, g = self.chain(np.ascontiguousarray(force_taxel_n * np.float32(N), np.float32), seeds=seeds)
         r = 1.0 / g.astype(np.float64).sum(-1) + self.cfg.sensor.stack.lead_resistance_ohm
         dmm = multimeter_numpy(r, seeds, self.cfg.sensor.multimeter, self.cfg.sampling.sample_rate_hz)
         return {

@@ -7,12 +7,21 @@ Per taxel and sample step (dt = 1 / sample rate), with f the taxel's load scaled
   hysteresis z_k' = max(u - r_k, min(u + r_k, z_k)), then z_k' -> u + (z_k' - u) c  (slow recovery at rest);
              x = max(0, (1 - sum w) u + sum w_k z_k')  (Prandtl-Ishlinskii play bank: return-point memory;
              Brokate & Sprekels 1996). x is the effective compaction load (N).
+  press      a press starts when f rises through f_on after falling below f_off; it takes the episode's next
+             draw (kappa, psi): engaged contact area and knit set fraction (scenes/fabric_config.py,
+             FabricPressConfig; Holm 1967; Kawabata 1980)
+  knit set   x_pk' = max(x, x + (x_pk - x) c_set),  x_s = x + psi (x_pk' - x)   (the loops keep part of the peak
+             compaction on release; fibre stress relaxation with c_set = exp(-dt / T_set))
   stack      R_layer = r_inf + r_amp exp(-(x / F_l)^beta)                  (in-layer, knit compaction)
              R_c     = R_c0 (1 + x / F_c)^(-m),  m in [1/3, 1/2]          (Holm, Electric Contacts 1967:
              constriction resistance rho / 2a with the a-spot radius growing as F^m)
              R_stack = n_layers R_layer + (n_layers + 1) R_c              (Kirchhoff: layers and contacts in series)
-  column     R_taxel = n_taxels R_stack   (taxel columns in parallel give R_stack under a uniform press)
-Outputs: effective load x and conductance 1 / R_taxel per taxel, float32 like the Warp kernel.
+             (laws at x_s)
+  column     R_taxel = n_taxels R_stack / kappa   (taxel columns in parallel give R_stack under a uniform press;
+             the press's engaged area scales the conduction)
+Outputs: effective load x_s and conductance 1 / R_taxel per taxel, float32 like the Warp kernel.
+Press draws: `press_draws(seeds, p)` [E, M, 2] (kappa, psi) from each episode seed (stream 2); None = every
+press the mean one (kappa 1, psi = set_fraction_mean).
 """
 
 from __future__ import annotations
@@ -41,6 +50,13 @@ class FabricParams:
     contact_r0_ohm: float
     contact_force_n: float
     contact_exponent: float
+    press_on_n: float = 0.05
+    press_off_n: float = 0.02
+    area_sigma: float = 0.0
+    set_mean: float = 0.0
+    set_sigma: float = 0.0
+    set_decay: float = 1.0  # c_set = exp(-dt / T_set)
+    max_presses: int = 1
 
     @property
     def n_prony(self) -> int:
@@ -76,7 +92,32 @@ def fabric_params(cfg) -> FabricParams:
         contact_r0_ohm=st.contact_r0_ohm,
         contact_force_n=st.contact_force_n,
         contact_exponent=st.contact_exponent,
+        press_on_n=s.press.onset_force_n,
+        press_off_n=s.press.release_force_n,
+        area_sigma=s.press.area_sigma,
+        set_mean=s.press.set_fraction_mean,
+        set_sigma=s.press.set_fraction_sigma,
+        set_decay=float(np.exp(-dt / s.press.set_recovery_time_s)),
+        max_presses=s.press.max_presses,
     )
+
+
+def press_draws(seeds: list[int] | None, p: FabricParams, n_episodes: int | None = None) -> np.ndarray:
+    """[E, M, 2] float32 per-press draws (kappa, psi), M = p.max_presses: kappa = exp(area_sigma N(0,1)),
+    psi = set_mean exp(set_sigma N(0,1) - set_sigma^2 / 2) clipped to [0, 1] (lognormal of mean set_mean), from
+    np.random.default_rng([seed, 2]). seeds None: the mean press (kappa 1, psi set_mean) for n_episodes episodes."""
+    M = p.max_presses
+    if seeds is None:
+        out = np.empty((n_episodes or 1, M, 2), np.float32)
+        out[..., 0], out[..., 1] = 1.0, p.set_mean
+        return out
+    out = np.empty((len(seeds), M, 2), np.float64)
+    for e, s in enumerate(seeds):
+        rng = np.random.default_rng([int(s), 2])
+        out[e, :, 0] = np.exp(p.area_sigma * rng.standard_normal(M))
+        n = rng.standard_normal(M)
+        out[e, :, 1] = np.clip(p.set_mean * np.exp(p.set_sigma * n - 0.5 * p.set_sigma**2), 0.0, 1.0)
+    return out.astype(np.float32)
 
 
 def stack_resistance(x, p: FabricParams, layers: int | None = None):
@@ -90,26 +131,36 @@ def stack_resistance(x, p: FabricParams, layers: int | None = None):
 
 @dataclass
 class FabricState:
-    """State carried across calls (float32): prony [B, P], play [B, K]; B = episodes x taxels."""
+    """State carried across calls (float32): prony [B, P], play [B, K], press [B, 5] = (pressed 0/1, presses so
+    far, kappa, psi, x_peak N); B = episodes x taxels. Virgin: no press yet, kappa 1, psi 0."""
 
     prony_n: np.ndarray
     play_n: np.ndarray
+    press: np.ndarray
 
     @classmethod
     def zeros(cls, n: int, p: FabricParams) -> "FabricState":
-        return cls(np.zeros((n, p.n_prony), np.float32), np.zeros((n, p.n_play), np.float32))
+        press = np.zeros((n, 5), np.float32)
+        press[:, 2] = 1.0
+        return cls(np.zeros((n, p.n_prony), np.float32), np.zeros((n, p.n_play), np.float32), press)
 
 
 def fabric_chain_numpy(
-    load_n: np.ndarray, p: FabricParams, state: FabricState | None = None
+    load_n: np.ndarray, p: FabricParams, state: FabricState | None = None, draws: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray, FabricState]:
-    """load_n [E, T, N] float32 (whole-sample-equivalent force per taxel, N) -> effective load x [E,T,N] (N),
-    conductance [E,T,N] (S) per taxel column, final state."""
+    """load_n [E, T, N] float32 (whole-sample-equivalent force per taxel, N), draws [E, M, 2] (press_draws; None:
+    the mean press) -> effective load x_s [E,T,N] (N), conductance [E,T,N] (S) per taxel column, final state."""
     f32 = np.float32
     E, T, N = load_n.shape
     st = state if state is not None else FabricState.zeros(E * N, p)
     q = st.prony_n.reshape(E, N, p.n_prony).astype(f32).copy()
     z = st.play_n.reshape(E, N, p.n_play).astype(f32).copy()
+    ps = st.press.reshape(E, N, 5).astype(f32).copy()
+    pressed, npress, kappa, psi, xpk = (ps[..., i].copy() for i in range(5))
+    tab = press_draws(None, p, E) if draws is None else np.asarray(draws, f32)
+    M = tab.shape[1]
+    ep = np.arange(E)[:, None]
+    f_on, f_off, c_set = f32(p.press_on_n), f32(p.press_off_n), f32(p.set_decay)
     a, g = p.prony_decay.astype(f32), p.prony_fraction.astype(f32)
     r, w = p.play_threshold_n.astype(f32), p.play_weight.astype(f32)
     w_direct = f32(1.0) - w.sum(dtype=f32)
@@ -124,14 +175,24 @@ def fabric_chain_numpy(
     cond = np.empty((E, T, N), f32)
     for k in range(T):
         f = load_n[:, k, :].astype(f32)
+        start = (pressed == 0) & (f > f_on)
+        stop = (pressed == 1) & (f < f_off)
+        j = np.mod(npress.astype(np.int64), M)
+        kappa = np.where(start, tab[ep, j, 0], kappa)
+        psi = np.where(start, tab[ep, j, 1], psi)
+        npress = np.where(start, npress + f32(1.0), npress)
+        pressed = np.where(start, f32(1.0), np.where(stop, f32(0.0), pressed))
         q = a * q + g * (f32(1.0) - a) * f[..., None]
         u = f + q.sum(-1, dtype=f32)
         z = np.maximum(u[..., None] - r, np.minimum(u[..., None] + r, z))
         z = u[..., None] + (z - u[..., None]) * c
         x = np.maximum(w_direct * u + (w * z).sum(-1, dtype=f32), f32(0.0))
+        xpk = np.maximum(x, x + (xpk - x) * c_set)
+        x = x + psi * (xpk - x)
         r_layer = r_inf + r_amp * np.exp(-np.power(x * inv_fl, beta))
         r_c = rc0 * np.power(f32(1.0) + x * inv_fc, -m)
-        r_taxel = n_t * (n_l * r_layer + n_c * r_c)
+        r_taxel = n_t * (n_l * r_layer + n_c * r_c) / kappa
         xs[:, k] = x
         cond[:, k] = f32(1.0) / r_taxel
-    return xs, cond, FabricState(q.reshape(-1, p.n_prony), z.reshape(-1, p.n_play))
+    press = np.stack([pressed, npress, kappa, psi, xpk], -1).astype(f32).reshape(-1, 5)
+    return xs, cond, FabricState(q.reshape(-1, p.n_prony), z.reshape(-1, p.n_play), press)
