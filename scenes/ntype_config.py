@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from scenes.base import NonNegFloat, PositiveFloat, Strict
 
@@ -121,6 +121,17 @@ class NtypeSensorConfig(Strict):
     layer: NtypeLayerConfig = Field(default_factory=NtypeLayerConfig)
     dynamics: NtypeDynamicsConfig = Field(default_factory=NtypeDynamicsConfig)
     readout: NtypeReadoutConfig = Field(default_factory=NtypeReadoutConfig)
+
+    @model_validator(mode="after")
+    def _check(self) -> "NtypeSensorConfig":
+        e = self.element
+        flat = e.reading == "coplanar" or (e.reading == "eq8" and e.inclined_azimuth_deg in (0.0, 90.0))
+        if flat and e.filler_shear_modulus_pa == 0.0:
+            raise ValueError(
+                f"sensor.element.reading: '{e.reading}' puts the columns in one plane; with filler_shear_modulus_pa=0 "
+                "one shear direction has no stiffness (allowed: filler_shear_modulus_pa > 0 or reading 'crossed')"
+            )
+        return self
 
 
 # The paper's experiment (protocol kind "element_loads", ntype sect. 3.2): every element carries its own static
