@@ -73,6 +73,7 @@ class Mode:
     centres_col: int = 300  # Table 1 networks (36 inputs, ~2700 training frames)
     centres_win: int = 400  # sliding-window networks (shared over the 36 elements)
     rest_keep: float = 0.1  # share of unloaded element rows kept for the window networks' training
+    win_rows_max: int | None = None  # cap on the window networks' training rows (random subset; None = all)
     min_abs_ref: float = 0.5  # N, eq. 14 over components with |F| >= this
     kmeans_iter: int = 100
     cnn: dict[str, Any] = field(default_factory=lambda: {"max_epochs": 200, "patience": 20, "batch_size": 64, "lr": 2e-3})
@@ -80,6 +81,7 @@ class Mode:
     emlp: dict[str, Any] = field(default_factory=dict)  # ElementMLP hyper-parameters (its DEFAULTS otherwise)
     tasks: tuple[str, ...] = TASKS  # the paper's experiment first, then our harder task
     paper_scene: list[str] = field(default_factory=list)  # overrides of the "paper" task (after PAPER_PROTOCOL)
+    paper_emlp: dict[str, Any] = field(default_factory=dict)  # ElementMLP overrides on the "paper" task (36 loaded rows a frame)
 
     @property
     def models(self) -> tuple[str, ...]:  # what --models can pick (the CLI checks against this, like velostat)
@@ -87,11 +89,12 @@ class Mode:
 
 
 def _modes() -> dict[str, Mode]:
-    full = Mode("full", [])
+    full = Mode("full", [], win_rows_max=40000, paper_emlp={"batch_size": 1024, "max_epochs": 100})
     quick = Mode("quick", ["generation.episodes=60", "generation.episodes_per_shard=30", "generation.threads=1"],
                  centres_col=150, centres_win=200, kmeans_iter=30,
                  cnn={"max_epochs": 60, "patience": 10, "batch_size": 128, "lr": 3e-3},
-                 paper_scene=["generation.episodes=60", "generation.episodes_per_shard=30"])
+                 paper_scene=["generation.episodes=60", "generation.episodes_per_shard=30"], win_rows_max=15000,
+                 paper_emlp={"batch_size": 1024, "max_epochs": 60, "n_seeds": 3})
     tiny = Mode("tiny", ["generation.episodes=12", "generation.episodes_per_shard=12", "generation.threads=1",
                          "protocol.duration_s=1.0"], paper_scene=["generation.episodes=12", "generation.episodes_per_shard=12",
                                                                   "protocol.duration_s=5"],
@@ -266,7 +269,7 @@ def _run(md: Mode, mode: str, out: Path, data: Path, seqs: list, fp: dict, folds
     X = [s.x.reshape(len(s), n_el, 3) for s in seqs]
     Y = [s.y.reshape(len(s), n_el, 3) for s in seqs]
     rest_ohm, beta = sensor_law(data)
-    emlp = {"mirror": SYMMETRY_OF_READING[sensor_reading(data)], **md.emlp}
+    emlp = {"mirror": SYMMETRY_OF_READING[sensor_reading(data)], **md.emlp, **(md.paper_emlp if task == "paper" else {})}
     spreads = list(md.spreads)
     res_col = {s: [] for s in spreads}  # per spread: per-fold error dicts
     res_win = {w: {s: [] for s in spreads} for w in md.windows}
@@ -301,7 +304,10 @@ def _run(md: Mode, mode: str, out: Path, data: Path, seqs: list, fp: dict, folds
         if "rbf_win" in want:  # Tables 3/4: shared sliding-window network
             t0 = time.perf_counter()
             Ytr_rows = Ytr.reshape(-1, 3)
-            rows = _balanced_rows(Ytr_rows, md.rest_keep, np.random.default_rng(seed + fi))
+            rng_rows = np.random.default_rng(seed + fi)
+            rows = _balanced_rows(Ytr_rows, md.rest_keep, rng_rows)
+            if md.win_rows_max is not None and len(rows) > md.win_rows_max:
+                rows = np.sort(rng_rows.choice(rows, md.win_rows_max, replace=False))
             for w in md.windows:
                 A = window_inputs(Ntr, w, pad)[rows]
                 At = window_inputs(Nte, w, pad)
