@@ -81,19 +81,25 @@ def scan_apparent(R: np.ndarray, elements_x: int, elements_y: int, scheme: str, 
 
 def _scan_chunk(R, upper, lower, U, L, N, scheme, vs, r_on, r_ref):
     F = R.shape[0]
-    A0 = _laplacian(crossbar(R, upper, lower, U, L))
     g_on = 1.0 / max(r_on, 1e-9)  # R_on = 0: an ideal switch (stiff but exact in float64 at 1e-9 ohm)
     g_read = 1.0 / (r_on + r_ref)
     idx = np.arange(N)
     u_sel, l_sel = upper.ravel(), lower.ravel()  # [M*3] selections, in output order
     if scheme == "feedback":
-        A = A0.copy()
-        A[:, idx, idx] += g_on
-        B = np.zeros((F, N, U))
-        B[:, np.arange(U), np.arange(U)] = g_on * vs  # right-hand side for driving each upper wire
-        V = np.linalg.solve(A, B)  # [F, N, U]: node voltages with upper wire u driven
-        I = g_on * V[:, U + l_sel, u_sel]  # current of the read wire into the virtual ground
+        # one matrix per frame, [[D_u, -G], [-G^T, D_l]] with D = diag(wire conductances + g_on); the lower
+        # wires' voltages with upper wire u driven are g_on vs (S^-1 G^T D_u^-1)[:, u], S = D_l - G^T D_u^-1 G
+        # (the Schur complement, half the size of the full system)
+        G = crossbar(R, upper, lower, U, L)
+        du = G.sum(2) + g_on  # [F, U]
+        dl = G.sum(1) + g_on  # [F, L]
+        Bt = np.swapaxes(G, 1, 2) / du[:, None, :]  # [F, L, U] = G^T D_u^-1
+        S = -Bt @ G
+        S[:, np.arange(L), np.arange(L)] += dl
+        X = np.linalg.solve(S, Bt)
+        V = g_on * vs * X  # [F, L, U]: lower-wire voltages with upper wire u driven
+        I = g_on * V[:, l_sel, u_sel]  # current of the read wire into the virtual ground
         return (vs / I).reshape(F, -1, 3)
+    A0 = _laplacian(crossbar(R, upper, lower, U, L))
     if scheme == "grounded":
         A = np.repeat(A0[:, None], L, 1)  # [F, L, N, N]: one matrix per read (lower) wire
         A[..., idx, idx] += g_on
