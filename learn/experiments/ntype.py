@@ -349,7 +349,13 @@ def _run(md: Mode, mode: str, out: Path, data: Path, seqs: list, fp: dict, folds
                 keep_pred["map_cnn"] = p
         if last:
             keep_pred["ref"] = Yte
-        log(f"{task}: fold {fi + 1}/{len(folds)} done ({time.perf_counter() - t_all:.0f} s)")
+        note = ""
+        if res_win.get(5) and res_win[5][spreads[0]]:
+            b5 = min(spreads, key=lambda s: _mean3(res_win[5][s][-1]))
+            note += f"; rbf_w5 (spread {b5:g}) " + " / ".join(fmt(res_win[5][b5][-1][f"E_{c}"], 2) for c in COMPONENTS)
+        if res_emlp:
+            note += "; elem_mlp " + " / ".join(fmt(res_emlp[-1][f"E_{c}"], 2) for c in COMPONENTS)
+        log(f"{task}: fold {fi + 1}/{len(folds)} done ({time.perf_counter() - t_all:.0f} s{note})")
 
     results: dict[str, Any] = {"mean": _avg(res_mean)}
     if "rbf_col" in want:
