@@ -64,10 +64,13 @@ class ProtocolConfig(Strict):
     at a random position to a force U[amplitude_min, amplitude_max] (force control), then strokes tangentially
     in a random direction to a target shear force of U[0, shear_ratio_max] x friction x normal force
     (Coulomb stick-slip; above 1 it slips), holds, then releases (ntype).
+    kind = "element_loads" (force control, the ntype paper's experiment, sect. 3.2): every frame, each array
+    element carries its own static 3-D force, components U[amplitude_min, amplitude_max]
+    (simulate/protocols/element_loads.py; scenes/ntype_config.py PAPER_PROTOCOL).
     """
 
     kind: Literal[
-        "sinusoid", "hold", "staircase", "press_stroke",
+        "sinusoid", "hold", "staircase", "press_stroke", "element_loads",
         "velostat_steps", "velostat_staircase", "velostat_calibration", "velostat_calibration_sweep", "velostat_mix",
     ] = "sinusoid"
     control: Literal["displacement", "force"] = "displacement"

@@ -16,15 +16,27 @@ from scenes.base import NonNegFloat, PositiveFloat, Strict
 
 
 class NtypeElementConfig(Strict):
-    """One N-type element: a normal column (0 deg) and two inclined columns (+-45 deg from the normal).
+    """One N-type element: a normal column "2" (1 cm) and two inclined columns "3" and "1" (sqrt2 cm, 45 deg
+    from column 2; ntype sect. 2.2), read as R_x, R_y, R_z = columns 3, 1, 2 (ntype eq. 1-3).
 
-    Column directions (unit vectors from the bottom to the top electrode):
-      normal   n_z  = (0, 0, 1)
-      R_x col  n_+  = ( sin(t) cos(a), sin(t) sin(a), cos(t))   (paper's column "3")
-      R_y col  n_-  = (-sin(t) cos(a), sin(t) sin(a), cos(t))   (paper's column "1")
-    t = inclination_deg (45 in the paper), a = inclined_azimuth_deg: the azimuth of the inclined columns'
-    projections off the x axis (the paper's phi in eq. 8, value not given). At a = 0 the three columns are
-    coplanar (an "N" in the x-z plane) and no column strains under F_y to first order.
+    Column directions (unit vectors from the bottom to the top electrode; t = inclination_deg, s = sin t,
+    c = cos t), by `reading` of Figure 1 / eq. 8 (the paper gives no drawing with coordinates):
+      "crossed" (default): each element has two upper electrodes ("4", "5") and two lower ones ("6", "7")
+                 and every column joins one upper to one lower wire, the upper wires perpendicular to the lower
+                 ones (Figure 1). A three-stroke "N" over 2 + 2 electrodes (1: 6 -> 4, 2: 4 -> 7, 3: 7 -> 5)
+                 that is not flat: column 3 leans in the x-z plane, column 1 in the y-z plane,
+                 n_3 = (-s, 0, c), n_1 = (0, -s, c). A positive F_x (F_y) shortens column 3 (1), the paper's
+                 R_x (R_y) in [32, 50] kOhm falling under F in [0, 4.8] N. Column 3 observes F_x and F_z,
+                 column 1 F_y and F_z, column 2 F_z only (to first order; see sensors/ntype/model.py).
+      "coplanar": a flat "N" in the x-z plane, n_3 = (-s, 0, c), n_1 = (s, 0, c): F_x moves columns 3 and 1
+                 in opposite directions and no column observes F_y (only through the crosstalk of the cover).
+      "eq8":     eq. 8 taken literally: the inclined columns' projections at +-phi from the x axis
+                 (phi = inclined_azimuth_deg), n_{3,1} = (-s cos phi, -+s sin phi, c): each inclined column
+                 observes F_x and F_y together (the paper's "strong coupling between F_x and F_y").
+    The element's top moves as one (Delta l_i ~ the electrode displacement, ntype sect. 2.3), resisted by the
+    three columns and the insulating GD-401 rubber that fills the rest of its cell (the filler, a bonded
+    elastic block: shear G A / h, compression E A / h; Timoshenko & Goodier 1970), so the shear coupling of
+    the normal column is that of the column geometry against the block.
     """
 
     elements_x: Annotated[int, Field(ge=1, le=64)] = 6  # ntype: 6 x 6 array
@@ -35,8 +47,10 @@ class NtypeElementConfig(Strict):
     normal_length_m: PositiveFloat = 0.010  # ntype sect. 2.2: 1 cm
     inclined_length_m: PositiveFloat = 0.014142135623730951  # ntype sect. 2.2: sqrt(2) cm
     inclination_deg: Annotated[float, Field(gt=0, lt=90)] = 45.0  # ntype sect. 2.2
-    inclined_azimuth_deg: Annotated[float, Field(ge=0, le=90)] = 60.0  # estimate: F_y observable, normal column still most sensitive to F_z
-    filler_stiffness_n_per_m: NonNegFloat = 300.0  # estimate: insulating GD-401 filler around the element, isotropic
+    reading: Literal["crossed", "coplanar", "eq8"] = "crossed"  # estimate: Figure 1 read as above (crossed wires)
+    inclined_azimuth_deg: Annotated[float, Field(ge=0, le=90)] = 45.0  # "eq8" only: eq. 8's phi, not given; estimate: 45 puts the two projections at right angles like the wires
+    filler_youngs_modulus_pa: NonNegFloat = 6.1e6  # estimate: GD-401 filler as stiff as the conductive rubber (ntype sect. 2.1 gives only the latter)
+    filler_shear_modulus_pa: NonNegFloat = 2.05e6  # estimate: likewise, the paper's 2.05 MPa
 
     @property
     def n_elements(self) -> int:
@@ -52,7 +66,7 @@ class NtypeResistanceConfig(Strict):
 
     rest_normal_ohm: PositiveFloat = 25e3  # ntype sect. 3.2: top of the 16-25 kOhm range (unloaded)
     rest_inclined_ohm: PositiveFloat = 50e3  # ntype sect. 3.2: top of the 32-50 kOhm range (unloaded)
-    piezo_coefficient: float = 0.7  # estimate: beta of rho(e) = rho0 exp(beta e); places 4.8 N of F_z near 16 kOhm
+    piezo_coefficient: float = 215.0  # estimate: beta of rho(e) = rho0 exp(beta e); places 4.8 N of F_z (0.2 % strain of the stiff cell) at 16 kOhm
     min_strain: Annotated[float, Field(gt=-0.9, lt=0)] = -0.6  # estimate: strain clamp (column fully squeezed)
 
 
@@ -77,8 +91,25 @@ class NtypeDynamicsConfig(Strict):
 
 
 class NtypeReadoutConfig(Strict):
-    """Scanning ohmmeter over the 6 x 6 x 3 columns (upper wire x lower wire, ntype sect. 2.2)."""
+    """Scan of the 6 x 6 x 3 columns through the upper and lower wires that cross at right angles (ntype
+    sect. 2.2, Figure 1): a passive resistor matrix of 2 x 6 upper and 2 x 6 lower wires (sensors/ntype/scan.py).
+    One column at a time: its upper wire is driven at `drive_v`, its lower wire read; the others are
 
+      "ideal"     not there (an ohmmeter per column, no matrix: the former readout, for comparison)
+      "floating"  left open: sneak paths through every other column (reference resistor divider)
+      "grounded"  grounded through the multiplexer: sneak currents into the read wire partly drain away
+                  (reference resistor divider on the read wire)
+      "feedback"  grounded, and the read wire held at virtual ground by an op-amp (zero-potential method):
+                  only the multiplexer on-resistance leaves a residue
+    Source: D'Alessio, "Measurement errors in the scanning of piezoresistive sensors arrays", Sens. Actuators A
+    72 (1999) 71-76; the paper says only "by scanning the circuit" (sect. 3.2), so the scheme is an estimate.
+    Then relative noise + resolution on the apparent resistance.
+    """
+
+    scan: Literal["ideal", "floating", "grounded", "feedback"] = "feedback"  # estimate: the usual suppression for a resistive matrix
+    drive_v: PositiveFloat = 5.0  # estimate: scan voltage (only ratios matter without noise in volts)
+    switch_on_ohm: NonNegFloat = 100.0  # estimate: analog multiplexer on-resistance (CD4067-class, ~100 ohm at 5 V)
+    reference_ohm: PositiveFloat = 1e3  # estimate: a low sense resistor keeps the read wire near ground (what grounding needs to suppress; ~1/30 of a column)
     noise_fraction: NonNegFloat = 0.002  # estimate: relative rms noise per reading
     resolution_ohm: NonNegFloat = 1.0  # estimate: readout quantum (0 disables)
 
@@ -94,9 +125,20 @@ class NtypeSensorConfig(Strict):
     @model_validator(mode="after")
     def _check(self) -> "NtypeSensorConfig":
         e = self.element
-        if e.inclined_azimuth_deg == 0.0 and e.filler_stiffness_n_per_m == 0.0:
+        flat = e.reading == "coplanar" or (e.reading == "eq8" and e.inclined_azimuth_deg in (0.0, 90.0))
+        if flat and e.filler_shear_modulus_pa == 0.0:
             raise ValueError(
-                "sensor.element.inclined_azimuth_deg: 0 with filler_stiffness_n_per_m=0 leaves F_y without stiffness "
-                "(allowed: azimuth > 0 or filler stiffness > 0)"
+                f"sensor.element.reading: '{e.reading}' puts the columns in one plane; with filler_shear_modulus_pa=0 "
+                "one shear direction has no stiffness (allowed: filler_shear_modulus_pa > 0 or reading 'crossed')"
             )
         return self
+
+
+# The paper's experiment (protocol kind "element_loads", ntype sect. 3.2): every element carries its own static
+# 3-D force, each component in [0, 4.8] N; 150 episodes x 20 frames = 3000 samples. One frame a second:
+# estimate, long beside the 0.3 s lag so that each sample is a settled reading (the paper's are static).
+# (frequencies_hz is unused by this kind; set below the 1 Hz rate's limit.)
+PAPER_PROTOCOL = [
+    "protocol.kind=element_loads", "protocol.amplitude_min=0", "protocol.amplitude_max=4.8",
+    "protocol.settle_s=0", "protocol.duration_s=20", "sampling.sample_rate_hz=1", "protocol.frequencies_hz=[0.05]",
+]

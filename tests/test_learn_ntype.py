@@ -204,3 +204,15 @@ def test_experiment_ntype_models_subset(tmp_path):
     m = json.loads((out / "metrics.json").read_text())
     assert set(m["models"]) == {"mean", "rbf_col"}
     assert (out / "report.md").read_text()
+
+
+def test_symmetric_frames_transpose_and_mirror_y():
+    """The crossed reading's symmetry: x <-> y with R_x <-> R_y and F_x <-> F_y; twice is the identity."""
+    from learn.models.element_mlp import symmetric_frames
+
+    E = np.arange(2 * 36 * 3, dtype=float).reshape(2, 36, 3)
+    Et, Ft = symmetric_frames(E, E, "transpose")
+    np.testing.assert_array_equal(Et[0, 1 * 6 + 4], E[0, 4 * 6 + 1][[1, 0, 2]])  # element (iy=1, ix=4) <- (4, 1)
+    np.testing.assert_array_equal(symmetric_frames(Et, Ft, "transpose")[1], E)
+    Ey, Fy = symmetric_frames(E, E, "mirror_y")
+    np.testing.assert_array_equal(Fy[1, 0], E[1, 30] * [1, -1, 1])  # element (0, 0) <- (5, 0), F_y -> -F_y

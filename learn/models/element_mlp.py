@@ -12,8 +12,10 @@
               loss (p - y)^2 / (|y| + ``rel_floor``), close to the relative error eq. 14 for loaded components
               and to a plain squared error near zero; AdamW + cosine schedule, early stopping on held-out
               training episodes; trained on every loaded element row plus ``rest_keep`` of the unloaded ones.
-  symmetry    the array is mirror-symmetric in x when the R_x and R_y columns swap (their azimuths are
-              mirror images) and F_x changes sign: every training frame is added mirrored.
+  symmetry    every training frame is added transformed by the array's symmetry (``mirror``, chosen from the
+              column reading, scenes/ntype_config.py): "transpose" (the "crossed" reading: x <-> y with
+              R_x <-> R_y and F_x <-> F_y), "mirror_x" ("coplanar": x -> -x, R_x <-> R_y, F_x -> -F_x),
+              "mirror_y" ("eq8": y -> -y, R_x <-> R_y, F_y -> -F_y), or "none".
   ensemble    ``n_seeds`` nets (different seeds and validation episodes), predictions averaged.
 Static (the current frame only), like the paper's RBF.
 """
@@ -26,7 +28,7 @@ import numpy as np
 import torch
 from torch import nn
 
-__all__ = ["ElementMLP", "invert_strain", "square_window", "mirror_x"]
+__all__ = ["ElementMLP", "invert_strain", "square_window", "mirror_x", "symmetric_frames", "SYMMETRY_OF_READING"]
 
 GRID = (6, 6)
 
@@ -69,6 +71,29 @@ def mirror_x(E: np.ndarray, F: np.ndarray, grid: tuple[int, int] = GRID) -> tupl
     return np.ascontiguousarray(Em), np.ascontiguousarray(Fm)
 
 
+def symmetric_frames(E: np.ndarray, F: np.ndarray, kind: str, grid: tuple[int, int] = GRID) -> tuple[np.ndarray, np.ndarray]:
+    """The frames under the array's symmetry `kind` ("mirror_x", "mirror_y", "transpose"); columns (R_x, R_y, R_z)."""
+    if kind == "mirror_x":
+        return mirror_x(E, F, grid)
+    n = len(E)
+    ny, nx = grid
+    e, f = E.reshape(n, ny, nx, 3), F.reshape(n, ny, nx, 3)
+    if kind == "mirror_y":
+        Em = e[:, ::-1][..., [1, 0, 2]]
+        Fm = f[:, ::-1] * np.array([1.0, -1.0, 1.0])
+    elif kind == "transpose":
+        if ny != nx:
+            raise ValueError("transpose symmetry needs a square array")
+        Em = np.swapaxes(e, 1, 2)[..., [1, 0, 2]]
+        Fm = np.swapaxes(f, 1, 2)[..., [1, 0, 2]]
+    else:
+        raise ValueError(f"unknown symmetry '{kind}' (allowed: mirror_x, mirror_y, transpose)")
+    return np.ascontiguousarray(Em.reshape(n, ny * nx, 3)), np.ascontiguousarray(Fm.reshape(n, ny * nx, 3))
+
+
+SYMMETRY_OF_READING = {"crossed": "transpose", "coplanar": "mirror_x", "eq8": "mirror_y"}
+
+
 class ElementMLP:
     """fit(R episodes [T, 36, 3] ohm, F episodes [T, 36, 3] N) -> self; predict(R [N, 36, 3]) -> F [N, 36, 3]."""
 
@@ -97,8 +122,9 @@ class ElementMLP:
         return nn.Sequential(nn.Linear(n_in, k), nn.GELU(), nn.Linear(k, k), nn.GELU(), nn.Linear(k, 3))
 
     def _rows(self, E: np.ndarray, F: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        if self.h["mirror"]:
-            Em, Fm = mirror_x(E, F)
+        kind = {True: "mirror_x", False: "none"}.get(self.h["mirror"], self.h["mirror"])
+        if kind != "none":
+            Em, Fm = symmetric_frames(E, F, kind)
             E, F = np.concatenate([E, Em]), np.concatenate([F, Fm])
         A, Y = self._features(E), F.reshape(-1, 3)
         loaded = np.abs(Y).max(1) > 0.02

@@ -9,7 +9,8 @@ Pipeline over (episode x element), ground truth and measurement both kept:
   -> element chain (Warp kernel sensors/ntype/kernels.py, numpy reference sensors/ntype/reference.py):
      viscoelastic lag, u = K^-1 F with K = sum_j k_j n_j n_j^T (+ filler), e_j = n_j.u / l_j,
      R_j = rho(e_j) l_j^2 (1 + e_j)^2 / V_j (ntype eq. 1; Timoshenko & Goodier 1970 for the columns)
-  -> scanning ohmmeter: relative noise + resolution (resistance_measured).
+  -> scan of the resistor matrix (sensors/ntype/scan.py: upper x lower wires, sneak paths and their
+     suppression; "ideal" = an ohmmeter per column), then relative noise + resolution (resistance_measured).
 Column order everywhere: (R_x, R_y, R_z) = the paper's columns "3", "1", "2", so resistance[..., c]
 pairs with force[..., c] as in the paper's 36 x 3 samples.
 """
@@ -23,8 +24,9 @@ import numpy as np
 from scenes.config import SceneConfig
 from sensors.base import ChannelSpec, LoadBatch, resolve_backend
 from sensors.ntype.reference import NtypeParams, ntype_chain_numpy
+from sensors.ntype.scan import scan_apparent
 
-COLUMNS = ("3: R_x (+45 deg)", "1: R_y (-45 deg)", "2: R_z (normal)")
+COLUMNS = ("3: R_x (inclined)", "1: R_y (inclined)", "2: R_z (normal)")
 
 OUTPUTS: dict[str, ChannelSpec] = {
     "force_element": ChannelSpec("N", ("time", "element", "xyz"), "force applied on each element's cell (label; z compressive)"),
@@ -33,16 +35,36 @@ OUTPUTS: dict[str, ChannelSpec] = {
     "displacement": ChannelSpec("m", ("time", "element", "xyz"), "top-electrode displacement, world frame (z up)"),
     "strain": ChannelSpec("1", ("time", "element", "column"), "column strain (negative = compression); columns R_x, R_y, R_z"),
     "resistance": ChannelSpec("ohm", ("time", "element", "column"), "true column resistance; columns R_x, R_y, R_z"),
-    "resistance_measured": ChannelSpec("ohm", ("time", "element", "column"), "scanned resistance (noise, resolution)"),
+    "resistance_measured": ChannelSpec("ohm", ("time", "element", "column"), "apparent resistance read by scanning the wire matrix (sneak paths, noise, resolution)"),
 }
 
 
 def column_normals(cfg: SceneConfig) -> np.ndarray:
-    """[3, 3] unit directions of columns (R_x, R_y, R_z), bottom to top electrode."""
+    """[3, 3] unit directions of columns (R_x, R_y, R_z) = ("3", "1", "2"), bottom to top electrode, for the
+    element's `reading` of Figure 1 / eq. 8 (scenes/ntype_config.py NtypeElementConfig)."""
     el = cfg.sensor.element
-    t, a = math.radians(el.inclination_deg), math.radians(el.inclined_azimuth_deg)
+    t = math.radians(el.inclination_deg)
     s, c = math.sin(t), math.cos(t)
-    return np.array([[s * math.cos(a), s * math.sin(a), c], [-s * math.cos(a), s * math.sin(a), c], [0.0, 0.0, 1.0]])
+    if el.reading == "crossed":
+        n3, n1 = (-s, 0.0, c), (0.0, -s, c)
+    elif el.reading == "coplanar":
+        n3, n1 = (-s, 0.0, c), (s, 0.0, c)
+    else:  # "eq8": projections at +-phi from the x axis
+        a = math.radians(el.inclined_azimuth_deg)
+        n3, n1 = (-s * math.cos(a), -s * math.sin(a), c), (-s * math.cos(a), s * math.sin(a), c)
+    return np.array([n3, n1, (0.0, 0.0, 1.0)])
+
+
+def cell_stiffness(cfg: SceneConfig) -> np.ndarray:
+    """[3, 3] stiffness (N/m) of the filler block around one element: the element's cell (pitch x pitch, the
+    array's thickness h) less the three columns, bonded top and bottom: shear G A / h in x and y,
+    compression E A / h in z (Timoshenko & Goodier 1970; the bonded layer's shape-factor stiffening is
+    left out, an estimate)."""
+    el = cfg.sensor.element
+    area = cfg.pad.size_x_m / el.elements_x * cfg.pad.size_y_m / el.elements_y - 3 * el.column_area_m2
+    h = el.normal_length_m
+    g, e = el.filler_shear_modulus_pa * area / h, el.filler_youngs_modulus_pa * area / h
+    return np.diag([g, g, e])
 
 
 def ntype_params(cfg: SceneConfig) -> NtypeParams:
@@ -50,7 +72,10 @@ def ntype_params(cfg: SceneConfig) -> NtypeParams:
     n = column_normals(cfg)
     lengths = np.array([el.inclined_length_m, el.inclined_length_m, el.normal_length_m])
     k = el.youngs_modulus_pa * el.column_area_m2 / lengths
-    K = sum(k[j] * np.outer(n[j], n[j]) for j in range(3)) + el.filler_stiffness_n_per_m * np.eye(3)
+    K = sum(k[j] * np.outer(n[j], n[j]) for j in range(3)) + cell_stiffness(cfg)
+    if abs(np.linalg.det(K)) < 1e-12 * np.abs(K).max() ** 3:
+        raise ValueError("sensor.element: columns and filler leave the element without stiffness in some direction "
+                         "(allowed: filler moduli > 0 or a reading whose columns span x, y, z)")
     dt = 1.0 / cfg.sampling.sample_rate_hz
     return NtypeParams(
         normals=n,
@@ -152,11 +177,12 @@ class NtypeSensor:
             from sensors.ntype.kernels import ntype_chain_warp
 
             disp, strain, res, _ = ntype_chain_warp(electrode_force, self.p, self.device)
-        rd = self.cfg.sensor.readout
+        rd, el = self.cfg.sensor.readout, self.cfg.sensor.element
+        seen = scan_apparent(res, el.elements_x, el.elements_y, rd.scan, rd.drive_v, rd.switch_on_ohm, rd.reference_ohm)
         meas = np.empty_like(res)
         for e, s in enumerate(seeds):
             rng = np.random.default_rng(np.random.SeedSequence(int(s), spawn_key=(1,)))
-            meas[e] = res[e] * (1.0 + rd.noise_fraction * rng.standard_normal(res[e].shape))
+            meas[e] = seen[e] * (1.0 + rd.noise_fraction * rng.standard_normal(res[e].shape))
         if rd.resolution_ohm > 0:
             meas = np.round(meas / rd.resolution_ohm) * rd.resolution_ohm
         f32 = np.float32
@@ -186,4 +212,8 @@ class NtypeSensor:
             "rest_resistance_ohm": self.p.rest_ohm,
             "piezo_coefficient": rs.piezo_coefficient,
             "control": self.cfg.protocol.control,
+            "reading": el.reading,
+            "scan": self.cfg.sensor.readout.scan,
+            "switch_on_ohm": self.cfg.sensor.readout.switch_on_ohm,
+            "reference_ohm": self.cfg.sensor.readout.reference_ohm,
         }

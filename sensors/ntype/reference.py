@@ -60,3 +60,50 @@ def ntype_chain_numpy(
         one = f32(1.0) + e
         disp[:, k], strain[:, k], res[:, k] = u, e, r0 * one * one * np.exp(beta * e)
     return disp, strain, res, q.reshape(E * M, 3)
+
+
+def scan_kirchhoff_numpy(R: np.ndarray, upper: np.ndarray, lower: np.ndarray, U: int, L: int, scheme: str,
+                         drive_v: float, switch_on_ohm: float, reference_ohm: float) -> np.ndarray:
+    """Direct Kirchhoff reference of sensors/ntype/scan.py for one frame R [M, 3] (ohm): for each column, list
+    every resistor of the circuit (the 3 M columns between wire nodes, the multiplexer and reference resistors
+    from wire nodes to the source / ground nodes), stamp them one by one into the nodal matrix with the source
+    and ground as extra nodes, fix those two potentials and solve; then read the scheme's quantity.
+    Source: D'Alessio, Sens. Actuators A 72 (1999) 71-76."""
+    M = R.shape[0]
+    src, gnd = U + L, U + L + 1
+    cols = [(int(upper[m, j]), U + int(lower[m, j]), float(R[m, j])) for m in range(M) for j in range(3)]
+    out = np.empty((M, 3))
+    for m in range(M):
+        for j in range(3):
+            u, l = int(upper[m, j]), U + int(lower[m, j])
+            res = list(cols)
+            for w in range(U + L):
+                if w == u:
+                    res.append((w, src, switch_on_ohm))
+                elif w == l:
+                    extra = 0.0 if scheme == "feedback" else reference_ohm
+                    res.append((w, gnd, switch_on_ohm + extra))
+                elif scheme in ("grounded", "feedback"):
+                    res.append((w, gnd, switch_on_ohm))
+            n = U + L + 2
+            A = np.zeros((n, n))
+            for a, b, r in res:
+                g = 1.0 / max(r, 1e-9)
+                A[a, a] += g
+                A[b, b] += g
+                A[a, b] -= g
+                A[b, a] -= g
+            # Dirichlet rows for the source and ground nodes
+            rhs = np.zeros(n)
+            for node, pot in ((src, drive_v), (gnd, 0.0)):
+                A[node] = 0.0
+                A[node, node] = 1.0
+                rhs[node] = pot
+            v = np.linalg.solve(A, rhs)
+            if scheme == "feedback":
+                i = (v[l] - v[gnd]) / max(switch_on_ohm, 1e-9)
+                out[m, j] = drive_v / i
+            else:
+                v_out = v[l] * reference_ohm / (switch_on_ohm + reference_ohm)
+                out[m, j] = reference_ohm * (drive_v - v_out) / v_out
+    return out

@@ -5,11 +5,18 @@
    normal, 32-50 kOhm inclined over 0-4.8 N).
 2. Crosstalk: a 4.8 N press moved 0, 1, 2, 3, 4 cm away from the element; the element's normal-column
    change relative to the centred press (paper: significant within 1-2 cm, sect. 3.3).
-3. MuJoCo: a batch of default press_stroke episodes; the shear the stick-slip contact delivers against the
-   protocol's target, and the ranges of labels and resistances in that data.
+3. MuJoCo: a batch of default press_stroke episodes (our harder task); the shear the stick-slip contact delivers
+   against the protocol's target, and the ranges of labels and resistances in that data; the same ranges on the
+   paper's experiment (protocol kind element_loads, scenes/ntype_config.py PAPER_PROTOCOL), side by side.
+4. Column readings of Figure 1 / eq. 8 (crossed, coplanar, eq8): each column's change under 4.8 N of each
+   component alone, i.e. which component each column can observe.
+5. Scanned readout: mean deviation of the scanned from the true resistances on the paper-protocol data, and an
+   unloaded element's reading change when all others load, per scan scheme (ideal, floating, grounded, feedback).
 """
 
 from __future__ import annotations
+
+import json
 
 import numpy as np
 
@@ -98,9 +105,68 @@ def mujoco_dataset_stats(cfg: SceneConfig, episodes: int = 24, backend: str = "w
     }
 
 
+def paper_protocol_stats(cfg: SceneConfig, episodes: int = 10, backend: str = "warp", device: str = "cpu") -> dict:
+    """Labels and resistances on the paper's experiment (element_loads), and the scan schemes on the same loads."""
+    from scenes.ntype_config import PAPER_PROTOCOL
+    from sensors.data.manifest import episode_seed
+    from simulate.contact.load_field import run_episodes
+    from simulate.protocols.indenter import make_episode_protocol
+    c = load_scene_from(cfg, PAPER_PROTOCOL)
+    seeds = [episode_seed(c.generation.root_seed, k) for k in range(episodes)]
+    batch = run_episodes(c, [make_episode_protocol(c, s) for s in seeds])
+    out = make_sensor(c, backend, device).run_load(batch, seeds)
+    lab = out["force_element"].reshape(-1, 3)
+    res = out["resistance"].reshape(-1, 3) / 1e3
+    pct = lambda a: (float(np.percentile(a, 1)), float(np.percentile(a, 99)))  # noqa: E731
+    scans = {}
+    from sensors.ntype.scan import scan_apparent
+
+    el, rd = c.sensor.element, c.sensor.readout
+    R = out["resistance"].astype(np.float64)
+    R0 = np.ones((1, el.n_elements, 3)) * make_sensor(c, "numpy").p.rest_ohm
+    R1 = R0 * 0.7
+    R1[0, el.n_elements // 2] = R0[0, el.n_elements // 2]
+    for sch in ("ideal", "floating", "grounded", "feedback"):
+        a = scan_apparent(R, el.elements_x, el.elements_y, sch, rd.drive_v, rd.switch_on_ohm, rd.reference_ohm)
+        q0, q1 = (scan_apparent(x, el.elements_x, el.elements_y, sch, rd.drive_v, rd.switch_on_ohm, rd.reference_ohm)[0, el.n_elements // 2]
+                  for x in (R0, R1))
+        scans[sch] = {"mean_abs_dev_pct": float(100 * np.abs(a / R - 1).mean()),
+                      "sneak_pct": float(100 * np.abs(q1 / q0 - 1).max())}
+    return {"episodes": episodes, "samples": int(lab.shape[0] // el.n_elements),
+            "label_range_n": {ax: (float(lab[:, i].min()), float(lab[:, i].max())) for i, ax in enumerate("xyz")},
+            "label_corr": np.corrcoef(lab.T).round(3).tolist(),
+            "r_normal_kohm_p1_p99": pct(res[:, 2]), "r_inclined_kohm_p1_p99": pct(res[:, :2].ravel()),
+            "scan": scans, "scan_default": rd.scan}
+
+
+def load_scene_from(cfg: SceneConfig, overrides: list[str]) -> SceneConfig:
+    """cfg with dotted overrides applied (the loader's syntax)."""
+    from scenes.loader import apply_overrides
+
+    return SceneConfig.model_validate(apply_overrides(json.loads(cfg.model_dump_json()), overrides))
+
+
+def readings(cfg: SceneConfig) -> dict:
+    """Per column reading: each column's relative change (%) under 4.8 N of F_x, F_y, F_z alone (element chain
+    without lag or crosstalk: u = K^-1 F, e = N u / l, R = R0 (1 + e)^2 exp(beta e))."""
+    from sensors.ntype.model import ntype_params
+
+    out = {}
+    for r in ("crossed", "coplanar", "eq8"):
+        p = ntype_params(load_scene_from(cfg, [f"sensor.element.reading={r}"]))
+        d = {}
+        for name, F in (("Fx", [4.8, 0, 0]), ("Fy", [0, 4.8, 0]), ("Fz", [0, 0, -4.8])):
+            e = p.normals @ (p.compliance @ np.array(F, float)) / p.lengths_m
+            d[name] = (100 * ((1 + e) ** 2 * np.exp(p.beta * e) - 1)).tolist()
+        out[r] = d
+    return out
+
+
 def characterize_ntype(cfg: SceneConfig, backend: str = "warp", device: str = "cpu") -> Report:
     pc = pure_and_crosstalk(cfg, backend, device)
     ds = mujoco_dataset_stats(cfg, backend=backend, device=device)
+    pp = paper_protocol_stats(cfg, backend=backend, device=device)
+    rd = readings(cfg)
     rows = []
     for name in ("Fz", "Fx", "-Fx", "Fy"):
         r, d = pc["pure"][name]["r_kohm"], pc["pure"][name]["rel_pct"]
@@ -116,6 +182,20 @@ def characterize_ntype(cfg: SceneConfig, backend: str = "warp", device: str = "c
                  f"{lr['y'][0]:.1f}..{lr['y'][1]:.1f}", f"{lr['z'][0]:.1f}..{lr['z'][1]:.1f}", "0..4.8 each"])
     rows.append(["stroke shear |delivered - target| max (N)", "", "", fmt(ds["shear_max_abs_error_n"], 3),
                  f"(targets up to {ds['shear_target_max_n']:.2f} N)"])
+    rn, ri = pp["r_normal_kohm_p1_p99"], pp["r_inclined_kohm_p1_p99"]
+    rows.append([f"paper's experiment (element_loads), all elements, 1-99 % (kOhm; {pp['samples']} samples)",
+                 f"{ri[0]:.1f}-{ri[1]:.1f}", f"{ri[0]:.1f}-{ri[1]:.1f}", f"{rn[0]:.1f}-{rn[1]:.1f}", "32-50 / 32-50 / 16-25"])
+    lr = pp["label_range_n"]
+    rows.append(["paper's experiment: labels F_x / F_y / F_z range (N)", f"{lr['x'][0]:.1f}..{lr['x'][1]:.1f}",
+                 f"{lr['y'][0]:.1f}..{lr['y'][1]:.1f}", f"{lr['z'][0]:.1f}..{lr['z'][1]:.1f}", "0..4.8 each"])
+    for r, d in rd.items():
+        rows.append([f"reading '{r}' ({'default' if r == cfg.sensor.element.reading else 'alternative'}): ΔR/R0 (%) under 4.8 N of F_x / F_y / F_z"]
+                    + [" / ".join(f"{d[k][j]:+.1f}" for k in ("Fx", "Fy", "Fz")) for j in range(3)]
+                    + ["col 3 ~ F_x, col 1 ~ F_y, col 2 ~ F_z; F_z weakly coupled"])
+    for sch, v in pp["scan"].items():
+        rows.append([f"scan '{sch}'{' (default)' if sch == pp['scan_default'] else ''}: |R_read/R - 1| mean on the paper's "
+                     "experiment; an idle element's reading change when all others fall 30 % (%)", "", "",
+                     f"{fmt(v['mean_abs_dev_pct'], 2)}; {fmt(v['sneak_pct'], 2)}", "paper: \"scanning the circuit\""])
     return Report(
         title=f"{cfg.name}: N-type element columns, crosstalk and MuJoCo 3-D loads (element {pc['element']})",
         columns=["case", "R_x col 3 (kOhm)", "R_y col 1 (kOhm)", "R_z col 2 (kOhm)", "paper"],
@@ -129,7 +209,7 @@ def characterize_ntype(cfg: SceneConfig, backend: str = "warp", device: str = "c
             f"inclined {ds['fraction_inclined_in_paper_range']:.2f}; label correlation (loaded elements, x,y,z): "
             f"{ds['label_corr_loaded']}",
         ],
-        metrics={"pure_crosstalk": pc, "mujoco": ds, "paper": PAPER},
+        metrics={"pure_crosstalk": pc, "mujoco": ds, "paper_protocol": pp, "readings": rd, "paper": PAPER},
         plot=lambda path: _plot(cfg, pc, path),
     )
 

@@ -215,6 +215,7 @@ def load_field(cfg: SceneConfig, pos_rel_m: np.ndarray, force_n: np.ndarray):
 # protocol kinds with their own contact stage: kind -> "module:function(cfg, protocols, threads) -> LoadBatch"
 CONTACT_STAGES: dict[str, str] = {
     "press_stroke": "simulate.contact.press_stroke:run_press_stroke",
+    "element_loads": "simulate.contact.element_loads:run_element_loads",
 }
 
 

@@ -289,3 +289,7 @@ def xy_waveform(proto: EpisodeProtocol, cfg: SceneConfig, t_s: np.ndarray) -> np
 from simulate.protocols import compression_tester as _velostat  # noqa: E402  (velostat registers its compression-tester kinds)
 
 _velostat.register(WAVEFORMS, PARAM_DRAWS)
+
+from simulate.protocols import element_loads as _element_loads  # noqa: E402  (ntype: the paper's static element loads)
+
+_element_loads.register(WAVEFORMS, PARAM_DRAWS)
