@@ -22,6 +22,9 @@ from scenes import SceneConfig
 # force-controlled kinds run on MuJoCo Warp only when asked for (--physics mujoco_warp).
 GPU_PROTOCOL_KINDS = ("sinusoid", "hold")
 GPU_CONTROLS = ("displacement",)
+# where the GPU feed runs and the scene names no compression: Blosc2 zstd (level 1 + shuffle), the lzf size at
+# ~2x its write speed (bench/results/compression-cpu.json); the CPU path keeps lzf (the same bytes as before)
+GPU_COMPRESSION = "zstd"
 MAX_AUTO_WRITERS = 8  # writer processes of the GPU feed: 8 measured best on the 16-core H100 host (bench/README.md)
 
 
@@ -38,7 +41,9 @@ class Choice:
         engine = "MuJoCo Warp" if self.physics == "mujoco_warp" else "C MuJoCo"
         feed = (f", GPU feed with {self.workers} writer process(es)" if self.physics == "mujoco_warp" and self.workers > 1
                 else f", {self.workers} worker process(es)")
-        return (f"engine: {engine} on {self.physics_device}, sensor kernels on {self.device}{feed} "
+        comp = next((o.split("=", 1)[1] for o in self.overrides if o.startswith("generation.compression=")), None)
+        comp = f", {comp} compression" if comp else ""
+        return (f"engine: {engine} on {self.physics_device}, sensor kernels on {self.device}{feed}{comp} "
                 f"({self.reason})")
 
 
@@ -107,6 +112,8 @@ def choose(cfg: SceneConfig, physics: str = "auto", device: str = "auto", worker
     if physics == "mujoco_warp":
         overrides += ["generation.physics=mujoco_warp", f"generation.device={'cuda' if device.startswith('cuda') else 'cpu'}"]
         physics_device = device
+        if physics_device.startswith("cuda") and "compression" not in g.model_fields_set:
+            overrides.append(f"generation.compression={GPU_COMPRESSION}")
     else:
         physics_device = "cpu"
         if "physics" in g.model_fields_set:
