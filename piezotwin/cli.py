@@ -25,26 +25,27 @@ def generate(
     seed: Annotated[Optional[int], typer.Option(help="Root seed.")] = None,
     set_: SetOpt = None,
     backend: Annotated[str, typer.Option(help="Sensor kernels: warp | numpy.")] = "warp",
-    device: Annotated[str, typer.Option(help="Warp device: cpu | cuda.")] = "cpu",
+    device: Annotated[str, typer.Option(help="Warp device: auto (CUDA when present) | cpu | cuda | cuda:N.")] = "auto",
     executor: Annotated[str, typer.Option(help="Where shards run: local (process pool when --workers > 1) | ray.")] = "local",
     address: Annotated[Optional[str], typer.Option(help="Ray cluster address (ray executor; default: start a local one).")] = None,
     shards: Annotated[Optional[int], typer.Option(help="Number of shards (sets generation.episodes_per_shard).")] = None,
-    workers: Annotated[int, typer.Option(help="Worker processes (local pool) or CPUs of a local Ray cluster.")] = 1,
-    physics: Annotated[Optional[str], typer.Option(help="Contact stage: mujoco (C, CPU) | mujoco_warp (batched worlds on --device) | auto.")] = None,
+    workers: Annotated[Optional[int], typer.Option(help="Worker processes (local pool; writers of the GPU feed) or CPUs of a local Ray cluster; default: 1, or up to 8 writers where the GPU feed runs.")] = None,
+    physics: Annotated[str, typer.Option(help="Contact stage: auto (MuJoCo Warp where CUDA and mujoco_warp are, else C MuJoCo) | mujoco (C, CPU) | mujoco_warp (batched worlds on --device).")] = "auto",
 ) -> None:
-    """Generate a dataset: HDF5 shards + manifest.json. Resumes at the first missing shard."""
+    """Generate a dataset: HDF5 shards + manifest.json. Resumes at the first missing shard.
+
+    By default (--physics auto --device auto) a machine with a CUDA device and mujoco_warp steps the worlds on
+    the GPU; elsewhere C MuJoCo on the CPU. The line `engine: ...` says what ran and why."""
     extra = []
-    if physics is not None:
-        if physics not in ("mujoco", "mujoco_warp", "auto"):
-            fail(f"--physics must be one of: mujoco, mujoco_warp, auto (got '{physics}')")
-        extra += [f"generation.physics={physics}", f"generation.device={'cuda' if device.startswith('cuda') else device}"]
+    if physics not in ("mujoco", "mujoco_warp", "auto"):
+        fail(f"--physics must be one of: mujoco, mujoco_warp, auto (got '{physics}')")
     if episodes is not None:
         extra.append(f"generation.episodes={episodes}")
     if seed is not None:
         extra.append(f"generation.root_seed={seed}")
     if executor not in ("local", "ray"):
         fail(f"--executor must be one of: local, ray (got '{executor}')")
-    if workers < 1:
+    if workers is not None and workers < 1:
         fail(f"--workers must be >= 1 (got {workers})")
     if address and executor != "ray":
         fail("--address needs --executor ray")
@@ -57,11 +58,21 @@ def generate(
     if shards is not None:
         if not 1 <= shards <= cfg.generation.episodes:
             fail(f"--shards must be between 1 and the number of episodes ({cfg.generation.episodes}); got {shards}")
-        cfg = _load(scene, set_, extra + [f"generation.episodes_per_shard={-(-cfg.generation.episodes // shards)}"])
+        extra.append(f"generation.episodes_per_shard={-(-cfg.generation.episodes // shards)}")
+        cfg = _load(scene, set_, extra)
     if backend not in ("warp", "numpy"):
         fail(f"--backend must be one of: warp, numpy (got '{backend}')")
     if device not in ("cpu", "cuda", "auto") and not device.startswith("cuda:"):
         fail(f"--device must be one of: cpu, cuda, cuda:N, auto (got '{device}')")
+    from simulate.generation.choice import choose
+
+    try:
+        chosen = choose(cfg, physics, device, workers, backend)
+    except ValueError as exc:
+        fail(str(exc))
+    if chosen.overrides:
+        cfg = _load(scene, set_, extra + chosen.overrides)
+    device, workers = chosen.device, chosen.workers
     if backend == "warp":
         from sensors.warp_setup import resolve_device
 
@@ -83,6 +94,7 @@ def generate(
     from simulate.generation.executors import generate as run_generate
     from simulate.generation.run import n_shards
 
+    err.print(chosen.line(), highlight=False, soft_wrap=True)
     with Progress(
         TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("episodes"),
         TimeElapsedColumn(), TimeRemainingColumn(), console=err, transient=False,
@@ -105,6 +117,7 @@ def generate(
     if skipped:
         console.print(f"resumed: {len(skipped)} complete shard(s) kept")
     console.print(f"wrote {manifest}")
+    console.print(chosen.line(), highlight=False, soft_wrap=True)
     from sensors.data.manifest import shard_path
 
     _print_summary(shard_path(out, 0))

@@ -235,7 +235,8 @@ class GenerationConfig(Strict):
     episodes: Annotated[int, Field(ge=1, le=10_000_000)] = 32
     episodes_per_shard: Annotated[int, Field(ge=1)] = 16
     root_seed: Annotated[int, Field(ge=0, lt=2**63)] = 0
-    compression: Literal["lzf", "gzip", "none"] = "lzf"
+    # lzf + shuffle (default); gzip level 1; zstd / lz4: Blosc2 level 1 + shuffle (hdf5plugin); none
+    compression: Literal["lzf", "gzip", "none", "zstd", "lz4"] = "lzf"
     threads: Annotated[int, Field(ge=1, le=256)] = 2
     device: Literal["cpu", "cuda", "auto"] = "cpu"
     # contact stage: C MuJoCo rollout on CPU threads, or MuJoCo Warp batched worlds on `device`;

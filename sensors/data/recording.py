@@ -11,7 +11,7 @@ Layout (see DESIGN.md section 4)::
     /episodes/<id>/<name>  one dataset per channel; attrs units, dim_names, description
 
 Time series are chunked along time in blocks of whole frames (a length that divides T where one
-is close to the target), compressed with lzf + shuffle by default (gzip level 1 + shuffle, or none).
+is close to the target), compressed with lzf + shuffle by default (gzip level 1 + shuffle, Blosc2 zstd / lz4 level 1 + shuffle, or none).
 
 Attribute values: numbers, strings, bools and numeric arrays are stored as HDF5 attributes; dicts,
 lists of strings and other JSON-able values are stored as JSON strings and the attribute name is
@@ -51,7 +51,19 @@ _JSON_ATTRS = "_json_attrs"
 _NAME_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]*$")
 _CHUNK_FRAMES = 256  # target chunk length along time
 _CHUNK_MAX_BYTES = 1 << 20  # cap on one chunk, for very wide frames
-_COMPRESSIONS = ("lzf", "gzip", "none")
+_COMPRESSIONS = ("lzf", "gzip", "none", "zstd", "lz4")
+# "zstd" / "lz4": Blosc2 (level 1, byte shuffle) through hdf5plugin; its filters register on import, so a
+# reader needs hdf5plugin too (imported here when installed)
+try:
+    import hdf5plugin as _hdf5plugin
+except ImportError:  # pragma: no cover - a dependency; only the Blosc2 options need it
+    _hdf5plugin = None
+
+
+def _blosc2(cname: str) -> dict[str, Any]:
+    if _hdf5plugin is None:
+        raise ValueError(f"compression '{cname}' needs the hdf5plugin package (pip install hdf5plugin)")
+    return dict(_hdf5plugin.Blosc2(cname=cname, clevel=1, filters=_hdf5plugin.Blosc2.SHUFFLE))
 
 __all__ = [
     "RecordingWriter",
@@ -268,6 +280,8 @@ def _write_channel(
             kwargs.update(compression="lzf", shuffle=True)
         elif compression == "gzip":
             kwargs.update(compression="gzip", compression_opts=1, shuffle=True)
+        elif compression in ("zstd", "lz4"):
+            kwargs.update(_blosc2(compression))
     contents = {"data": data} if with_data else {"shape": data.shape, "dtype": data.dtype}
     ds = group.create_dataset(name, **contents, **kwargs)
     ds.attrs["units"] = ch.units
@@ -375,7 +389,7 @@ class RecordingWriter:
         sensor_attrs: Mapping[str, Any],
         mjcf: str | None = None,
         extra_attrs: Mapping[str, Any] | None = None,
-        compression: Literal["lzf", "gzip", "none"] = "lzf",
+        compression: Literal["lzf", "gzip", "none", "zstd", "lz4"] = "lzf",
         _fast: bool = True,  # tests only: False writes every episode object by object
     ):
         if source not in ("sim", "real"):
@@ -514,7 +528,7 @@ def write_recording(
     mjcf: str | None = None,
     episode_attrs: Mapping[str, Mapping[str, Any]] | None = None,
     extra_attrs: Mapping[str, Any] | None = None,
-    compression: Literal["lzf", "gzip", "none"] = "lzf",
+    compression: Literal["lzf", "gzip", "none", "zstd", "lz4"] = "lzf",
 ) -> Path:
     """Write one recording (shard) atomically and return its final path.
 

@@ -166,6 +166,86 @@ def simulate_sensors(
     return out, sample_targets(cfg, protocols, n)
 
 
+# MuJoCo Warp step time against worlds, one GPU: t(W) = STEP_S_FLOOR + W / WORLD_STEPS_PER_S, fitted to the H100
+# figures of bench/README.md (1024 worlds 2.2e6, 32768 worlds 2.38e7 world-steps/s): below ~15k worlds a step
+# costs about the same whatever the worlds (kernel launches), above it the worlds' work sets the pace
+STEP_S_FLOOR = 0.44e-3
+WORLD_STEPS_PER_S = 3.5e7
+
+
+def world_groups(groups: list[tuple[int, list[int]]]) -> list[list[tuple[int, list[int]]]]:
+    """Length groups (n_samples, positions), shortest first, merged into runs of worlds for MuJoCo Warp.
+
+    Worlds of one run step together for as many samples as its longest episode (the shorter ones padded,
+    their extra samples dropped). A few worlds step no faster than many, so small groups of mixed lengths run
+    faster as one padded batch than one after another, and large groups faster apart; the contiguous
+    partition of the sorted lengths with the least modelled time (STEP_S_FLOOR, WORLD_STEPS_PER_S) is taken.
+    """
+    k = len(groups)
+    best = [0.0] + [float("inf")] * k  # best[j]: least time for the first j groups
+    cut = [0] * (k + 1)
+    for j in range(1, k + 1):
+        worlds = 0
+        for i in range(j, 0, -1):  # last run = groups i-1 .. j-1
+            worlds += len(groups[i - 1][1])
+            t = best[i - 1] + groups[j - 1][0] * (STEP_S_FLOOR + worlds / WORLD_STEPS_PER_S)
+            if t < best[j]:
+                best[j], cut[j] = t, i - 1
+    runs, j = [], k
+    while j > 0:
+        runs.append(groups[cut[j]:j])
+        j = cut[j]
+    return runs[::-1]
+
+
+def padded_controls(cfg: SceneConfig, protocols: list[EpisodeProtocol], nsteps: np.ndarray):
+    """Controls (steps, episodes) -> rows for worlds of mixed lengths: each episode's own `episode_controls`
+    (its own nstep, so the same rows as when it runs alone), its last row held past its end."""
+
+    def rows(steps: slice, eps: slice) -> np.ndarray:
+        ps, ns = protocols[eps], nsteps[eps]
+        out = np.empty((len(ps), steps.stop - steps.start, 3))
+        for nstep in np.unique(ns):
+            j = np.flatnonzero(ns == nstep)
+            group = [ps[i] for i in j]
+            a, b = steps.start, min(steps.stop, int(nstep))
+            if b > a:
+                out[j, : b - a] = episode_controls(cfg, group, int(nstep), slice(a, b))[0]
+            if b < steps.stop:
+                last = out[j, b - a - 1] if b > a else episode_controls(cfg, group, int(nstep), slice(int(nstep) - 1, int(nstep)))[0][:, 0]
+                out[j, max(0, b - a):] = last[:, None, :]
+        return out
+
+    return rows
+
+
+def simulate_sensors_padded(cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """MuJoCo Warp only: episodes of mixed lengths as one batch of worlds, stepped as long as the longest;
+    returns {n_samples: (sensordata (E_n, n, ns), target (E_n, n))} in `length_groups` order. An episode's
+    samples depend only on its own controls up to then, so each equals its run in a batch of its own length."""
+    from simulate.contact.mujoco_warp import worlds_for
+
+    engine, device = physics_engine(cfg)
+    if engine != "mujoco_warp":
+        raise ValueError("simulate_sensors_padded: MuJoCo Warp only (the C path runs each length as its own rollout)")
+    sub = cfg.sampling.substeps
+    lengths = np.array([p.n_samples for p in protocols])
+    if lengths.min() < 2:
+        raise ValueError(f"run_episodes: n_samples must be >= 2 (got {lengths.min()})")
+    n = int(lengths.max())
+    nsteps = (lengths - 1) * sub
+    mjcf = build_mjcf(cfg)
+    m = mujoco.MjModel.from_xml_string(mjcf)
+    ctrl = padded_controls(cfg, protocols, nsteps)
+    states0, sens0 = _initial_states(m, cfg, protocols, ctrl(slice(0, 1), slice(0, len(protocols)))[:, 0])
+    out = worlds_for(m, mjcf, len(protocols), device).run(states0[:, 1 : 1 + m.nq], ctrl, sens0, sub, n)
+    res = {}
+    for k in sorted(set(lengths.tolist())):
+        j = np.flatnonzero(lengths == k)
+        res[k] = (out[j, :k], sample_targets(cfg, [protocols[i] for i in j], k))
+    return res
+
+
 def load_field(cfg: SceneConfig, pos_rel_m: np.ndarray, force_n: np.ndarray):
     """Taxel fields from the indenter pose and net contact force.
 

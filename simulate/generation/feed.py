@@ -80,15 +80,22 @@ def step_worlds(cfg: SceneConfig, gids: list[int], threads: int = 1, submitted: 
     from multiprocessing import shared_memory
 
     from sensors.data.manifest import episode_seed
-    from simulate.contact.load_field import simulate_sensors
-    from simulate.generation.run import episode_protocols, length_groups
+    from simulate.contact.load_field import simulate_sensors, simulate_sensors_padded
+    from simulate.generation.run import episode_protocols, physics_runs
 
     t1 = time.time()
     protos = episode_protocols(cfg, [episode_seed(cfg.generation.root_seed, k) for k in gids], gids)
     t2 = time.time()
     spent = {"waiting to start": t0 - (submitted or t0), "imports": t1 - t0, "protocols": t2 - t1}
     out = {}
-    for n, idx in length_groups(protos):
+    groups = []
+    for run in physics_runs(cfg, protos):
+        if len(run) == 1:
+            groups.append((run[0][0], run[0][1], None))
+            continue
+        padded = simulate_sensors_padded(cfg, [protos[i] for _, idx in run for i in idx], threads)  # small: copied below
+        groups += [(n, idx, padded.pop(n)) for n, idx in run]
+    for n, idx, done in groups:
         made = []
 
         def alloc(shape: tuple[int, ...]) -> np.ndarray:  # sensordata (E, n, ns) float64, then target (E, n)
@@ -98,7 +105,12 @@ def step_worlds(cfg: SceneConfig, gids: list[int], threads: int = 1, submitted: 
             made.append(shared_memory.SharedMemory(create=True, size=nbytes))
             return np.ndarray(shape, np.float64, buffer=made[0].buf)
 
-        sens, target = simulate_sensors(cfg, [protos[i] for i in idx], threads, alloc)
+        if done is None:
+            sens, target = simulate_sensors(cfg, [protos[i] for i in idx], threads, alloc)
+        else:
+            into, target = alloc(done[0].shape), done[1]  # into shared memory like the rest
+            into[...] = done[0]
+            sens = into
         if not made:
             out[n] = (sens, target)
             continue
@@ -273,6 +285,23 @@ def write_packed_shard(cfg: SceneConfig, out_dir: str, packed: PackedShard, sens
     return entry, {"episodes": t1 - t0, "close, fsync": t2 - t1, "sha256": time.perf_counter() - t2}
 
 
+BATCH_RAM_FRACTION = 0.1  # a batch's sensordata (float64, in shared memory) at most this much of the host's memory
+
+
+def feed_worlds(cfg: SceneConfig) -> int:
+    """Episodes per feed batch: FEED_WORLDS for each episode length the protocol draws (`length_groups` step one
+    after another, so mixed frequencies keep FEED_WORLDS worlds in each), while the batch's sensordata stays
+    within BATCH_RAM_FRACTION of the host's memory."""
+    p, s = cfg.protocol, cfg.sampling
+    if p.kind != "sinusoid":
+        return FEED_WORLDS
+    freqs = sorted(set(p.frequencies_hz))
+    mean_samples = sum(cfg.episode_duration_s(f) for f in freqs) / len(freqs) * s.sample_rate_hz + 1
+    per_episode = 8 * 20 * mean_samples  # float64 sensordata, 20 values per sample (build_mjcf's sensors)
+    ram = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    return max(FEED_WORLDS, min(FEED_WORLDS * len(freqs), int(BATCH_RAM_FRACTION * ram / per_episode)))
+
+
 def _groups(cfg: SceneConfig, todo: list[int], worlds: int) -> list[list[int]]:
     """Consecutive runs of the shards to make, each with >= `worlds` episodes where the shards allow, after a
     ramp (worlds / 4, then worlds / 2): the driver and the writers start on a small first batch instead of
@@ -377,7 +406,7 @@ def generate_feed(
         seconds[key] = seconds.get(key, 0.0) + time.perf_counter() - t0
 
     ctx = mp.get_context("spawn")
-    groups = _groups(cfg, todo, worlds or FEED_WORLDS)
+    groups = _groups(cfg, todo, worlds or feed_worlds(cfg))
     # the worlds step in their own processes, batches ahead of the load field + sensor chain here (kinds with
     # their own contact stage run it here); they start first, so their start-up overlaps the driver's
     physics = None if cfg.protocol.kind in CONTACT_STAGES else ProcessPoolExecutor(PHYSICS_PROCESSES, mp_context=ctx)

@@ -19,7 +19,7 @@ from sensors.registry import make_sensor
 from sensors.data.manifest import build_manifest, episode_seed, first_missing_shards, shard_path
 from sensors.data.recording import Channel, RecordingWriter
 from sensors.base import LoadBatch
-from simulate.contact.load_field import iter_load_batches, physics_engine
+from simulate.contact.load_field import CONTACT_STAGES, iter_load_batches, physics_engine, simulate_sensors_padded, world_groups
 from simulate.contact.mjcf import build_mjcf
 from simulate.protocols.indenter import EpisodeProtocol, make_episode_protocol
 
@@ -82,13 +82,17 @@ def simulate_slices(
     engine, engine_device = physics_engine(cfg)
     gpu = engine == "mujoco_warp"
     on_device = engine_device if gpu and getattr(sensor, "device_load", False) and sensor.device == engine_device else None
-    for n, idx in length_groups(protos):
-        done = None if physics is None else physics[n]
-        for sl, batch in iter_load_batches(cfg, [protos[i] for i in idx], threads, SENSOR_SLICE if gpu else None, on_device, done):
-            part = idx[sl]
-            out = sensor.run_load(batch if on_device else batch.on_host(), [seeds[i] for i in part])
-            batch = batch.on_host() if _records_fields(cfg) else batch
-            yield part, [protos[i] for i in part], channel_arrays(batch, out, cfg, sensor)
+    for run in physics_runs(cfg, protos):
+        padded = None
+        if physics is None and len(run) > 1:  # small groups of mixed lengths: one padded batch of worlds
+            padded = simulate_sensors_padded(cfg, [protos[i] for _, idx in run for i in idx], threads)
+        for n, idx in run:
+            done = physics[n] if physics is not None else None if padded is None else padded.pop(n)
+            for sl, batch in iter_load_batches(cfg, [protos[i] for i in idx], threads, SENSOR_SLICE if gpu else None, on_device, done):
+                part = idx[sl]
+                out = sensor.run_load(batch if on_device else batch.on_host(), [seeds[i] for i in part])
+                batch = batch.on_host() if _records_fields(cfg) else batch
+                yield part, [protos[i] for i in part], channel_arrays(batch, out, cfg, sensor)
 
 
 def episode_protocols(cfg: SceneConfig, seeds: list[int], indices: list[int] | None = None) -> list[EpisodeProtocol]:
@@ -98,6 +102,16 @@ def episode_protocols(cfg: SceneConfig, seeds: list[int], indices: list[int] | N
 def length_groups(protos: list[EpisodeProtocol]) -> list[tuple[int, list[int]]]:
     """(n_samples, positions) of the episodes of each length, shortest first: one batch of worlds each."""
     return [(n, [i for i, p in enumerate(protos) if p.n_samples == n]) for n in sorted({p.n_samples for p in protos})]
+
+
+def physics_runs(cfg: SceneConfig, protos: list[EpisodeProtocol]) -> list[list[tuple[int, list[int]]]]:
+    """The `length_groups` of the episodes, as runs of the physics: each length alone on C MuJoCo and for
+    kinds with their own contact stage; on MuJoCo Warp, small groups merged into padded batches of worlds
+    (`simulate.contact.load_field.world_groups`)."""
+    groups = length_groups(protos)
+    if physics_engine(cfg)[0] != "mujoco_warp" or cfg.protocol.kind in CONTACT_STAGES:
+        return [[g] for g in groups]
+    return world_groups(groups)
 
 
 def _records_fields(cfg: SceneConfig) -> bool:

@@ -1,0 +1,85 @@
+"""`--physics auto` / `--device auto` / `--workers auto` (simulate/generation/choice.py): what runs where, and why."""
+
+import pytest
+from typer.testing import CliRunner
+
+from piezotwin.cli import app
+from scenes import load_scene
+from simulate.generation import choice
+from simulate.generation.choice import choose
+
+H100 = (1, "NVIDIA H100 80GB HBM3")
+
+
+def test_cpu_machine_keeps_the_c_engine_and_says_why():
+    c = choose(load_scene("cnt_pdms"), cuda=(0, ""), mjw=True)
+    assert (c.physics, c.physics_device, c.device, c.workers) == ("mujoco", "cpu", "cpu", 1)
+    assert c.overrides == []  # the config stays as it was: same bytes as before auto
+    assert "C MuJoCo on cpu" in c.line() and "auto: no CUDA device" in c.line()
+    c = choose(load_scene("cnt_pdms"), cuda=H100, mjw=False)
+    assert c.physics == "mujoco" and "mujoco_warp not installed" in c.reason
+    assert c.device == "cuda:0"  # the sensor kernels still take the GPU
+
+
+def test_gpu_machine_takes_the_gpu_feed():
+    c = choose(load_scene("cnt_pdms"), cuda=H100, mjw=True)
+    assert (c.physics, c.physics_device, c.device) == ("mujoco_warp", "cuda:0", "cuda:0")
+    assert c.workers >= 2  # writer processes of the feed
+    assert c.overrides == ["generation.physics=mujoco_warp", "generation.device=cuda", "generation.compression=zstd"]
+    assert "zstd compression" in c.line()
+    c2 = choose(load_scene("cnt_pdms", ["generation.compression=none"]), cuda=H100, mjw=True)
+    assert not any("compression" in o for o in c2.overrides)  # the scene's own choice stays
+    assert "MuJoCo Warp on cuda:0" in c.line() and "NVIDIA H100" in c.line() and "GPU feed" in c.line()
+    cfg = load_scene("cnt_pdms", c.overrides)  # the recordings name the engine that ran, not "auto"
+    assert cfg.generation.physics == "mujoco_warp" and cfg.generation.device == "cuda" and cfg.generation.compression == "zstd"
+
+
+def test_user_choice_wins():
+    c = choose(load_scene("cnt_pdms"), physics="mujoco", cuda=H100, mjw=True)
+    assert c.physics == "mujoco" and "--physics mujoco as asked" in c.reason and c.workers == 1
+    c = choose(load_scene("cnt_pdms", ["generation.physics=mujoco"]), cuda=H100, mjw=True)
+    assert c.physics == "mujoco" and "generation.physics=mujoco as set" in c.reason
+    c = choose(load_scene("cnt_pdms"), physics="mujoco_warp", device="cpu", cuda=H100, mjw=True)
+    assert (c.physics, c.physics_device) == ("mujoco_warp", "cpu")  # Warp's CPU device, as asked
+    c = choose(load_scene("cnt_pdms"), workers=3, cuda=H100, mjw=True)
+    assert c.workers == 3
+    c = choose(load_scene("cnt_pdms", ["generation.physics=auto"]), cuda=(0, ""), mjw=True)
+    assert c.overrides == ["generation.physics=mujoco"]  # "auto" in a scene file made concrete
+
+
+@pytest.mark.parametrize("preset, needle", [("ntype", "press_stroke"), ("fabric_1", "staircase"), ("velostat", "velostat_mix")])
+def test_scenes_without_a_validated_gpu_path_stay_on_c_mujoco(preset, needle):
+    c = choose(load_scene(preset), cuda=H100, mjw=True)
+    assert c.physics == "mujoco" and needle in c.reason
+
+
+def test_cli_default_is_auto_and_same_bytes_as_the_c_engine(tmp_path, monkeypatch):
+    monkeypatch.setattr(choice, "_cuda", lambda: (0, ""))  # a machine without CUDA, whatever runs the test
+    fast = ["--episodes", "2", "--set", "protocol.frequencies_hz=[2.0]", "--set", "protocol.cycles=1",
+            "--set", "pad.taxels_x=4", "--set", "pad.taxels_y=4", "--set", "generation.episodes_per_shard=2"]
+    runner = CliRunner()
+    res = runner.invoke(app, ["generate", "cnt_pdms", "-o", str(tmp_path / "auto")] + fast)
+    assert res.exit_code == 0, res.output
+    assert "engine: C MuJoCo on cpu, sensor kernels on cpu" in res.output and "(auto: no CUDA device)" in res.output
+    res = runner.invoke(app, ["generate", "cnt_pdms", "-o", str(tmp_path / "forced"), "--physics", "mujoco", "--device", "cpu"] + fast)
+    assert res.exit_code == 0, res.output
+    assert "--physics mujoco as asked" in res.output
+    a, b = (tmp_path / d / "shard-00000.h5" for d in ("auto", "forced"))
+    assert _contents(a) == _contents(b)  # every dataset and attribute but the creation time
+
+
+def _contents(path) -> dict:
+    import h5py
+    import numpy as np
+
+    out = {}
+    with h5py.File(path, "r") as f:
+        def visit(name, obj):
+            for k, v in obj.attrs.items():
+                if k != "created_utc":
+                    out[f"{name}@{k}"] = repr(v)
+            if isinstance(obj, h5py.Dataset):
+                out[name] = np.asarray(obj[()]).tobytes()
+        visit("/", f)
+        f.visititems(visit)
+    return out
