@@ -152,3 +152,30 @@ def fit(
                   f"(within press {eb['rms_log_within_press']:.3f}), after {ea['rms_log']:.3f} "
                   f"(within press {ea['rms_log_within_press']:.3f}); wrote {yml}, {out}/fit.json, {out}/fit.png",
                   highlight=False)
+
+
+def import_with_spec(spec: str, data: Optional[Path], second: Optional[Path], out: Path, rate: Optional[float]) -> None:
+    """`piezotwin import --spec SPEC DATA`: any column log (sensors/data/column_import.py)."""
+    from piezotwin.common import _print_summary
+    from sensors.data.column_import import import_columns, load_spec
+    from sensors.data.real_import import ImportLogError
+
+    if data is None or second is not None:
+        fail("with --spec give one DATA folder (or one log file)")
+    _check_writable(out.parent if str(out.parent) else Path("."))
+    try:
+        sp = load_spec(spec)
+        p = import_columns(data, sp, out, rate_hz=rate)
+    except ImportLogError as exc:
+        fail(str(exc))
+    from sensors.data.recording import Recording
+
+    with Recording(p) as rec:
+        for ep in rec.episode_ids:
+            a = rec.episode_attrs(ep)
+            tgt = sp.target
+            console.print(f"{ep}: {a['rate_hz']:g} Hz clock{' (period uncertain)' if a.get('time_uncertain') else ''}, "
+                          f"{a['duration_s']:.1f} s, {tgt} {a.get(tgt + '_min', float('nan')):.3g} .. "
+                          f"{a.get(tgt + '_max', float('nan')):.3g}, {len(a.get('events') or [])} events",
+                          highlight=False, soft_wrap=True)
+    _print_summary(p)
