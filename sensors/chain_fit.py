@@ -66,6 +66,7 @@ class ChainParams:
     noise_sd: float = 0.0  # reading units
     adc_step: float = 0.0
     tip_area_m2: float = 1e-4
+    threshold_force_n: float = 0.0  # force the cover / gap carries before the film is loaded (F_eff = F - F_0)
 
     @property
     def times_s(self) -> list[float]:
@@ -98,7 +99,7 @@ def creep_force(force: np.ndarray, dt: float, p: ChainParams) -> np.ndarray:
 
 def film_resistance(force: np.ndarray, dt: float, p: ChainParams, level: np.ndarray | float = 0.0) -> np.ndarray:
     """R_film (ohm, inf unloaded) of the recorded force; level: ln multiplier per sample (press placement)."""
-    f = np.maximum(np.asarray(force, np.float64), 0.0)
+    f = np.maximum(np.asarray(force, np.float64) - p.threshold_force_n, 0.0)
     c = creep_force(f, dt, p)
     with np.errstate(divide="ignore", over="ignore"):
         return np.where(f > 0, p.r0_ohm * np.exp(level) * ((f + c) / F_REF_N) ** (-p.exponent), np.inf)
@@ -196,7 +197,7 @@ def load_real_runs(recording: str | Path, *, input_channel: str = "sensor", targ
                 dt = float(np.median(np.diff(t)))
             a = {**sattrs, **dict(rec.episode_attrs(ep))}
             fs = float(a.get("adc_full_scale") or np.median(s[f < 0.02 * max(f.max(), 1e-9)]))
-            out.append(RealRun(ep, f, s, dt, fs, noise, {k: a[k] for k in ("reference_resistor_ohm",) if k in a}))
+            out.append(RealRun(ep, f, s, dt, fs, noise, {k: a[k] for k in ("reference_resistor_ohm", "adc_full_scale") if k in a}))
     if not out:
         raise ValueError(f"{recording}: no episode" + (f" matches {episodes!r}" if episodes else ""))
     return out
@@ -219,9 +220,10 @@ class ChainFit:
                 "bootstrap": self.boot, "error": self.error, "press_levels_log": self.press_levels, "least_squares": self.result}
 
 
-NAMES = ("exponent", "ln_creep_amplitude", "ln_creep_force_n", "ln_tau_min_s", "ln_tau_max_s", "ln_r_series_ohm")
-LB = np.array([0.2, np.log(1e-3), np.log(1e-3), np.log(0.02), np.log(0.5), np.log(1e-3)])
-UB = np.array([4.0, np.log(50.0), np.log(1e4), np.log(5.0), np.log(1e3), np.log(1e7)])
+NAMES = ("exponent", "ln_creep_amplitude", "ln_creep_force_n", "ln_tau_min_s", "ln_tau_max_s", "ln_r_series_ohm",
+         "threshold_force_n")
+LB = np.array([0.2, np.log(1e-3), np.log(1e-3), np.log(0.02), np.log(0.5), np.log(1e-3), 0.0])
+UB = np.array([4.0, np.log(50.0), np.log(1e4), np.log(5.0), np.log(1e3), np.log(1e7), 1e3])
 
 
 def _with(p: ChainParams, th: np.ndarray, fit_series: bool) -> ChainParams:
@@ -229,12 +231,13 @@ def _with(p: ChainParams, th: np.ndarray, fit_series: bool) -> ChainParams:
                 tau_min_s=float(np.exp(th[3])), tau_max_s=float(np.exp(max(th[4], th[3]))))
     if fit_series:
         q.r_series_ohm = float(np.exp(th[5]))
+        q.threshold_force_n = float(th[6])
     return q
 
 
 def _theta(p: ChainParams) -> np.ndarray:
     return np.array([p.exponent, np.log(p.creep_amplitude), np.log(p.creep_force_n), np.log(p.tau_min_s),
-                     np.log(p.tau_max_s), np.log(max(p.r_series_ohm, 1e-3))])
+                     np.log(p.tau_max_s), np.log(max(p.r_series_ohm, 1e-3)), p.threshold_force_n])
 
 
 class _Data:
@@ -285,7 +288,7 @@ class _Data:
 def _fit_shape(data: _Data, p0: ChainParams, idx: np.ndarray, fit_series: bool, max_nfev: int):
     from scipy.optimize import least_squares
 
-    n = 6 if fit_series else 5
+    n = 7 if fit_series else 5
 
     def fun(th):
         q = _with(p0, np.concatenate([th, _theta(p0)[n:]]), fit_series)
@@ -300,42 +303,65 @@ def _fit_shape(data: _Data, p0: ChainParams, idx: np.ndarray, fit_series: bool, 
 
 
 def _profile(data: _Data, q: ChainParams, idx: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
-    """Residuals with each press's level l fitted (r0 = 1 ohm reference, levels absorb r0): ln(R_f e^l + r_s)."""
+    """Residuals ln R_model - ln R_real with each press's level l fitted (Gauss-Newton, r0 = 1 ohm so the
+    levels absorb r0): R_model = (R_f e^l + r_s) || r_leak."""
     out, lev = [], []
     cache = {}
+    L = q.r_leak_ohm
     for j in idx:
         pr, lr = data.presses[j], data.lnr[j]
         if pr.run not in cache:
             r = data.runs[pr.run]
             cache[pr.run] = film_resistance(r.force, r.dt, replace(q, r0_ohm=1.0))
         rf = cache[pr.run][pr.sl]
-        ok = np.isfinite(lr) & np.isfinite(rf)
+        ok = np.isfinite(lr)
         rf, y = rf[ok], lr[ok]
-        if q.r_series_ohm > 0:
-            target = np.log(np.maximum(np.exp(y) - q.r_series_ohm, 1e-3 * np.exp(y)))
-        else:
-            target = y
-        l = float(np.mean(target - np.log(rf))) if len(y) else 0.0
-        # two Gauss-Newton steps on l for ln(R_f e^l + r_s) ~ y
-        for _ in range(2):
-            m = rf * np.exp(l) + q.r_series_ohm
-            g = rf * np.exp(l) / m
-            e = np.log(m) - y
-            l -= float(np.sum(e * g) / max(np.sum(g * g), 1e-12))
-        out.append(np.log(rf * np.exp(l) + q.r_series_ohm) - y)
+        fin = np.isfinite(rf)
+        if not fin.any():
+            out.append(np.log(L) - y)
+            lev.append(0.0)
+            continue
+        ry = np.exp(y)
+        ry = ry * L / np.maximum(L - ry, 1e-3 * L)  # undo the leak
+        target = np.log(np.maximum(ry - q.r_series_ohm, 1e-3 * ry))
+        l = float(np.median(target[fin] - np.log(rf[fin])))
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            for _ in range(4):
+                a = rf * np.exp(l) + q.r_series_ohm
+                m = L / (1.0 + L / a)
+                g = np.where(fin, m * rf * np.exp(l) / a ** 2, 0.0)
+                e = np.log(m) - y
+                l -= float(np.sum(e * g) / max(np.sum(g * g), 1e-12))
+                l = float(np.clip(l, -50, 50))
+            a = rf * np.exp(l) + q.r_series_ohm
+            out.append(np.log(L / (1.0 + L / a)) - y)
         lev.append(l)
     return out, np.asarray(lev)
+
+
+def leak_from_unloaded(runs: Seq[RealRun], p: ChainParams) -> float:
+    """Unloaded resistance (ohm) through the divider: median over the runs' unloaded samples; 1e12 when
+    the board's full scale is its own rest level (no leak visible)."""
+    vals = []
+    for r in runs:
+        rest = r.force < 0.02 * max(r.force.max(), 1e-9)
+        R = resistance_from_reading(r.reading[rest], p, r.fs)
+        R = R[np.isfinite(R)]
+        if len(R) > 10 and "adc_full_scale" in r.attrs:
+            vals.append(np.median(R))
+    return float(np.median(vals)) if vals else 1e12
 
 
 def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = None, n_boot: int = 16,
               min_force_frac: float = 0.1, min_force_n: float = 0.05, max_nfev: int = 60, seed: int = 0,
               progress=None) -> ChainFit:
     """Fit the chain to real runs (see the module docstring); progress(k, n) is called after each fit."""
+    p0 = replace(p0, r_leak_ohm=leak_from_unloaded(runs, p0))
     data = _Data(runs, p0, min_force_frac, min_force_n)
     if len(data.presses) < 3:
         raise ValueError(f"found {len(data.presses)} press(es) with a response; a fit needs at least 3")
     if fit_series is None:
-        fit_series = p0.divider == "low"
+        fit_series = any("adc_full_scale" in r.attrs for r in runs)  # an ADC of known full scale: a floor shows
     idx = np.arange(len(data.presses))
     q, res = _fit_shape(data, p0, idx, fit_series, max_nfev)
     if progress:
@@ -380,7 +406,7 @@ def _finish(q: ChainParams, data: _Data, idx: np.ndarray, runs: Seq[RealRun]) ->
 
 def _summary(f: dict[str, Any]) -> dict[str, float]:
     p = f["p"]
-    return {"exponent": p.exponent, "r0_ohm": p.r0_ohm, "creep_amplitude": p.creep_amplitude,
+    return {"exponent": p.exponent, "r0_ohm": p.r0_ohm, "threshold_force_n": p.threshold_force_n, "creep_amplitude": p.creep_amplitude,
             "creep_force_n": p.creep_force_n, "tau_min_s": p.tau_min_s, "tau_max_s": p.tau_max_s,
             "level_log_sd": p.level_log_sd, "r_series_ohm": p.r_series_ohm}
 
