@@ -179,3 +179,39 @@ def import_with_spec(spec: str, data: Optional[Path], second: Optional[Path], ou
                           f"{a.get(tgt + '_max', float('nan')):.3g}, {len(a.get('events') or [])} events",
                           highlight=False, soft_wrap=True)
     _print_summary(p)
+
+
+@app.command()
+def sim2real(
+    family: Annotated[str, typer.Argument(help="Sensor family of the capture (velostat, or divider for an ADC divider array like TAMS).")],
+    recording: Annotated[Path, typer.Argument(help="Real recording (piezotwin import).")],
+    test_episodes: Annotated[str, typer.Option("--test-episodes", help="Glob of the real test runs (never fitted, never trained on).")],
+    out: Annotated[Path, typer.Option("-o", "--out", help="Output folder (resumable: finished steps are kept).")],
+    episodes: Annotated[Optional[int], typer.Option(help="Simulated episodes (default: the budget's 96).")] = None,
+    pretrain_epochs: Annotated[Optional[int], typer.Option(help="Pre-training epoch cap (default 40).")] = None,
+    n_boot: Annotated[Optional[int], typer.Option(help="Bootstrap replicates of the fit (default 16).")] = None,
+    seed: Annotated[int, typer.Option(help="Root seed (split, fit bootstrap, generation, training).")] = 0,
+) -> None:
+    """Real -> sim -> real: fit the chain, generate randomized data around it, pre-train, fine-tune, report."""
+    from learn.sim2real import S2R_BUDGET, run_sim2real
+
+    if family not in ("velostat", "divider"):
+        fail(f"sim2real supports the families velostat and divider (got '{family}')")
+    _need_recording(recording)
+    _check_writable(out)
+    b = dict(S2R_BUDGET)
+    for k, v in (("n_episodes", episodes), ("pretrain_epochs", pretrain_epochs), ("n_boot", n_boot)):
+        if v is not None:
+            if v < 1:
+                fail(f"--{k.replace('_', '-')} must be >= 1 (got {v})")
+            b[k] = v
+    try:
+        m = run_sim2real(family, recording, out, test_glob=test_episodes, budget=b, seed=seed, progress=err.is_terminal,
+                         log=lambda s: console.print(s, highlight=False))
+    except (ValueError, KeyError) as exc:
+        fail(str(exc.args[0] if exc.args else exc))
+    r = m["results"]
+    console.print(f"test RMSE (N): zero-shot {r['zero_shot']['rmse']:.3f} (two-point gain "
+                  f"{r['zero_shot']['two_point_gain']['rmse']:.3f}), fine-tuned {r['finetuned']['rmse']:.3f} "
+                  f"({r['finetuned']['rmse_pct_full_scale']:.1f} % FS), scratch {r['scratch']['rmse']:.3f}, static curve "
+                  f"{r['static_curve']['rmse']:.3f}; wrote {out}/report.md, metrics.json", highlight=False)

@@ -485,3 +485,47 @@ def save_fit(fit: ChainFit, path: str | Path, extra: dict[str, Any] | None = Non
 def load_params(path: str | Path) -> tuple[ChainParams, dict[str, Any]]:
     d = json.loads(Path(path).read_text())
     return ChainParams.from_json(d["params"]), d
+
+
+def press_stats(runs: Seq[RealRun], min_force_frac: float = 0.1, min_force_n: float = 0.05) -> dict[str, list[float]]:
+    """Per press of the real runs: peak force (N), rise, hold (>= 90 % of peak), fall and gap times (s)."""
+    out: dict[str, list[float]] = {k: [] for k in ("peak_force_n", "rise_s", "hold_s", "fall_s", "gap_s")}
+    for r in runs:
+        sls = presses_of(r.force, max(min_force_frac * r.force.max(), min_force_n))
+        for i, sl in enumerate(sls):
+            f = r.force[sl]
+            hold = np.flatnonzero(f >= 0.9 * f.max())
+            out["peak_force_n"].append(float(np.percentile(f, 95)))
+            out["rise_s"].append(float(hold[0] * r.dt + r.dt))
+            out["hold_s"].append(float((hold[-1] - hold[0]) * r.dt + r.dt))
+            out["fall_s"].append(float((len(f) - hold[-1]) * r.dt))
+            if i + 1 < len(sls):
+                out["gap_s"].append(float((sls[i + 1].start - sl.stop) * r.dt))
+    return out
+
+
+def randomization_from_fit(fit: ChainFit, runs: Seq[RealRun]):
+    """The Randomization `fit` writes: joint bootstrap replicates of the chain, the gain (bootstrap spread of
+    ln r0), the board's full scale (run-to-run spread), the noise, and press protocols spanning the real
+    presses (peak force log-uniform from half the smallest to 1.2 x the largest peak; times uniform over
+    their 5-95 % range)."""
+    from scenes.randomize import Dist, Randomization
+
+    p = fit.params
+    st = press_stats(runs)
+    press = {}
+    for k, v in st.items():
+        if len(v) < 2:
+            continue
+        if k == "peak_force_n":
+            press[k] = Dist(kind="loguniform", low=0.5 * min(v), high=1.2 * max(v))
+        else:
+            press[k] = Dist(kind="uniform", low=float(np.percentile(v, 5)), high=float(np.percentile(v, 95)))
+    boot = [{k: float(b[k]) for k in ("exponent", "creep_amplitude", "creep_force_n", "tau_min_s", "tau_max_s",
+                                        "level_log_sd", "r_series_ohm", "threshold_force_n") if k in b} for b in fit.boot]
+    sd_gain = float(np.std([np.log(b["r0_ohm"]) for b in fit.boot])) if fit.boot else 0.1
+    episode = {"gain_log": Dist(kind="normal", mean=0.0, sd=max(sd_gain, 0.05)),  # estimate: floor 5 %
+               "noise_scale": Dist(kind="loguniform", low=0.5, high=2.0)}  # estimate
+    if p.full_scale_log_sd > 0:
+        episode["full_scale"] = Dist(kind="lognormal", median=p.full_scale, log_sd=p.full_scale_log_sd)
+    return Randomization(episode=episode, press=press, boot=boot)
