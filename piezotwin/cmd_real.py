@@ -116,8 +116,12 @@ def fit(
     episodes: Annotated[Optional[str], typer.Option(help="Glob of episodes to fit (default all).")] = None,
     rate: Annotated[float, typer.Option(help="Rate the recording is resampled to for the fit (Hz).")] = 20.0,
     min_force: Annotated[float, typer.Option(help="Samples below this force (N) are left out of the residual.")] = 0.5,
+    chain: Annotated[bool, typer.Option("--chain", help="Identify the whole chain (placement spread, creep, divider readout, noise) with bootstrap ranges (sensors/chain_fit.py); always for the divider family.")] = False,
+    n_boot: Annotated[int, typer.Option(help="Bootstrap replicates over presses (--chain).")] = 16,
 ) -> None:
     """Fit the film's conductance law, creep and noise to a real recording (least squares on a fast numpy model)."""
+    if chain or preset == "divider":
+        return _fit_chain(preset, recording, out, input_channel, target, episodes, rate, n_boot)
     from scenes import ConfigError, load_scene
     from sensors.velostat import fit as VF
 
@@ -215,3 +219,26 @@ def sim2real(
                   f"{r['zero_shot']['two_point_gain']['rmse']:.3f}), fine-tuned {r['finetuned']['rmse']:.3f} "
                   f"({r['finetuned']['rmse_pct_full_scale']:.1f} % FS), scratch {r['scratch']['rmse']:.3f}, static curve "
                   f"{r['static_curve']['rmse']:.3f}; wrote {out}/report.md, metrics.json", highlight=False)
+
+
+def _fit_chain(family, recording, out, input_channel, target, episodes, rate, n_boot) -> None:
+    from learn.sim2real import _chain_prior
+    from sensors import chain_fit as C
+
+    _need_recording(recording)
+    if not rate > 0:
+        fail(f"--rate must be > 0 (got {rate})")
+    _check_writable(out)
+    try:
+        runs = C.load_real_runs(recording, input_channel=input_channel, target=target, rate_hz=rate, episodes=episodes)
+        fit = C.fit_chain(runs, _chain_prior(family, runs), n_boot=n_boot)
+        rand = C.randomization_from_fit(fit, runs)
+    except (ValueError, KeyError) as exc:
+        fail(str(exc.args[0] if exc.args else exc))
+    out.mkdir(parents=True, exist_ok=True)
+    C.save_fit(fit, out / "chain_fit.json", {"family": family, "recording": str(recording), "fit_runs": [r.key for r in runs],
+                                             "randomization": rand.model_dump(mode="json")})
+    e = fit.error
+    console.print(f"chain fit: {e['n_presses']} presses ({e['n_missed_presses']} without response), within-press rms ln "
+                  f"reading {e['rms_log_reading_within_press']:.3f}, press level spread {fit.params.level_log_sd:.2f} (ln), "
+                  f"exponent {fit.params.exponent:.3f}; wrote {out}/chain_fit.json", highlight=False)
