@@ -244,3 +244,262 @@ def _report(out: Path, m: dict[str, Any], other: str | None) -> None:
                   "![learning curve](learning_curve.png)", ""]
     lines += ["![predictions](predictions.png)", "", f"Total {m['seconds']:.0f} s. Numbers in metrics.json."]
     (out / "report.md").write_text("\n".join(lines) + "\n")
+
+
+# ---------------------------------------------------------------------------------------------- the whole loop
+
+S2R_BUDGET = {  # the default budget of `piezotwin sim2real` (2 CPU cores, <= 15 min on the Lupasic logs)
+    "fit_rate_hz": 20.0, "n_boot": 16, "n_episodes": 96, "episode_s": 60.0, "pretrain_epochs": 40,
+    "pretrain_patience": 12, "finetune_epochs": 120, "finetune_patience": 20, "lr": 3e-4, "policy": "none",
+}
+
+
+def isotonic_decreasing(x: np.ndarray, y: np.ndarray, n_knots: int = 200) -> tuple[np.ndarray, np.ndarray]:
+    """Force as a non-increasing function of x = ln reading (pool-adjacent-violators on quantile bins);
+    returns knots (x ascending, y) for np.interp."""
+    o = np.argsort(x)
+    x, y = x[o], y[o]
+    edges = np.unique(np.quantile(x, np.linspace(0, 1, n_knots + 1)))
+    b = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, len(edges) - 2)
+    cnt = np.bincount(b, minlength=len(edges) - 1).astype(float)
+    keep = cnt > 0
+    xm = (np.bincount(b, x, len(edges) - 1)[keep] / cnt[keep])
+    ym = (np.bincount(b, y, len(edges) - 1)[keep] / cnt[keep])
+    w = cnt[keep]
+    # PAV for a non-increasing fit
+    vals, wts, lens = [], [], []
+    for v, ww in zip(ym, w):
+        vals.append(v); wts.append(ww); lens.append(1)
+        while len(vals) > 1 and vals[-2] < vals[-1]:
+            v2, w2, l2 = vals.pop(), wts.pop(), lens.pop()
+            vals[-1] = (vals[-1] * wts[-1] + v2 * w2) / (wts[-1] + w2)
+            wts[-1] += w2
+            lens[-1] += l2
+    yf = np.repeat(vals, lens)
+    return xm, yf
+
+
+class StaticCurve:
+    """The baseline a user fits without a model: force = monotone (isotonic) function of ln reading."""
+
+    kind = "static_curve"
+
+    def __init__(self, seqs):
+        x = np.concatenate([s.x[:, 0] for s in seqs])
+        y = np.concatenate([s.y[:, 0] for s in seqs])
+        self.kx, self.ky = isotonic_decreasing(x, y)
+
+    def predict(self, x: np.ndarray) -> np.ndarray:
+        return np.interp(x[:, 0], self.kx, self.ky)[:, None]
+
+
+class _Shifted:
+    """A compensator fed x - shift (the two-point gain calibration of the input)."""
+
+    def __init__(self, comp, shift: float):
+        self.comp, self.shift = comp, shift
+
+    def predict(self, x: np.ndarray) -> np.ndarray:
+        return self.comp.predict(x - self.shift)
+
+
+def two_point_shift(p, run_seq, rate_hz: float) -> dict[str, float]:
+    """Two-point gain calibration as a user does it: the unloaded reading and one known load (the first press
+    of the first training run, its plateau): shift of ln reading that maps the real reading at that load to
+    the identified chain's (press level 0)."""
+    from dataclasses import replace as _r
+
+    from sensors.chain_fit import presses_of, simulate_reading
+
+    f = run_seq.y[:, 0]
+    y = np.exp(run_seq.x[:, 0])
+    sl = presses_of(f, max(0.1 * f.max(), 0.05))[0]
+    hold = sl.start + np.flatnonzero(f[sl] >= 0.9 * f[sl].max())
+    ys = simulate_reading(f[: hold[-1] + 1], 1.0 / rate_hz, _r(p, noise_sd=0.0, miss_prob=0.0))
+    shift = float(np.median(np.log(y[hold])) - np.median(np.log(ys[hold])))
+    return {"shift_ln": shift, "known_load_n": float(np.median(f[hold])), "unloaded_reading": float(np.median(y[f < 0.02 * f.max()]))}
+
+
+def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, test_glob: str, budget: dict | None = None,
+                 seed: int = 0, input_channel: str = "sensor", target: str = "force", model: str = "tcn",
+                 progress: bool = False, log: Callable[[str], None] = lambda s: None) -> dict[str, Any]:
+    """fit -> randomized generation -> pre-training -> fine-tuning -> report; each step's artefact is written
+    whole (tmp + rename) and skipped when present with the same step config (state.json)."""
+    import fnmatch
+    import json
+
+    from learn.checkpoint import load_checkpoint, save_checkpoint
+    from learn.models.base import make_model
+    from sensors import chain_fit as C
+    from simulate.generation.chain_gen import generate_chain
+    from scenes.randomize import Randomization
+
+    B = {**S2R_BUDGET, **(budget or {})}
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    state_f = out / "state.json"
+    state = json.loads(state_f.read_text()) if state_f.is_file() else {}
+    key = {"family": family, "recording": str(Path(recording).resolve()), "test": test_glob, "budget": B, "seed": seed,
+           "model": model}
+    if state.get("key") != key:
+        state = {"key": key, "done": {}}
+    rate = float(B["fit_rate_hz"])
+    t_all = time.perf_counter()
+
+    def mark(step, info):
+        state["done"][step] = info
+        tmp = state_f.with_suffix(".tmp")
+        tmp.write_text(dumps(state))
+        tmp.replace(state_f)
+
+    runs = C.load_real_runs(recording, input_channel=input_channel, target=target, rate_hz=rate)
+    train_runs = [r for r in runs if not fnmatch.fnmatch(r.key, test_glob)]
+    test_keys = [r.key for r in runs if fnmatch.fnmatch(r.key, test_glob)]
+    if not test_keys:
+        raise ValueError(f"--test-episodes {test_glob!r} matches no episode of {recording}")
+    if len(train_runs) < 2:
+        raise ValueError(f"{recording}: needs at least 2 runs outside {test_glob!r} (one trains, one stops early)")
+
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                  TimeElapsedColumn(), disable=not progress, transient=False) as bar:
+        # 1. fit
+        fit_f = out / "fit.json"
+        if "fit" not in state["done"] or not fit_f.is_file():
+            task = bar.add_task("1/4 fit (bootstrap over presses)", total=B["n_boot"] + 1)
+            p0 = _chain_prior(family, runs)
+            fit = C.fit_chain(train_runs, p0, n_boot=int(B["n_boot"]), seed=seed,
+                              progress=lambda k, n: bar.update(task, completed=k))
+            held = C.evaluate(fit, [r for r in runs if r.key in test_keys])
+            rand = C.randomization_from_fit(fit, train_runs)
+            C.save_fit(fit, fit_f, {"family": family, "recording": str(recording), "fit_runs": [r.key for r in train_runs],
+                                    "held_out": held, "randomization": rand.model_dump(mode="json")})
+            mark("fit", {"within_press_fit": fit.error["rms_log_reading_within_press"], "held_out": held})
+            log(f"fit: within-press rms ln reading {fit.error['rms_log_reading_within_press']:.3f} (fit runs), "
+                f"{held.get('rms_log_reading_within_press', float('nan')):.3f} (held-out), levels in 90 % band "
+                f"{held.get('level_in_band90', float('nan')):.2f}")
+        p, fj = C.load_params(fit_f)
+        rand = Randomization.model_validate(fj["randomization"])
+        # 2. generate
+        gen_f = out / "sim.h5"
+        if "generate" not in state["done"] or not gen_f.is_file():
+            task = bar.add_task("2/4 randomized generation", total=int(B["n_episodes"]))
+            generate_chain(p, rand, gen_f, n_episodes=int(B["n_episodes"]), root_seed=seed, duration_s=float(B["episode_s"]),
+                           rate_hz=rate, progress=lambda k: bar.update(task, completed=k))
+            mark("generate", {"file": str(gen_f), "n_episodes": int(B["n_episodes"])})
+        # 3. pre-train
+        ck = out / "checkpoints" / "pretrained"
+        if "pretrain" not in state["done"] or not (ck / "config.json").is_file():
+            task = bar.add_task("3/4 pre-training", total=1)
+            seqs = FT.apply_map(FT.load_recording(gen_f, ["sensor"], ["force"]), "log")
+            sp = _split(seqs, seed)
+            comp = make_model(model, max_epochs=int(B["pretrain_epochs"]), patience=int(B["pretrain_patience"]))
+            t0 = time.perf_counter()
+            comp.fit([s.x for s in sp["train"]], [s.y for s in sp["train"]], valid=([s.x for s in sp["valid"]], [s.y for s in sp["valid"]]),
+                     seed=seed, progress=progress, inputs=["sensor"], targets=["force"], units=seqs[0].units)
+            hist = getattr(comp, "history", {}) or {}
+            sim_rmse = FT.rmse_on(comp, sp["valid"])
+            tmp = ck.with_name("pretrained.tmp")
+            save_checkpoint(comp, tmp, extra={"input_map": {"channel": "sensor", "transform": "log", "rate_hz": rate},
+                                               "sim_valid_rmse": sim_rmse})
+            if ck.exists():
+                import shutil
+
+                shutil.rmtree(ck)
+            tmp.replace(ck)
+            bar.update(task, completed=1)
+            mark("pretrain", {"sim_valid_rmse": sim_rmse, "seconds": time.perf_counter() - t0,
+                              "epochs": hist.get("epochs"), "best_epoch": hist.get("best_epoch")})
+            log(f"pre-trained: simulated valid RMSE {sim_rmse:.3f} N, epochs {hist.get('epochs')} (best {hist.get('best_epoch')})")
+        base = load_checkpoint(ck)
+        # 4. fine-tune, baselines, learning curve
+        task = bar.add_task("4/4 fine-tuning + baselines", total=1)
+        m = _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target, rate,
+                           lambda k, n: bar.update(task, completed=k, total=n), log)
+    m["steps"] = state["done"]
+    m["budget"] = B
+    m["seconds_total_this_call"] = time.perf_counter() - t_all
+    (out / "metrics.json").write_text(dumps(m))
+    _s2r_report(out, m)
+    return m
+
+
+def _chain_prior(family: str, runs) -> "Any":
+    from sensors.chain_fit import ChainParams
+
+    adc = next((r.attrs.get("adc_full_scale") for r in runs if r.attrs.get("adc_full_scale")), None)
+    rref = next((r.attrs.get("reference_resistor_ohm") for r in runs if r.attrs.get("reference_resistor_ohm")), None)
+    p = ChainParams(divider="high", r_ref_ohm=float(rref or 1e4), full_scale=float(adc or 1.0))
+    if adc:  # an ADC divider (TAMS-like): a series floor and a cover threshold show
+        p.r_series_ohm, p.threshold_force_n, p.exponent = 100.0, 0.05, 1.5  # estimate: starting point of the fit
+    return p
+
+
+def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target, rate, tick, log) -> dict[str, Any]:
+    seqs = FT.apply_map(FT.load_recording(recording, [input_channel], [target], rate_hz=rate), "log")
+    sp = FT.split_runs(seqs, train_fraction=None, test_glob=test_glob, seed=seed)
+
+    def score(comp, test=None) -> dict[str, Any]:
+        test = test or sp.test
+        ref = np.concatenate([s.y[:, 0] for s in test])
+        est = np.concatenate([comp.predict(s.x)[:, 0] for s in test])
+        r = M.regression_metrics(ref, est)
+        r["per_run_rmse"] = {s.key: M.rmse(s.y[:, 0], comp.predict(s.x)[:, 0]) for s in test}
+        return r
+
+    kw = dict(policy=B["policy"], lr=B["lr"], max_epochs=int(B["finetune_epochs"]), patience=int(B["finetune_patience"]), seed=seed)
+    sizes = sorted({k for k in (1, 2, 4) if k < len(sp.train)} | {len(sp.train)})
+    n_steps = len(sizes) + 1
+    res: dict[str, Any] = {}
+    res["zero_shot"] = score(base)
+    tp = two_point_shift(p, sp.train[0], rate)
+    res["zero_shot"]["two_point_gain"] = {**score(_Shifted(base, tp["shift_ln"])), **tp}
+    tick(1, n_steps)
+    full = max(float(max(s.y.max() for s in sp.test)), 1e-9)
+    lc = []
+    for i, k in enumerate(sizes):
+        tr = [s for s in sp.train if s.key in sp.order[:k]]
+        ft, info = FT.finetune(base, tr, sp.valid, **kw)
+        sc = FT.train_from_scratch(base.kind, base.hparams, tr, sp.valid, seed=seed, max_epochs=int(B["finetune_epochs"]),
+                                   patience=int(B["finetune_patience"]))
+        st = StaticCurve(tr + list(sp.valid))  # the curve sees every labelled real run the others see
+        row = {"n_runs": k, "runs": [s.key for s in tr], "finetuned": score(ft), "scratch": score(sc), "static_curve": score(st),
+               "finetune_epochs": info["epochs"], "finetune_best_epoch": info["best_epoch"]}
+        lc.append(row)
+        log(f"  {k} real run(s): fine-tuned {row['finetuned']['rmse']:.3f} N, scratch {row['scratch']['rmse']:.3f} N, "
+            f"static curve {row['static_curve']['rmse']:.3f} N")
+        tick(i + 2, n_steps)
+    last = lc[-1]
+    for k in ("finetuned", "scratch", "static_curve"):
+        res[k] = last[k]
+    for k in res:
+        res[k]["rmse_pct_full_scale"] = 100 * res[k]["rmse"] / full
+    res["zero_shot"]["two_point_gain"]["rmse_pct_full_scale"] = 100 * res["zero_shot"]["two_point_gain"]["rmse"] / full
+    curve = [{"n_runs": r["n_runs"], "runs": r["runs"], **{f"{k}_rmse": r[k]["rmse"] for k in ("finetuned", "scratch", "static_curve")},
+              "finetune_epochs": r["finetune_epochs"]} for r in lc]
+    tg = {
+        "finetuned_beats_scratch_and_static_every_budget": all(r["finetuned_rmse"] < min(r["scratch_rmse"], r["static_curve_rmse"]) for r in curve),
+        "one_run_within_1.3x_all_runs": curve[0]["finetuned_rmse"] <= 1.3 * curve[-1]["finetuned_rmse"],
+        "pooled_le_12pct": res["finetuned"]["rmse_pct_full_scale"] <= 12.0,
+        "zero_shot_two_point_le_25pct": res["zero_shot"]["two_point_gain"]["rmse_pct_full_scale"] <= 25.0,
+    }
+    return {"recording": str(recording), "split": sp.keys(), "full_scale_n": full, "results": res, "learning_curve": curve,
+            "targets": tg, "input_map": "x = ln(reading) at %g Hz; the simulated reading is in the real board's units" % rate}
+
+
+def _s2r_report(out: Path, m: dict[str, Any]) -> None:
+    r = m["results"]
+    rows = [[k, fmt(r[k]["rmse"]), fmt(r[k]["rmse_pct_full_scale"]), fmt(r[k]["mae"]), fmt(r[k]["r2"])]
+            for k in ("zero_shot", "finetuned", "scratch", "static_curve")]
+    z = r["zero_shot"]["two_point_gain"]
+    rows.insert(1, ["zero_shot + two-point gain", fmt(z["rmse"]), fmt(z["rmse_pct_full_scale"]), fmt(z["mae"]), fmt(z["r2"])])
+    lines = ["# sim2real", "", f"Recording `{m['recording']}`; test runs: {', '.join(m['split']['test'])}; "
+             f"full scale {m['full_scale_n']:.1f} N.", "",
+             md_table(["model", "RMSE (N)", "% FS", "MAE (N)", "R^2"], rows), "",
+             "## Learning curve (test RMSE, N)", "",
+             md_table(["real runs", "fine-tuned", "scratch", "static curve"],
+                      [[c["n_runs"], fmt(c["finetuned_rmse"]), fmt(c["scratch_rmse"]), fmt(c["static_curve_rmse"])] for c in m["learning_curve"]]),
+             "", "## Targets", "", *[f"- {k}: {'met' if v else 'NOT met'}" for k, v in m["targets"].items()], "",
+             "Fit, generation and pre-training details: fit.json, state.json; numbers: metrics.json."]
+    (out / "report.md").write_text("\n".join(lines) + "\n")

@@ -116,8 +116,12 @@ def fit(
     episodes: Annotated[Optional[str], typer.Option(help="Glob of episodes to fit (default all).")] = None,
     rate: Annotated[float, typer.Option(help="Rate the recording is resampled to for the fit (Hz).")] = 20.0,
     min_force: Annotated[float, typer.Option(help="Samples below this force (N) are left out of the residual.")] = 0.5,
+    chain: Annotated[bool, typer.Option("--chain", help="Identify the whole chain (placement spread, creep, divider readout, noise) with bootstrap ranges (sensors/chain_fit.py); always for the divider family.")] = False,
+    n_boot: Annotated[int, typer.Option(help="Bootstrap replicates over presses (--chain).")] = 16,
 ) -> None:
     """Fit the film's conductance law, creep and noise to a real recording (least squares on a fast numpy model)."""
+    if chain or preset == "divider":
+        return _fit_chain(preset, recording, out, input_channel, target, episodes, rate, n_boot)
     from scenes import ConfigError, load_scene
     from sensors.velostat import fit as VF
 
@@ -152,3 +156,89 @@ def fit(
                   f"(within press {eb['rms_log_within_press']:.3f}), after {ea['rms_log']:.3f} "
                   f"(within press {ea['rms_log_within_press']:.3f}); wrote {yml}, {out}/fit.json, {out}/fit.png",
                   highlight=False)
+
+
+def import_with_spec(spec: str, data: Optional[Path], second: Optional[Path], out: Path, rate: Optional[float]) -> None:
+    """`piezotwin import --spec SPEC DATA`: any column log (sensors/data/column_import.py)."""
+    from piezotwin.common import _print_summary
+    from sensors.data.column_import import import_columns, load_spec
+    from sensors.data.real_import import ImportLogError
+
+    if data is None or second is not None:
+        fail("with --spec give one DATA folder (or one log file)")
+    _check_writable(out.parent if str(out.parent) else Path("."))
+    try:
+        sp = load_spec(spec)
+        p = import_columns(data, sp, out, rate_hz=rate)
+    except ImportLogError as exc:
+        fail(str(exc))
+    from sensors.data.recording import Recording
+
+    with Recording(p) as rec:
+        for ep in rec.episode_ids:
+            a = rec.episode_attrs(ep)
+            tgt = sp.target
+            console.print(f"{ep}: {a['rate_hz']:g} Hz clock{' (period uncertain)' if a.get('time_uncertain') else ''}, "
+                          f"{a['duration_s']:.1f} s, {tgt} {a.get(tgt + '_min', float('nan')):.3g} .. "
+                          f"{a.get(tgt + '_max', float('nan')):.3g}, {len(a.get('events') or [])} events",
+                          highlight=False, soft_wrap=True)
+    _print_summary(p)
+
+
+@app.command()
+def sim2real(
+    family: Annotated[str, typer.Argument(help="Sensor family of the capture (velostat, or divider for an ADC divider array like TAMS).")],
+    recording: Annotated[Path, typer.Argument(help="Real recording (piezotwin import).")],
+    test_episodes: Annotated[str, typer.Option("--test-episodes", help="Glob of the real test runs (never fitted, never trained on).")],
+    out: Annotated[Path, typer.Option("-o", "--out", help="Output folder (resumable: finished steps are kept).")],
+    episodes: Annotated[Optional[int], typer.Option(help="Simulated episodes (default: the budget's 96).")] = None,
+    pretrain_epochs: Annotated[Optional[int], typer.Option(help="Pre-training epoch cap (default 40).")] = None,
+    n_boot: Annotated[Optional[int], typer.Option(help="Bootstrap replicates of the fit (default 16).")] = None,
+    seed: Annotated[int, typer.Option(help="Root seed (split, fit bootstrap, generation, training).")] = 0,
+) -> None:
+    """Real -> sim -> real: fit the chain, generate randomized data around it, pre-train, fine-tune, report."""
+    from learn.sim2real import S2R_BUDGET, run_sim2real
+
+    if family not in ("velostat", "divider"):
+        fail(f"sim2real supports the families velostat and divider (got '{family}')")
+    _need_recording(recording)
+    _check_writable(out)
+    b = dict(S2R_BUDGET)
+    for k, v in (("n_episodes", episodes), ("pretrain_epochs", pretrain_epochs), ("n_boot", n_boot)):
+        if v is not None:
+            if v < 1:
+                fail(f"--{k.replace('_', '-')} must be >= 1 (got {v})")
+            b[k] = v
+    try:
+        m = run_sim2real(family, recording, out, test_glob=test_episodes, budget=b, seed=seed, progress=err.is_terminal,
+                         log=lambda s: console.print(s, highlight=False))
+    except (ValueError, KeyError) as exc:
+        fail(str(exc.args[0] if exc.args else exc))
+    r = m["results"]
+    console.print(f"test RMSE (N): zero-shot {r['zero_shot']['rmse']:.3f} (two-point gain "
+                  f"{r['zero_shot']['two_point_gain']['rmse']:.3f}), fine-tuned {r['finetuned']['rmse']:.3f} "
+                  f"({r['finetuned']['rmse_pct_full_scale']:.1f} % FS), scratch {r['scratch']['rmse']:.3f}, static curve "
+                  f"{r['static_curve']['rmse']:.3f}; wrote {out}/report.md, metrics.json", highlight=False)
+
+
+def _fit_chain(family, recording, out, input_channel, target, episodes, rate, n_boot) -> None:
+    from learn.sim2real import _chain_prior
+    from sensors import chain_fit as C
+
+    _need_recording(recording)
+    if not rate > 0:
+        fail(f"--rate must be > 0 (got {rate})")
+    _check_writable(out)
+    try:
+        runs = C.load_real_runs(recording, input_channel=input_channel, target=target, rate_hz=rate, episodes=episodes)
+        fit = C.fit_chain(runs, _chain_prior(family, runs), n_boot=n_boot)
+        rand = C.randomization_from_fit(fit, runs)
+    except (ValueError, KeyError) as exc:
+        fail(str(exc.args[0] if exc.args else exc))
+    out.mkdir(parents=True, exist_ok=True)
+    C.save_fit(fit, out / "chain_fit.json", {"family": family, "recording": str(recording), "fit_runs": [r.key for r in runs],
+                                             "randomization": rand.model_dump(mode="json")})
+    e = fit.error
+    console.print(f"chain fit: {e['n_presses']} presses ({e['n_missed_presses']} without response), within-press rms ln "
+                  f"reading {e['rms_log_reading_within_press']:.3f}, press level spread {fit.params.level_log_sd:.2f} (ln), "
+                  f"exponent {fit.params.exponent:.3f}; wrote {out}/chain_fit.json", highlight=False)

@@ -106,7 +106,7 @@ def capture(
 
 @app.command("import")
 def import_(
-    sensor_log: Annotated[Optional[Path], typer.Argument(help="Sensor log: 'value unix_time_s' per line.")] = None,
+    sensor_log: Annotated[Optional[Path], typer.Argument(help="Sensor log: 'value unix_time_s' per line (with --spec: the data folder or one file).")] = None,
     force_log: Annotated[Optional[Path], typer.Argument(help="Load-cell log: 'force unix_time_s' per line.")] = None,
     out: Annotated[Path, typer.Option("-o", "--out", help="Recording to write (.h5).")] = Path("real.h5"),
     lupasic_dir: Annotated[Optional[Path], typer.Option("--dir", help="Instead of two logs: every run of a Lupasic folder (velostat_data/, futek_data/), one episode each.")] = None,
@@ -115,9 +115,15 @@ def import_(
     calibration: Annotated[Optional[Path], typer.Option(help="'counts kg' pairs, e.g. futek_calibration.txt.")] = None,
     sensor_units: Annotated[str, typer.Option(help="Units of the sensor values.")] = "raw",
     family: Annotated[str, typer.Option(help="Sensor family recorded in /sensor.")] = "velostat",
+    spec: Annotated[Optional[str], typer.Option("--spec", help="Column-log spec: a YAML file or a built-in layout (lupasic-sweep, tams); see docs/real-sensors.md.")] = None,
 ) -> None:
     """Import a sensor log and a load-cell log (host unix time) into a recording with source="real"."""
     from sensors.data.real_import import ImportLogError, import_runs, lupasic_pairs
+
+    if spec is not None:
+        from piezotwin.cmd_real import import_with_spec
+
+        return import_with_spec(spec, sensor_log, force_log, out, rate)
 
     n_logs = (sensor_log is not None) + (force_log is not None)
     if (lupasic_dir is None and n_logs != 2) or (lupasic_dir is not None and n_logs):

@@ -91,3 +91,86 @@ def test_fit_cli_writes_loadable_preset_and_rejects_bad_input(tmp_path):
     assert res.exit_code == 2 and "no channel" in res.output
     res = runner.invoke(app, ["fit", "velostat", str(tmp_path / "missing.h5")])
     assert res.exit_code == 2 and "does not exist" in res.output
+
+
+# ------------------------------------------------------------------ the whole chain (sensors/chain_fit.py)
+from dataclasses import replace as _replace  # noqa: E402
+
+from sensors import chain_fit as CF  # noqa: E402
+from scenes.randomize import Dist, Randomization, draw  # noqa: E402
+
+
+def _synthetic_runs(p, n_runs=4, seed=1, fs=1000.0, rate=20.0):
+    """Runs made with known parameters: press sequences through simulate_reading, one level per press."""
+    from simulate.generation.chain_gen import press_protocol
+
+    rand = Randomization(press={"peak_force_n": Dist(kind="loguniform", low=2.0, high=30.0),
+                                "rise_s": Dist(kind="uniform", low=0.3, high=0.8), "hold_s": Dist(kind="uniform", low=1.0, high=1.5),
+                                "fall_s": Dist(kind="fixed", value=0.1), "gap_s": Dist(kind="uniform", low=1.0, high=2.0)})
+    rng = np.random.default_rng(seed)
+    runs = []
+    for k in range(n_runs):
+        f, pid = press_protocol(rand, rng, 40.0, 1 / rate)
+        lev = rng.normal(0, p.level_log_sd, pid.max() + 1)
+        y = CF.simulate_reading(f, 1 / rate, p, level=np.where(pid >= 0, lev[np.maximum(pid, 0)], 0.0), fs=fs, rng=rng)
+        runs.append(CF.RealRun(f"run{k}", f, y, 1 / rate, fs, p.noise_sd))
+    return runs
+
+
+def test_chain_fit_recovers_known_parameters():
+    true = CF.ChainParams(exponent=1.2, r0_ohm=3000.0, creep_amplitude=2.0, creep_force_n=4.0, tau_min_s=0.1,
+                          tau_max_s=5.0, n_creep=4, level_log_sd=0.4, r_ref_ohm=1e4, full_scale=1000.0, noise_sd=0.0)
+    runs = _synthetic_runs(true)
+    p0 = CF.ChainParams(r_ref_ohm=1e4, full_scale=1000.0, n_creep=4)
+    fit = CF.fit_chain(runs, p0, n_boot=3)
+    q = fit.params
+    assert abs(q.exponent - 1.2) < 0.05
+    assert fit.error["rms_log_reading_within_press"] < 0.03
+    assert abs(q.level_log_sd - 0.4) < 0.15  # the spread of the presses' levels, from ~50 presses
+    # the creep: the simulated plateau drop of the fit equals the true chain's
+    ev = CF.evaluate(fit, _synthetic_runs(true, n_runs=2, seed=7))
+    d = ev["plateau_drop"]
+    assert abs(d["sim_median"] - d["real_median"]) < 0.03
+    assert 0.75 <= ev["level_in_band90"] <= 1.0
+    assert set(fit.ranges) >= {"exponent", "r0_ohm", "level_log_sd"}
+
+
+def test_divider_taxel_predicts_other_reference_resistor():
+    """A fitted ADC divider taxel, told only the new reference resistor, predicts the reading through it."""
+    true = CF.ChainParams(exponent=1.5, r0_ohm=2000.0, creep_amplitude=0.3, creep_force_n=1.0, tau_min_s=0.2, tau_max_s=5.0,
+                          n_creep=3, r_series_ohm=200.0, r_leak_ohm=4e5, r_ref_ohm=1e4, full_scale=5115.0, level_log_sd=0.05)
+    runs = _synthetic_runs(true, n_runs=3)
+    for r in runs:
+        r.attrs["adc_full_scale"] = 5115.0
+    fit = CF.fit_chain(runs, CF.ChainParams(r_ref_ohm=1e4, full_scale=5115.0, n_creep=3, r_series_ohm=50.0), n_boot=0)
+    new_true = _replace(true, r_ref_ohm=2.2e3, level_log_sd=0.0)
+    new_fit = _replace(fit.params, r_ref_ohm=2.2e3)
+    f = runs[0].force
+    y_true = CF.simulate_reading(f, runs[0].dt, new_true)
+    y_pred = CF.simulate_reading(f, runs[0].dt, new_fit)
+    on = f > 1.0
+    assert np.sqrt(np.mean(np.log(y_pred[on] / y_true[on]) ** 2)) < 0.1
+
+
+def test_randomization_draw_is_seeded_and_recorded(tmp_path):
+    from sensors.data.recording import Recording
+    from simulate.generation.chain_gen import generate_chain
+
+    rand = Randomization(episode={"gain_log": Dist(kind="normal", mean=0, sd=0.3), "tip_area_scale": Dist(kind="uniform", low=0.5, high=2)})
+    a, _ = draw(rand, 123)
+    b, _ = draw(rand, 123)
+    c, _ = draw(rand, 124)
+    assert a == b and a != c
+    p = CF.ChainParams(r_ref_ohm=1e4, full_scale=1000.0, level_log_sd=0.3)
+    f1 = generate_chain(p, rand, tmp_path / "a.h5", n_episodes=2, root_seed=5, duration_s=10)
+    f2 = generate_chain(p, rand, tmp_path / "b.h5", n_episodes=2, root_seed=5, duration_s=10)
+    with Recording(f1) as r1, Recording(f2) as r2:
+        for ep in r1.episode_ids:
+            at = r1.episode_attrs(ep)
+            assert "seed" in at and "tip_area_scale" in at["randomized"]
+            np.testing.assert_array_equal(np.asarray(r1.read(ep, "sensor")), np.asarray(r2.read(ep, "sensor")))
+
+
+def test_bad_distribution_rejected():
+    with pytest.raises(ValueError):
+        Dist(kind="uniform", low=2, high=1)

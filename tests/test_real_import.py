@@ -111,3 +111,112 @@ def test_import_whole_folder_one_episode_per_run(tmp_path):
     assert rates == {143.0} and 44 < peak < 46
     res = runner.invoke(app, ["import", str(SENSOR), "--dir", str(REAL), "-o", str(tmp_path / "x.h5")])
     assert res.exit_code == 2 and "either" in res.output
+
+
+# ------------------------------------------------------------------ any column log (sensors/data/column_import.py)
+from sensors.data.column_import import LAYOUTS, import_columns, load_spec, read_weight_calibration  # noqa: E402
+
+SWEEP = REAL / "speed_sweep"
+TAMS = REAL.parent / "tams-array" / "calibration"
+
+
+def _csv_spec(**kw):
+    spec = {"name": "t", "family": "generic", "input": "sensor", "target": "force",
+            "streams": [{"name": "log", "glob": "*.csv", "sample_rate_hz": 50.0, "header_lines": 1,
+                         "columns": [{"index": 0, "name": "sensor", "units": "counts"},
+                                     {"index": 1, "name": "force", "units": "N",
+                                      "calibration": {"points": [[100, 0.0], [300, 2.0]]}},
+                                     {"index": 2, "name": "label", "role": "event"}]}]}
+    spec["streams"][0].update(kw)
+    return spec
+
+
+def test_csv_two_point_stated_rate_events(tmp_path):
+    d = tmp_path / "d"
+    d.mkdir()
+    (d / "run1.csv").write_text("sensor,force,label\n10,100\n20,200,touch\n30,300\n40,400,lift\n")
+    p = import_columns(d, _csv_spec(), tmp_path / "o.h5")
+    with Recording(p) as rec:
+        (ep,) = rec.episode_ids
+        f = np.asarray(rec.read(ep, "force"))
+        np.testing.assert_allclose(f, [0, 1, 2, 3], atol=1e-6)  # two-point line (100 -> 0 N, 300 -> 2 N)
+        np.testing.assert_allclose(np.asarray(rec.read(ep, "time")), np.arange(4) / 50.0)
+        a = rec.episode_attrs(ep)
+        assert [e["label"] for e in a["events"]] == ["touch", "lift"]
+        assert a["events"][0]["time_s"] == pytest.approx(0.02)
+
+
+def test_uncertain_period_recorded(tmp_path):
+    d = tmp_path / "d"
+    d.mkdir()
+    (d / "a.csv").write_text("h\n1,100\n2,200\n3,300\n")
+    p = import_columns(d, _csv_spec(sample_rate_hz=None, sample_period_range_s=[0.01, 0.02]), tmp_path / "o.h5")
+    with Recording(p) as rec:
+        a = rec.episode_attrs(rec.episode_ids[0])
+        assert a["rate_hz"] == pytest.approx(1 / 0.015)
+        assert list(a["log_sample_period_range_s"]) == [0.01, 0.02] and a["time_uncertain"]
+
+
+@pytest.mark.parametrize("body,needle", [("h\n1,100\nx,200\n", "a.csv:3: column 0 (sensor) is not a number"),
+                                        ("h\n1,100\n2\n", "a.csv:3: malformed line (expected at least 2")])
+def test_column_bad_line_one_line_exit_2(tmp_path, body, needle):
+    import yaml
+
+    d = tmp_path / "d"
+    d.mkdir()
+    (d / "a.csv").write_text(body)
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(yaml.safe_dump(_csv_spec()))
+    res = CliRunner().invoke(app, ["import", "--spec", str(spec), str(d), "-o", str(tmp_path / "o.h5")])
+    assert res.exit_code == 2, res.output
+    assert needle in res.output and len(res.output.strip().splitlines()) == 1
+    assert not (tmp_path / "o.h5").exists()
+
+
+def test_bad_spec_one_line(tmp_path):
+    spec = tmp_path / "s.yaml"
+    spec.write_text("streams: [{name: a, glob: '*', columns: [{index: 0, name: sensor}]}]\n")
+    res = CliRunner().invoke(app, ["import", "--spec", str(spec), str(tmp_path), "-o", str(tmp_path / "o.h5")])
+    assert res.exit_code == 2 and "s.yaml" in res.output and len(res.output.strip().splitlines()) == 1
+
+
+def test_weight_calibration_file(tmp_path):
+    f = tmp_path / "c.txt"
+    f.write_text("no weight: 1000\n20g weight: 3000\ntip: 6mm cylinder\nresistance: 10kOhm\n")
+    assert read_weight_calibration(f) == [(1000.0, 0.0), (3000.0, 0.02)]
+    f.write_text("no weight: 1000\n")
+    with pytest.raises(ImportLogError, match="c.txt: a calibration needs at least 2"):
+        read_weight_calibration(f)
+
+
+@pytest.mark.skipif(not SWEEP.is_dir(), reason="speed sweep logs not present")
+def test_import_speed_sweep_layout(tmp_path):
+    res = CliRunner().invoke(app, ["import", "--spec", "lupasic-sweep", str(SWEEP), "-o", str(tmp_path / "s.h5")])
+    assert res.exit_code == 0, res.output
+    with Recording(tmp_path / "s.h5") as rec:
+        assert len(rec.episode_ids) == 9
+        ep = "speed_0.01-attempt_0"
+        a = rec.episode_attrs(ep)
+        labels = [e["label"] for e in a["events"]]
+        assert labels[0] == "start_exp" and "touch_grd" in labels and "go_up_roll" in labels
+        assert 100 < a["sensor_rate_hz"] < 200 and a["force_max"] > 10
+        assert np.asarray(rec.read(ep, "sensor")).shape[1] == 1
+
+
+@pytest.mark.skipif(not TAMS.is_dir(), reason="TAMS logs not present")
+def test_import_tams_layout(tmp_path):
+    res = CliRunner().invoke(app, ["import", "--spec", "tams", str(TAMS), "-o", str(tmp_path / "t.h5")])
+    assert res.exit_code == 0, res.output
+    with Recording(tmp_path / "t.h5") as rec:
+        assert sorted(rec.episode_ids) == ["10k-nosil-cylindertip", "10k-thicksil-cylindertip", "10k-thinsil-cylindertip"]
+        a = rec.episode_attrs("10k-nosil-cylindertip")
+        assert a["reference_resistor_ohm"] == 10_000.0
+        assert list(a["log_sample_period_range_s"]) == [0.01, 0.02]
+        f = np.asarray(rec.read("10k-nosil-cylindertip", "force"))
+        assert abs(np.median(f[:20])) < 0.02 and 0.5 < f.max() < 2.0  # N, from the two-point calibration
+        assert rec.sensor_attrs["adc_bits"] == 10
+
+
+def test_layouts_validate():
+    for name in LAYOUTS:
+        assert load_spec(name).name == name

@@ -1,0 +1,531 @@
+"""Identify a whole piezoresistive sensing chain from a real capture (force + reading), with ranges.
+
+Chain (one taxel or one film pressed by one tip; all SI):
+  contact   p = F / A_tip; press j lands at a random place on a spatially varying film: its conductance
+            level is multiplied by exp(-l_j), l_j ~ N(0, level_log_sd^2) (velostat: film random field,
+            sensors/velostat/model.py film_field; curved mount: partial contact), and with probability
+            miss_prob the press does not reach the active area (no response, as a third of a Lupasic
+            series' low-force samples).
+  film      R_film = r0_ohm * exp(l_j) * ((F + c) / F_ref)^-n, F_ref = 1 N (power law G ~ p^n: Holm,
+            Electric Contacts 1967; velostat paper Fig. 13b); the tip area only rescales r0 and F_c (p = F / A),
+            so from force and reading alone A is not identifiable: it is taken from the user (tip) and kept.
+  creep     c = sum_k c_k, c_k[t] = d_k c_k[t-1] + (1 - d_k) w_k Phi(F), Phi = a F_c ln(1 + F / F_c),
+            d_k = exp(-dt / tau_k), tau_k log-spaced in [tau_min, tau_max], w_k = 1 / K (Schapery-type
+            log-time creep as sensors/velostat/reference.py, written in force units).
+  readout   R = R_film + r_series (traces, mux), in parallel with r_leak (unloaded: the leak alone);
+            divider with reference resistor r_ref: reading = offset + FS * R / (R + r_ref)  ("high": reading
+            rises with resistance, the Lupasic board) or offset + FS * r_ref / (R + r_ref) ("low": TAMS,
+            reading falls with force); FS = full scale (ADC counts x samples summed, or the board's rest
+            level); noise: white, noise_sd in reading units; ADC step adc_step (0: none).
+Fit (scipy least_squares, trust-region reflective, bounded) of ln R on loaded samples (R from the reading
+through the inverse divider), each press's level l_j profiled out (its mean log residual): theta =
+[n, ln a, ln F_c, ln tau_min, ln tau_max] (+ ln r_series when the readout saturates). Then ln r0 = mean of
+the press levels, level_log_sd = their std (the press-to-press spread is a parameter of the model, drawn
+per press when generating, not subtracted), miss_prob = share of loaded presses that stay at the rest
+level. Ranges: bootstrap over presses (resample presses with replacement, refit), 5-95 % per parameter;
+the predictive 90 % band of a new press's level is mean +- 1.645 sqrt(sd^2 + var_boot(mean)).
+Hysteresis: the creep bank is the chain's (rate-dependent) hysteresis; no rate-independent (play) bank is
+fitted (the velostat model has none).
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import json
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any, Sequence as Seq
+
+import numpy as np
+
+__all__ = ["ChainParams", "Press", "RealRun", "load_real_runs", "simulate_reading", "fit_chain", "ChainFit",
+           "evaluate", "reading_from_resistance", "resistance_from_reading"]
+
+F_REF_N = 1.0
+
+
+@dataclass
+class ChainParams:
+    exponent: float = 1.0  # estimate
+    r0_ohm: float = 1.0e3  # estimate: film resistance at 1 N, mean placement
+    creep_amplitude: float = 0.5  # estimate
+    creep_force_n: float = 5.0  # estimate: F_c = p_c A_tip
+    tau_min_s: float = 0.3  # estimate
+    tau_max_s: float = 30.0  # estimate
+    n_creep: int = 4
+    level_log_sd: float = 0.0  # press-to-press std of ln level (placement)
+    miss_prob: float = 0.0
+    r_series_ohm: float = 0.0
+    r_leak_ohm: float = 1.0e12
+    # readout
+    divider: str = "high"  # "high": reading ~ R / (R + r_ref); "low": reading ~ r_ref / (R + r_ref)
+    r_ref_ohm: float = 1.0e4
+    full_scale: float = 1023.0
+    full_scale_log_sd: float = 0.0  # run-to-run std of ln FS (the Lupasic board's rest level drifts)
+    offset: float = 0.0
+    noise_sd: float = 0.0  # reading units
+    adc_step: float = 0.0
+    tip_area_m2: float = 1e-4
+    threshold_force_n: float = 0.0  # force the cover / gap carries before the film is loaded (F_eff = F - F_0)
+
+    @property
+    def times_s(self) -> list[float]:
+        if self.n_creep == 1:
+            return [self.tau_min_s]
+        return [float(v) for v in np.geomspace(self.tau_min_s, self.tau_max_s, self.n_creep)]
+
+    def to_json(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["times_s"] = self.times_s
+        return d
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> "ChainParams":
+        return cls(**{k: v for k, v in d.items() if k in cls.__dataclass_fields__})
+
+
+def creep_force(force: np.ndarray, dt: float, p: ChainParams) -> np.ndarray:
+    from scipy.signal import lfilter
+
+    f = np.maximum(np.asarray(force, np.float64), 0.0)
+    phi = p.creep_amplitude * p.creep_force_n * np.log1p(f / p.creep_force_n)
+    c = np.zeros_like(f)
+    w = 1.0 / p.n_creep
+    for tau in p.times_s:
+        d = np.exp(-dt / tau)
+        c += lfilter([(1.0 - d) * w], [1.0, -d], phi)
+    return c
+
+
+def film_resistance(force: np.ndarray, dt: float, p: ChainParams, level: np.ndarray | float = 0.0) -> np.ndarray:
+    """R_film (ohm, inf unloaded) of the recorded force; level: ln multiplier per sample (press placement)."""
+    f = np.maximum(np.asarray(force, np.float64) - p.threshold_force_n, 0.0)
+    c = creep_force(f, dt, p)
+    with np.errstate(divide="ignore", over="ignore"):
+        return np.where(f > 0, p.r0_ohm * np.exp(level) * ((f + c) / F_REF_N) ** (-p.exponent), np.inf)
+
+
+def total_resistance(r_film: np.ndarray, p: ChainParams) -> np.ndarray:
+    r = r_film + p.r_series_ohm
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(np.isinf(r), p.r_leak_ohm, r * p.r_leak_ohm / (r + p.r_leak_ohm))
+
+
+def reading_from_resistance(r: np.ndarray, p: ChainParams, fs: float | None = None) -> np.ndarray:
+    fs = p.full_scale if fs is None else fs
+    frac = r / (r + p.r_ref_ohm) if p.divider == "high" else p.r_ref_ohm / (r + p.r_ref_ohm)
+    return p.offset + fs * frac
+
+
+def resistance_from_reading(y: np.ndarray, p: ChainParams, fs: float | None = None) -> np.ndarray:
+    """Inverse divider (nan outside (offset, offset + FS))."""
+    fs = p.full_scale if fs is None else fs
+    u = (np.asarray(y, np.float64) - p.offset) / fs
+    u = np.where((u > 0) & (u < 1), u, np.nan)
+    return p.r_ref_ohm * (u / (1 - u) if p.divider == "high" else (1 - u) / u)
+
+
+def simulate_reading(force: np.ndarray, dt: float, p: ChainParams, level: np.ndarray | float = 0.0,
+                     fs: float | None = None, rng: np.random.Generator | None = None) -> np.ndarray:
+    """Force [T] (N) -> reading [T] (noise-free without rng)."""
+    y = reading_from_resistance(total_resistance(film_resistance(force, dt, p, level), p), p, fs)
+    if rng is not None and p.noise_sd > 0:
+        y = y + rng.standard_normal(len(y)) * p.noise_sd
+    if p.adc_step > 0:
+        y = np.round((y - p.offset) / p.adc_step) * p.adc_step + p.offset
+    return y
+
+
+# ----------------------------------------------------------------------------------------------- real runs
+
+@dataclass
+class Press:
+    run: int
+    sl: slice  # samples of the press (loaded stretch)
+
+
+@dataclass
+class RealRun:
+    key: str
+    force: np.ndarray
+    reading: np.ndarray
+    dt: float
+    fs: float  # full scale of this run (rest level for a board whose full scale is its rest)
+    noise_sd: float
+    attrs: dict = field(default_factory=dict)
+
+
+def presses_of(force: np.ndarray, min_force_n: float) -> list[slice]:
+    on = force > min_force_n
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], on.astype(int), [0]])))
+    return [slice(a, b) for a, b in zip(edges[::2], edges[1::2]) if b - a >= 3]
+
+
+def noise_of(reading: np.ndarray, mask: np.ndarray) -> float:
+    d = np.diff(np.asarray(reading, np.float64))[mask[1:] & mask[:-1]]
+    if len(d) < 10:
+        return 0.0
+    return float(np.median(np.abs(d - np.median(d))) / 0.6745 / np.sqrt(2))
+
+
+def load_real_runs(recording: str | Path, *, input_channel: str = "sensor", target: str = "force",
+                   rate_hz: float | None = 20.0, episodes: str | Seq[str] | None = None) -> list[RealRun]:
+    from sensors.data.recording import Recording
+    from sensors.data.resample import resample
+
+    out = []
+    with Recording(recording) as rec:
+        sattrs = dict(rec.sensor_attrs)
+        for ep in rec.episode_ids:
+            if isinstance(episodes, str) and not fnmatch.fnmatch(ep, episodes):
+                continue
+            if episodes is not None and not isinstance(episodes, str) and ep not in episodes:
+                continue
+            try:
+                s = np.asarray(rec.read(ep, input_channel), np.float64).reshape(-1)
+                f = np.asarray(rec.read(ep, target), np.float64).reshape(-1)
+                t = np.asarray(rec.read(ep, "time"), np.float64)
+            except KeyError as exc:
+                raise ValueError(str(exc.args[0])) from None
+            rest = f < 0.02 * max(f.max(), 1e-9)
+            noise = noise_of(s, ~rest)
+            if rate_hz:
+                _, s2 = resample(t, s, rate_hz)
+                _, f2 = resample(t, f, rate_hz)
+                s, f, dt = s2[:, 0], f2[:, 0], 1.0 / rate_hz
+            else:
+                dt = float(np.median(np.diff(t)))
+            a = {**sattrs, **dict(rec.episode_attrs(ep))}
+            fs = float(a.get("adc_full_scale") or np.median(s[f < 0.02 * max(f.max(), 1e-9)]))
+            out.append(RealRun(ep, f, s, dt, fs, noise, {k: a[k] for k in ("reference_resistor_ohm", "adc_full_scale") if k in a}))
+    if not out:
+        raise ValueError(f"{recording}: no episode" + (f" matches {episodes!r}" if episodes else ""))
+    return out
+
+
+# ----------------------------------------------------------------------------------------------- fit
+
+@dataclass
+class ChainFit:
+    params: ChainParams
+    ranges: dict[str, list[float]]  # parameter -> [p5, p50, p95] over the bootstrap
+    level_band90: list[float]  # predictive 90 % band of a new press's ln level (relative to ln r0)
+    boot: list[dict[str, float]]
+    error: dict[str, Any]
+    press_levels: list[float]
+    result: dict[str, Any] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        return {"params": self.params.to_json(), "ranges_p5_p50_p95": self.ranges, "level_band90_log": self.level_band90,
+                "bootstrap": self.boot, "error": self.error, "press_levels_log": self.press_levels, "least_squares": self.result}
+
+
+NAMES = ("exponent", "ln_creep_amplitude", "ln_creep_force_n", "ln_tau_min_s", "ln_tau_max_s", "ln_r_series_ohm",
+         "threshold_force_n")
+LB = np.array([0.2, np.log(1e-3), np.log(1e-3), np.log(0.02), np.log(0.5), np.log(1e-3), 0.0])
+UB = np.array([4.0, np.log(50.0), np.log(1e4), np.log(5.0), np.log(1e3), np.log(1e7), 1e3])
+
+
+def _with(p: ChainParams, th: np.ndarray, fit_series: bool) -> ChainParams:
+    q = replace(p, exponent=float(th[0]), creep_amplitude=float(np.exp(th[1])), creep_force_n=float(np.exp(th[2])),
+                tau_min_s=float(np.exp(th[3])), tau_max_s=float(np.exp(max(th[4], th[3]))))
+    if fit_series:
+        q.r_series_ohm = float(np.exp(th[5]))
+        q.threshold_force_n = float(th[6])
+    return q
+
+
+def _theta(p: ChainParams) -> np.ndarray:
+    return np.array([p.exponent, np.log(p.creep_amplitude), np.log(p.creep_force_n), np.log(p.tau_min_s),
+                     np.log(p.tau_max_s), np.log(max(p.r_series_ohm, 1e-3)), p.threshold_force_n])
+
+
+class _Data:
+    """Loaded samples of the presses of the runs: per press its run, slice, and ln R from the reading."""
+
+    def __init__(self, runs: Seq[RealRun], p: ChainParams, min_force_frac: float, min_force_n: float):
+        self.runs = runs
+        self.presses: list[Press] = []
+        self.lnr: list[np.ndarray] = []
+        self.missed: list[bool] = []
+        for i, r in enumerate(runs):
+            thr = max(min_force_frac * r.force.max(), min_force_n)
+            R = resistance_from_reading(r.reading, p, r.fs)
+            for sl in presses_of(r.force, thr):
+                # the loading ramp above 30 % of the peak and the plateau, up to its last sample >= 90 % of the
+                # peak; the release is left out: there the tip leaves the film within one or two samples and
+                # the ~10 ms alignment of the two streams, not the film, sets the reading
+                seg = np.arange(sl.start, sl.stop)
+                fpk = r.force[seg].max()
+                seg = seg[: int(np.flatnonzero(r.force[seg] >= 0.9 * fpk)[-1]) + 1]
+                seg = seg[r.force[seg] > max(thr, 0.3 * fpk)]
+                if len(seg) < 3:
+                    continue
+                lr = np.log(R[seg])
+                miss = np.nanmedian(np.abs(r.reading[seg] - p.offset) / r.fs) > 0.85 if p.divider == "high" else \
+                    np.nanmedian(np.abs(r.reading[seg] - p.offset) / r.fs) > 0.97
+                self.missed.append(bool(miss or not np.isfinite(lr).mean() > 0.8))
+                if self.missed[-1]:
+                    continue
+                self.presses.append(Press(i, seg))
+                self.lnr.append(lr)
+
+    def residuals(self, p: ChainParams) -> tuple[list[np.ndarray], np.ndarray]:
+        """Per press ln R_sim(level 0) - ln R_real, and each press's mean (its level)."""
+        sims = {}
+        out, lev = [], []
+        for pr, lr in zip(self.presses, self.lnr):
+            if pr.run not in sims:
+                r = self.runs[pr.run]
+                sims[pr.run] = np.log(film_resistance(r.force, r.dt, p) + p.r_series_ohm)
+            e = sims[pr.run][pr.sl] - lr
+            e = e[np.isfinite(e)]
+            out.append(e)
+            lev.append(-np.mean(e) if len(e) else 0.0)
+        return out, np.asarray(lev)
+
+
+def _fit_shape(data: _Data, p0: ChainParams, idx: np.ndarray, fit_series: bool, max_nfev: int):
+    from scipy.optimize import least_squares
+
+    n = 7 if fit_series else 5
+
+    def fun(th):
+        q = _with(p0, np.concatenate([th, _theta(p0)[n:]]), fit_series)
+        # series resistance enters inside the log: refit the level per press through ln(R_film e^l + r_s)
+        out, _ = _profile(data, q, idx)
+        return np.concatenate(out)
+
+    th0 = np.clip(_theta(p0)[:n], LB[:n] + 1e-6, UB[:n] - 1e-6)
+    res = least_squares(fun, th0, bounds=(LB[:n], UB[:n]), x_scale="jac", max_nfev=max_nfev, method="trf")
+    q = _with(p0, np.concatenate([res.x, _theta(p0)[n:]]), fit_series)
+    return q, res
+
+
+def _profile(data: _Data, q: ChainParams, idx: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+    """Residuals ln R_model - ln R_real with each press's level l fitted (Gauss-Newton, r0 = 1 ohm so the
+    levels absorb r0): R_model = (R_f e^l + r_s) || r_leak."""
+    out, lev = [], []
+    cache = {}
+    L = q.r_leak_ohm
+    for j in idx:
+        pr, lr = data.presses[j], data.lnr[j]
+        if pr.run not in cache:
+            r = data.runs[pr.run]
+            cache[pr.run] = film_resistance(r.force, r.dt, replace(q, r0_ohm=1.0))
+        rf = cache[pr.run][pr.sl]
+        ok = np.isfinite(lr)
+        rf, y = rf[ok], lr[ok]
+        fin = np.isfinite(rf)
+        if not fin.any():
+            out.append(np.log(L) - y)
+            lev.append(0.0)
+            continue
+        ry = np.exp(y)
+        ry = ry * L / np.maximum(L - ry, 1e-3 * L)  # undo the leak
+        target = np.log(np.maximum(ry - q.r_series_ohm, 1e-3 * ry))
+        l = float(np.median(target[fin] - np.log(rf[fin])))
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            for _ in range(4):
+                a = rf * np.exp(l) + q.r_series_ohm
+                m = L / (1.0 + L / a)
+                g = np.where(fin, m * rf * np.exp(l) / a ** 2, 0.0)
+                e = np.log(m) - y
+                l -= float(np.sum(e * g) / max(np.sum(g * g), 1e-12))
+                l = float(np.clip(l, -50, 50))
+            a = rf * np.exp(l) + q.r_series_ohm
+            out.append(np.log(L / (1.0 + L / a)) - y)
+        lev.append(l)
+    return out, np.asarray(lev)
+
+
+def leak_from_unloaded(runs: Seq[RealRun], p: ChainParams) -> float:
+    """Unloaded resistance (ohm) through the divider: median over the runs' unloaded samples; 1e12 when
+    the board's full scale is its own rest level (no leak visible)."""
+    vals = []
+    for r in runs:
+        rest = r.force < 0.02 * max(r.force.max(), 1e-9)
+        R = resistance_from_reading(r.reading[rest], p, r.fs)
+        R = R[np.isfinite(R)]
+        if len(R) > 10 and "adc_full_scale" in r.attrs:
+            vals.append(np.median(R))
+    return float(np.median(vals)) if vals else 1e12
+
+
+def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = None, n_boot: int = 16,
+              min_force_frac: float = 0.1, min_force_n: float = 0.05, max_nfev: int = 60, seed: int = 0,
+              progress=None) -> ChainFit:
+    """Fit the chain to real runs (see the module docstring); progress(k, n) is called after each fit."""
+    p0 = replace(p0, r_leak_ohm=leak_from_unloaded(runs, p0))
+    data = _Data(runs, p0, min_force_frac, min_force_n)
+    if len(data.presses) < 3:
+        raise ValueError(f"found {len(data.presses)} press(es) with a response; a fit needs at least 3")
+    if fit_series is None:
+        fit_series = any("adc_full_scale" in r.attrs for r in runs)  # an ADC of known full scale: a floor shows
+    idx = np.arange(len(data.presses))
+    q, res = _fit_shape(data, p0, idx, fit_series, max_nfev)
+    if progress:
+        progress(1, n_boot + 1)
+    fin = _finish(q, data, idx, runs)
+    rng = np.random.default_rng([seed, 0xB007])
+    boot = []
+    for b in range(n_boot):
+        # resample presses with replacement (runs keep their own presses' force histories)
+        bi = rng.integers(0, len(idx), len(idx))
+        qb, _ = _fit_shape(data, q, bi, fit_series, max(10, max_nfev // 3))
+        boot.append(_summary(_finish(qb, data, bi, runs)))
+        if progress:
+            progress(b + 2, n_boot + 1)
+    ranges = {}
+    if boot:
+        for k in boot[0]:
+            v = np.array([d[k] for d in boot])
+            ranges[k] = [float(np.percentile(v, 5)), float(np.percentile(v, 50)), float(np.percentile(v, 95))]
+    lev = np.asarray(fin["levels"])
+    var_mean = float(np.var([np.log(d["r0_ohm"]) for d in boot])) if boot else 0.0
+    half = 1.645 * float(np.sqrt(fin["p"].level_log_sd ** 2 + var_mean))
+    err = within_press_error(fin["p"], data, idx)
+    err["n_presses"] = int(len(idx))
+    err["n_missed_presses"] = int(sum(data.missed))
+    return ChainFit(fin["p"], ranges, [-half, half], boot, err, [float(x) for x in lev - np.log(fin["p"].r0_ohm)],
+                    {"nfev": int(res.nfev), "status": int(res.status), "message": str(res.message), "names": list(NAMES[:len(res.x)])})
+
+
+def _finish(q: ChainParams, data: _Data, idx: np.ndarray, runs: Seq[RealRun]) -> dict[str, Any]:
+    _, lev = _profile(data, q, idx)
+    p = replace(q, r0_ohm=float(np.exp(np.mean(lev))), level_log_sd=float(np.std(lev, ddof=1)) if len(lev) > 1 else 0.0)
+    p.miss_prob = float(np.mean(data.missed)) if data.missed else 0.0
+    sig = [r.noise_sd for r in runs if r.noise_sd > 0]
+    p.noise_sd = float(np.median(sig)) if sig else 0.0
+    fs = np.array([r.fs for r in runs])
+    if p.divider == "high" and len(fs) > 1 and not any("adc_full_scale" in r.attrs for r in runs):
+        p.full_scale = float(np.exp(np.mean(np.log(fs))))
+        p.full_scale_log_sd = float(np.std(np.log(fs), ddof=1))
+    return {"p": p, "levels": lev}
+
+
+def _summary(f: dict[str, Any]) -> dict[str, float]:
+    p = f["p"]
+    return {"exponent": p.exponent, "r0_ohm": p.r0_ohm, "threshold_force_n": p.threshold_force_n, "creep_amplitude": p.creep_amplitude,
+            "creep_force_n": p.creep_force_n, "tau_min_s": p.tau_min_s, "tau_max_s": p.tau_max_s,
+            "level_log_sd": p.level_log_sd, "r_series_ohm": p.r_series_ohm}
+
+
+def within_press_error(p: ChainParams, data: _Data, idx: np.ndarray) -> dict[str, Any]:
+    """rms of ln reading (sim - real) over the presses with each press's level fitted; and plateau drop."""
+    errs = []
+    per_run: dict[str, list[np.ndarray]] = {}
+    _, lev = _profile(data, p, idx)
+    for j, l in zip(idx, lev):
+        pr = data.presses[j]
+        r = data.runs[pr.run]
+        y_sim = simulate_reading(r.force, r.dt, replace(p, r0_ohm=1.0), level=l, fs=r.fs)[pr.sl]
+        y = r.reading[pr.sl]
+        ok = (y > 0) & (y_sim > 0)
+        e = np.log(y_sim[ok]) - np.log(y[ok])
+        errs.append(e)
+        per_run.setdefault(r.key, []).append(e)
+    a = np.concatenate(errs) if errs else np.zeros(0)
+    return {"rms_log_reading_within_press": float(np.sqrt(np.mean(a ** 2))) if len(a) else float("nan"),
+            "per_run": {k: float(np.sqrt(np.mean(np.concatenate(v) ** 2))) for k, v in per_run.items()},
+            "n_samples": int(len(a))}
+
+
+def evaluate(fit: ChainFit, runs: Seq[RealRun], min_force_frac: float = 0.1, min_force_n: float = 0.05) -> dict[str, Any]:
+    """On runs not used in the fit: within-press rms ln-reading error (levels removed), the share of the
+    presses' levels inside the fitted 90 % band, and the plateau drop (reading at the end of the plateau /
+    at its start, real vs simulated)."""
+    p = fit.params
+    data = _Data(runs, p, min_force_frac, min_force_n)
+    idx = np.arange(len(data.presses))
+    if not len(idx):
+        return {"n_presses": 0}
+    err = within_press_error(p, data, idx)
+    _, lev = _profile(data, p, idx)
+    rel = lev - np.log(p.r0_ohm)
+    lo, hi = fit.level_band90
+    err["level_in_band90"] = float(np.mean((rel >= lo) & (rel <= hi)))
+    err["level_mean_log_vs_fit"] = float(np.mean(rel))
+    err["level_sd_log"] = float(np.std(rel, ddof=1)) if len(rel) > 1 else 0.0
+    err["n_presses"] = int(len(idx))
+    err["plateau_drop"] = plateau_drops(p, data, idx, lev)
+    return err
+
+
+def plateau_drops(p: ChainParams, data: _Data, idx, lev) -> dict[str, float]:
+    """Median over presses of reading(end of plateau) / reading(plateau start), plateau = force >= 90 % of peak."""
+    real, sim = [], []
+    for j, l in zip(idx, lev):
+        pr = data.presses[j]
+        r = data.runs[pr.run]
+        f = r.force[pr.sl]
+        hold = np.flatnonzero(f >= 0.9 * f.max())
+        hold = hold[: np.argmax(np.diff(np.concatenate([hold, [hold[-1] + 2]])) > 1) + 1]  # first contiguous stretch
+        if len(hold) < 4:
+            continue
+        a, b = int(pr.sl[hold[0]]), int(pr.sl[hold[-1]])
+        ys = simulate_reading(r.force[: b + 1], r.dt, replace(p, r0_ohm=1.0), level=l, fs=r.fs)
+        real.append(r.reading[b] / r.reading[a])
+        sim.append(ys[b] / ys[a])
+    if not real:
+        return {}
+    return {"real_median": float(np.median(real)), "sim_median": float(np.median(sim)),
+            "real_p10_p90": [float(np.percentile(real, 10)), float(np.percentile(real, 90))],
+            "sim_p10_p90": [float(np.percentile(sim, 10)), float(np.percentile(sim, 90))]}
+
+
+def save_fit(fit: ChainFit, path: str | Path, extra: dict[str, Any] | None = None) -> Path:
+    path = Path(path)
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(json.dumps({**(extra or {}), **fit.to_json()}, indent=2, default=float))
+    tmp.replace(path)
+    return path
+
+
+def load_params(path: str | Path) -> tuple[ChainParams, dict[str, Any]]:
+    d = json.loads(Path(path).read_text())
+    return ChainParams.from_json(d["params"]), d
+
+
+def press_stats(runs: Seq[RealRun], min_force_frac: float = 0.1, min_force_n: float = 0.05) -> dict[str, list[float]]:
+    """Per press of the real runs: peak force (N), rise, hold (>= 90 % of peak), fall and gap times (s)."""
+    out: dict[str, list[float]] = {k: [] for k in ("peak_force_n", "rise_s", "hold_s", "fall_s", "gap_s")}
+    for r in runs:
+        sls = presses_of(r.force, max(min_force_frac * r.force.max(), min_force_n))
+        for i, sl in enumerate(sls):
+            f = r.force[sl]
+            hold = np.flatnonzero(f >= 0.9 * f.max())
+            out["peak_force_n"].append(float(np.percentile(f, 95)))
+            out["rise_s"].append(float(hold[0] * r.dt + r.dt))
+            out["hold_s"].append(float((hold[-1] - hold[0]) * r.dt + r.dt))
+            out["fall_s"].append(float((len(f) - hold[-1]) * r.dt))
+            if i + 1 < len(sls):
+                out["gap_s"].append(float((sls[i + 1].start - sl.stop) * r.dt))
+    return out
+
+
+def randomization_from_fit(fit: ChainFit, runs: Seq[RealRun]):
+    """The Randomization `fit` writes: joint bootstrap replicates of the chain, the gain (bootstrap spread of
+    ln r0), the board's full scale (run-to-run spread), the noise, and press protocols spanning the real
+    presses (peak force log-uniform from half the smallest to 1.2 x the largest peak; times uniform over
+    their 5-95 % range)."""
+    from scenes.randomize import Dist, Randomization
+
+    p = fit.params
+    st = press_stats(runs)
+    press = {}
+    for k, v in st.items():
+        if len(v) < 2:
+            continue
+        if k == "peak_force_n":
+            press[k] = Dist(kind="loguniform", low=0.5 * min(v), high=1.2 * max(v))
+        else:
+            press[k] = Dist(kind="uniform", low=float(np.percentile(v, 5)), high=float(np.percentile(v, 95)))
+    boot = [{k: float(b[k]) for k in ("exponent", "creep_amplitude", "creep_force_n", "tau_min_s", "tau_max_s",
+                                        "level_log_sd", "r_series_ohm", "threshold_force_n") if k in b} for b in fit.boot]
+    sd_gain = float(np.std([np.log(b["r0_ohm"]) for b in fit.boot])) if fit.boot else 0.1
+    episode = {"gain_log": Dist(kind="normal", mean=0.0, sd=max(sd_gain, 0.05)),  # estimate: floor 5 %
+               "noise_scale": Dist(kind="loguniform", low=0.5, high=2.0)}  # estimate
+    if p.full_scale_log_sd > 0:
+        episode["full_scale"] = Dist(kind="lognormal", median=p.full_scale, log_sd=p.full_scale_log_sd)
+    return Randomization(episode=episode, press=press, boot=boot)
