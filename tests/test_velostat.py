@@ -72,11 +72,14 @@ def test_position_error_grows_at_low_force(report):
 def test_two_contacts_give_conductance_weighted_position(report):
     x = report.metrics["two_contacts_x_mm"]
     assert abs(x["measured"] - x["conductance_weighted"]) < 1.5  # within ~1 mm (probe load, ADC)
-    assert x["conductance_weighted"] > 5.0  # pulled toward the harder (6 N) contact at +30 mm
+    assert -30.0 < x["conductance_weighted"] < 30.0  # between the contacts (where depends on the film's domains)
 
 
-def test_two_contacts_synthetic_fields(cfg, sensor):
-    """Two equal contacts at mirrored positions decode near the middle; unequal ones toward the stronger."""
+def test_two_contacts_synthetic_fields():
+    """Two equal contacts at mirrored positions decode near the middle; unequal ones toward the stronger
+    (a film of one domain: with several, equal presses differ by the domains' resistivity)."""
+    cfg = load_scene("velostat", ["sensor.film.domains=1"])
+    sensor = make_sensor(cfg, "numpy")
     N = cfg.pad.n_taxels
     xy = sensor.xy
     a = np.argmin(np.linalg.norm(xy - [-0.035, 0.005], axis=1))
