@@ -6,6 +6,7 @@ device (host transfers are reported apart). Writes bench/results/transduction-<h
 
     python bench/bench_transduction.py                       # CPU: numpy vs Warp
     python bench/bench_transduction.py --gpu-episodes 256    # adds CUDA at the issue's size (256 x 64 x 64 x 1000)
+    python bench/bench_transduction.py --velostat --side 32  # velostat film kernel: aging vs spectrum creep (Warp CPU)
 """
 
 from __future__ import annotations
@@ -113,6 +114,30 @@ def bench_fabric(E: int, T: int, N: int, device: str = "cpu", repeats: int = 7) 
     return out
 
 
+def bench_velostat_film(E: int, T: int, N: int, repeats: int = 3) -> dict:
+    """velostat film kernel on Warp CPU, both creep models on the same pressure in one run: taxel-steps/s."""
+    from scenes import load_scene
+    from sensors.registry import make_sensor
+    from sensors.velostat.kernels import run_film_warp
+
+    d = _drive(E, T, N) * 1e6  # 5-40 kPa presses
+    d[:, :, ::2] = 0.0  # half the taxels unloaded
+    out = {}
+    for model in ("spectrum", "aging"):
+        cfg = load_scene("velostat", [f"sensor.creep.model={model}", f"pad.taxels_x={int(np.sqrt(N))}",
+                                      f"pad.taxels_y={int(np.sqrt(N))}"])
+        fp = make_sensor(cfg, "warp").fp
+        run_film_warp(d[:1, :10], fp)  # compile
+        best = np.inf
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            run_film_warp(d, fp)
+            best = min(best, time.perf_counter() - t0)
+        out[model] = E * T * N / best
+    out["ratio_aging_over_spectrum_time"] = out["spectrum"] / out["aging"]
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--episodes", type=int, default=16, help="CPU batch (the numpy reference runs on the same)")
@@ -120,7 +145,16 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=1000)
     ap.add_argument("--gpu-episodes", type=int, default=256)
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
+    ap.add_argument("--velostat", action="store_true", help="only the velostat film kernel: aging vs spectrum creep")
     a = ap.parse_args()
+    if a.velostat:
+        from sensors.warp_setup import init_warp
+
+        init_warp()
+        v = bench_velostat_film(a.episodes, a.steps, a.side * a.side)
+        print(f"velostat film, warp cpu: spectrum {v['spectrum']:.3g}, aging {v['aging']:.3g} taxel-steps/s; "
+              f"time aging / spectrum {v['ratio_aging_over_spectrum_time']:.2f}x")
+        return
 
     from scenes import load_scene
     from sensors.warp_setup import init_warp

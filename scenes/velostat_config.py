@@ -14,7 +14,10 @@ from scenes.base import Fraction, NonNegFloat, PositiveFloat, Strict
 
 
 class VelostatFilmConfig(Strict):
-    """Through-thickness conductance of the film: G = g_area * A * field_g(x, y) * ((p + c) / p_ref)^n.
+    """Through-thickness conductance of the film: G = g_area * A * field_g(x, y) * ((p + c) / p_ref)^n, with
+    ln field_g = -ln(1 + domain_spread * q(domain)) + conductance_spread * z(x, y): a few domains of distinct
+    resistivity (Voronoi zones, q evenly spaced in [-1, 1]; an estimate of the structure behind the paper's ~5
+    Ward groups) and a smooth field z.
 
     Dominated by the film/ITO interface contact resistance, whose a-spot count grows with load
     (Holm, Electric Contacts, 1967): conductance ~ pressure^n with n ~ 1 (velostat sect. 2, Fig. 19).
@@ -25,21 +28,31 @@ class VelostatFilmConfig(Strict):
     exponent: Annotated[float, Field(gt=0.2, le=3.0)] = 1.05  # estimate: power law n ~ 1 (velostat Fig. 13b)
     field_seed: Annotated[int, Field(ge=0)] | None = None  # None: the part follows generation.root_seed
     correlation_length_m: PositiveFloat = 0.030  # estimate: 20-40 mm patches (velostat Figs. 18, 19)
-    conductance_spread: NonNegFloat = 0.35  # estimate: std of log conductance over the film
+    conductance_spread: NonNegFloat = 0.06  # estimate: std of log conductance within a domain (smooth field)
+    domains: Annotated[int, Field(ge=1, le=64)] = 5  # estimate: zones of carbon-black loading; the paper's Ward elbow finds about 5 groups of units (Fig. 12)
+    domain_spread: Annotated[float, Field(ge=0.0, lt=1.0)] = 0.65  # estimate: resistivity factors 1 -/+ domain_spread evenly over the domains (unit-to-unit inconsistency, Figs. 13, 19)
     creep_spread: NonNegFloat = 0.35  # estimate: std of log creep amplitude over the film
     field_resolution_m: PositiveFloat = 0.002  # grid on which the random field is drawn
 
 
 class VelostatCreepConfig(Strict):
-    """Log-time creep of the contact (contact-area aging, Dieterich & Kilgore, PAGEOPH 143, 1994) as a
-    Schapery-type nonlinear creep (Schapery, Polym. Eng. Sci. 9, 1969): a bank of first-order terms with
-    log-spaced times (equal weights per term -> log-time growth) relaxing toward
-    Phi(p) = amplitude * p_c * ln(1 + p / p_c), so the relative creep Phi/p falls with force and a faster
-    ramp leaves more creep for the hold (velostat sect. 3.1, Figs. 3, 5)."""
+    """Creep of the film/ITO contact. model "aging" (default): contact aging (Dieterich & Kilgore, PAGEOPH 143,
+    1994) with the aging law of rate-and-state friction (Ruina, JGR 88, 1983): the contact age grows in holds and
+    is renewed while the load rises (steady-state age renewal_pressure_pa / (dp/dt)); the contact grows by
+    amplitude * p_c * ln(1 + p / p_c) per e-fold of age, only while the age grows, so creep lives in the holds
+    (velostat Fig. 5: creep during loading negligible, R at full load about equal at 1-6 mm/min), grows with the
+    speed of the preceding ramp (younger contact), falls relative to the load (Fig. 3a) and accumulates over the
+    holds of a staircase (eq. 2, Fig. 22a). model "spectrum": the earlier Schapery-type bank of first-order terms
+    with log-spaced times_s relaxing toward amplitude * p_c * ln(1 + p / p_c) (creep from the first pascal of
+    every ramp; Schapery, Polym. Eng. Sci. 9, 1969), kept for comparison and for sensors/velostat/fit.py."""
 
-    amplitude: NonNegFloat = 6.0  # estimate: 3-6 N error in a 30 s hold at 7 N (velostat sect. 5.4: up to 5 N)
-    saturation_pressure_pa: PositiveFloat = 30_000.0  # estimate: p_c, relative creep halves by ~7 N on 1 cm^2
-    times_s: list[PositiveFloat] = Field(default_factory=lambda: [0.5, 1.5, 5.0, 15.0, 50.0, 150.0])  # estimate: half-decade spacing over the 1-100 s of the paper's holds
+    model: Literal["aging", "spectrum"] = "aging"
+    amplitude: NonNegFloat = 0.4  # estimate (aging: per e-fold of contact age): ~3 N error after a 30 s hold at 7 N, ~5 N after the 1-7 N staircase (velostat sect. 5.4, Fig. 22a: up to 5 N)
+    saturation_pressure_pa: PositiveFloat = 8_000.0  # estimate: p_c; relative creep falls over the 1-15 N of the paper (velostat Fig. 3a), p_c ~ 3 N on a 10 mm tip at a taxel corner
+    renewal_pressure_pa: PositiveFloat = 10_000.0  # estimate (aging): dp_c; contact age at the end of a ramp = dp_c / (dp/dt): 2 s at 6 mm/min, 12 s at 1 mm/min on a 10 mm tip at a taxel corner, so the creep rate at the start of a hold stays in the paper's creep band (eqs. 8-9)
+    cutoff_time_s: PositiveFloat = 0.5  # estimate (aging): theta_c of ln(1 + t / theta_c), Dieterich & Kilgore 1994 report ~1 s
+    recovery_time_s: PositiveFloat = 20.0  # estimate (aging): an unloaded film forgets its contact history (re-expansion of the matrix)
+    times_s: list[PositiveFloat] = Field(default_factory=lambda: [0.5, 1.5, 5.0, 15.0, 50.0, 150.0])  # estimate (spectrum): half-decade spacing over the 1-100 s of the paper's holds
 
     @model_validator(mode="after")
     def _check(self) -> "VelostatCreepConfig":

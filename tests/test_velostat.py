@@ -53,12 +53,37 @@ def test_creep_amplitude_grows_with_loading_speed(cfg, sensor):
     assert rel == sorted(rel) and rel[-1] > 1.2 * rel[0]
 
 
-def test_creep_error_at_7n_hold_in_band(report):
-    assert 3.0 <= report.metrics["creep_error_7n_hold_n"] <= 6.0  # paper: up to 5 N
+def test_r_at_full_load_nearly_speed_independent(cfg, sensor):
+    """Fig. 5: creep during loading is negligible, R at the full-load point about equal at 1-6 mm/min."""
+    r0 = []
+    for v in (1.0, 6.0):
+        out, i0, _ = _press(cfg, sensor, 3.0, speed_mm_min=v)
+        r0.append(float(out["resistance"][0, i0]))
+    assert abs(r0[0] - r0[1]) / max(r0) < 0.15
 
 
-def test_clustering_elbow_between_3_and_8(report):
-    assert 3 <= report.metrics["cluster_elbow"] <= 8  # paper: about 5
+def test_creep_lives_in_the_holds(cfg, sensor):
+    """Along a constant-rate ramp the film reads as without creep; in the hold it creeps (aging)."""
+    c0 = load_scene("velostat", ["sensor.creep.amplitude=0"])
+    s0 = make_sensor(c0, "numpy")
+    v = 3 * vc.MM_PER_MIN
+    t, f = knots_steps(cfg, [7.0], [20.0], [v], [0.0])[:2]
+    p = vc._proto(cfg, t, f, np.zeros(2), ramp_s(cfg, 7.0, v) + 21.0)
+    pr = vc.ideal_load(cfg, [p]).pressure_pa
+    g, g0 = sensor.conductance(pr)[0].sum(-1), s0.conductance(pr)[0].sum(-1)
+    i0 = vc._idx(cfg, ramp_s(cfg, 7.0, v))
+    on = slice(vc._idx(cfg, 0.5), i0)
+    np.testing.assert_allclose(g[on], g0[on], rtol=0.02)  # loading: no creep
+    assert g[i0 + 150] > 1.2 * g0[i0 + 150]  # 15 s into the hold: > 20 % more conductance
+
+
+def test_creep_error_at_7n_in_band(report):
+    assert 2.5 <= report.metrics["creep_error_7n_hold_n"] <= 6.0  # paper: up to 5 N (sect. 5.4)
+    assert 3.5 <= report.metrics["creep_error_7n_staircase_n"] <= 6.5  # paper: up to 5 N (Fig. 22a)
+
+
+def test_clustering_elbow_about_5(report):
+    assert 4 <= report.metrics["cluster_elbow"] <= 6  # paper: about 5 (film domains, an estimate)
     assert sum(report.metrics["cluster_sizes"]) == 36
 
 
@@ -72,11 +97,14 @@ def test_position_error_grows_at_low_force(report):
 def test_two_contacts_give_conductance_weighted_position(report):
     x = report.metrics["two_contacts_x_mm"]
     assert abs(x["measured"] - x["conductance_weighted"]) < 1.5  # within ~1 mm (probe load, ADC)
-    assert x["conductance_weighted"] > 5.0  # pulled toward the harder (6 N) contact at +30 mm
+    assert -30.0 < x["conductance_weighted"] < 30.0  # between the contacts (where depends on the film's domains)
 
 
-def test_two_contacts_synthetic_fields(cfg, sensor):
-    """Two equal contacts at mirrored positions decode near the middle; unequal ones toward the stronger."""
+def test_two_contacts_synthetic_fields():
+    """Two equal contacts at mirrored positions decode near the middle; unequal ones toward the stronger
+    (a film of one domain: with several, equal presses differ by the domains' resistivity)."""
+    cfg = load_scene("velostat", ["sensor.film.domains=1"])
+    sensor = make_sensor(cfg, "numpy")
     N = cfg.pad.n_taxels
     xy = sensor.xy
     a = np.argmin(np.linalg.norm(xy - [-0.035, 0.005], axis=1))
@@ -106,7 +134,9 @@ def test_compliance_limit_clips(cfg):
     assert np.isnan(out["position_measured"][0, 0]).all()  # unloaded: no touch, no position
 
 
-def test_warp_matches_numpy(cfg):
+@pytest.mark.parametrize("model", ["aging", "spectrum"])
+def test_warp_matches_numpy(model):
+    cfg = load_scene("velostat", [f"sensor.creep.model={model}"])
     rng = np.random.default_rng(3)
     E, T, N = 3, 80, cfg.pad.n_taxels
     pr = np.zeros((E, T, N), np.float32)

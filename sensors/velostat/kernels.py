@@ -1,7 +1,7 @@
 """Warp kernels of the `velostat` chain: the same equations as sensors/velostat/reference.py (tests compare them).
 
-film kernel: one thread per (episode, taxel), the time loop inside the kernel with the K creep states in
-registers (TECH-NOTES: looping over time in one launch beats one launch per step); layout [E, T, N].
+film kernels: one thread per (episode, taxel), the time loop inside the kernel with the creep state in
+registers (aging: theta, a, p_prev; spectrum: the K terms) (TECH-NOTES: looping over time in one launch beats one launch per step); layout [E, T, N].
 readout kernel: one thread per (episode, sample), a loop over the taxels (parallel contact paths),
 then noise, clipping and ADC quantisation.
 """
@@ -58,6 +58,62 @@ def film_kernel(n_creep: int):
 
     film.__name__ = film.__qualname__ = f"velostat_film_k{n_creep}"
     return wp.kernel(film, module="unique", enable_backward=False), vec_k
+
+
+@wp.kernel(enable_backward=False)
+def velostat_film_aging(
+    pressure: wp.array(dtype=wp.float32),  # [E*T*N]
+    n_steps: int,
+    n_taxels: int,
+    g_ref: wp.array(dtype=wp.float32),  # [N]
+    drive: wp.array(dtype=wp.float32),  # [N]
+    inv_pc: float,
+    inv_pref: float,
+    expo: float,
+    dt: float,
+    inv_dt: float,
+    inv_dpc: float,
+    thc: float,
+    rec: float,
+    state: wp.array(dtype=wp.vec3),  # [E*N] in/out: (theta s, a, p_prev Pa)
+    out: wp.array(dtype=wp.float32),  # [E*T*N]
+):
+    tid = wp.tid()
+    ep = tid // n_taxels
+    n = tid - ep * n_taxels
+    st = state[tid]
+    th = st[0]
+    a = st[1]
+    pp = st[2]
+    gr = g_ref[n]
+    dr = drive[n]
+    base = ep * n_steps * n_taxels + n
+    for k in range(n_steps):
+        idx = base + k * n_taxels
+        p = wp.max(pressure[idx], 0.0)
+        g = float(0.0)
+        if p > 0.0:
+            r = wp.max((p - pp) * inv_dt, 0.0) * inv_dpc
+            th_ss = float(0.0)
+            if r > 0.0:
+                th_ss = 1.0 / r
+            th_new = th_ss
+            if pp > 0.0:
+                if r > 0.0:
+                    th_new = th_ss + (th - th_ss) * wp.exp(-r * dt)
+                else:
+                    th_new = th + dt
+                if th_new > th:
+                    a = a + wp.log((th_new + thc) / (th + thc))
+            th = th_new
+            c = dr * wp.log(1.0 + p * inv_pc) * a
+            g = gr * wp.pow((p + c) * inv_pref, expo)
+        else:
+            a = a * rec
+            th = 0.0
+        out[idx] = g
+        pp = p
+    state[tid] = wp.vec3(th, a, pp)
 
 
 @wp.kernel(enable_backward=False)
@@ -127,6 +183,8 @@ def run_film_warp(pressure: np.ndarray, p: FilmParams, device: str = "cpu", stat
     init_warp()
     device = resolve_device(device)
     E, T, N = pressure.shape
+    if p.model == "aging":
+        return _run_aging_warp(pressure, p, device, state)
     kern, vec_k = film_kernel(p.n_creep)
     st = np.zeros((E * N, p.n_creep), np.float32) if state is None else np.asarray(state, np.float32)
     st_d = wp.array(st, dtype=vec_k, device=device)
@@ -139,6 +197,23 @@ def run_film_warp(pressure: np.ndarray, p: FilmParams, device: str = "cpu", stat
                 wp.array(p.creep_drive.astype(np.float32), dtype=wp.float32, device=device),
                 vec_k(*p.decay.astype(np.float32)), vec_k(*w1), float(1.0 / p.p_c_pa), float(1.0 / p.p_ref_pa),
                 float(p.exponent), st_d, out],
+    )
+    return out.numpy().reshape(E, T, N), st_d.numpy()
+
+
+def _run_aging_warp(pressure: np.ndarray, p: FilmParams, device, state: np.ndarray | None):
+    E, T, N = pressure.shape
+    st = np.zeros((E * N, 3), np.float32) if state is None else np.asarray(state, np.float32)
+    st_d = wp.array(st, dtype=wp.vec3, device=device)
+    pr = wp.array(np.ascontiguousarray(pressure, np.float32).reshape(-1), dtype=wp.float32, device=device)
+    out = wp.empty(E * T * N, dtype=wp.float32, device=device)
+    wp.launch(
+        velostat_film_aging, dim=E * N, device=device,
+        inputs=[pr, T, N, wp.array(p.g_ref_s.astype(np.float32), dtype=wp.float32, device=device),
+                wp.array(p.creep_drive.astype(np.float32), dtype=wp.float32, device=device),
+                float(1.0 / p.p_c_pa), float(1.0 / p.p_ref_pa), float(p.exponent), float(np.float32(p.dt_s)),
+                float(np.float32(1.0 / p.dt_s)), float(1.0 / p.renewal_pa), float(p.cutoff_s),
+                float(p.recovery_decay), st_d, out],
     )
     return out.numpy().reshape(E, T, N), st_d.numpy()
 

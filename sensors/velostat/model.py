@@ -2,12 +2,12 @@
 random field, constant-current force channel, 4-/5-wire ITO position decoding.
 
 Pipeline (ground truth beside the measurement):
-  pressure [E,T,N] (MuJoCo load field) -> film kernel: creep states + conductance per taxel
+  pressure [E,T,N] (MuJoCo load field) -> film kernel: contact-aging creep states + conductance per taxel
   (sensors/velostat/kernels.py, reference sensors/velostat/reference.py) -> readout kernel: parallel contact paths
   through the ITO sheets, V = I (R_film + R_ITO(x, y)) clipped at the compliance voltage, probe voltages of
   the X and Y gradient phases, noise, 12-bit ADC -> decoded resistance and position.
-The film is one physical part: its random field (conductance and creep amplitude, correlation length
-20-40 mm) is drawn from sensor.film.field_seed, or from generation.root_seed when that is None.
+The film is one physical part: its domains (carbon-loading zones, distinct conductance levels) and smooth
+random fields (conductance and creep amplitude, correlation length 20-40 mm) are drawn from sensor.film.field_seed, or from generation.root_seed when that is None.
 backend "warp" runs the Warp kernels on `device`; backend "numpy" runs the reference.
 """
 
@@ -60,26 +60,71 @@ def film_field(cfg: SceneConfig, seed: int) -> tuple[np.ndarray, np.ndarray]:
     return out[0], out[1]
 
 
+def film_domains(cfg: SceneConfig, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Domains of the film (carbon-black loading zones of the calendered sheet; count and contrast are
+    estimates): a Voronoi tessellation of `domains` seeds thrown uniformly over the film at a minimum distance
+    of 0.6 sqrt(area / domains) from each other, each domain with a
+    resistivity factor 1 + domain_spread * q, q evenly spaced over [-1, 1] (shuffled), so the levels are
+    distinct and evenly spaced in ohm (the paper's Ward distance, eq. 11); per taxel the cell mean of the log
+    conductance over the fine grid (a taxel on a border mixes). Returns (log-conductance level per taxel [N],
+    domain of each taxel's centre [N])."""
+    pad, f = cfg.pad, cfg.sensor.film
+    M = f.domains
+    n = pad.n_taxels
+    if M <= 1:
+        return np.zeros(n), np.zeros(n, int)
+    rng = np.random.default_rng([int(seed), 0xD0A1])
+    d_min = 0.6 * np.sqrt(pad.size_x_m * pad.size_y_m / M)  # estimate: zones of comparable size (no slivers)
+    seeds = np.empty((0, 2))
+    while len(seeds) < M:  # dart throwing with a minimum distance; relaxed if the film is crowded
+        for _ in range(200):
+            c = (rng.random(2) - 0.5) * [pad.size_x_m, pad.size_y_m]
+            if not len(seeds) or np.min(np.linalg.norm(seeds - c, axis=1)) >= d_min:
+                break
+        else:
+            d_min *= 0.8
+        seeds = np.vstack([seeds, c])
+    levels = -np.log1p(f.domain_spread * rng.permutation(np.linspace(-1.0, 1.0, M)))
+    res = f.field_resolution_m
+    nx = max(int(round(pad.size_x_m / res)), pad.taxels_x)
+    ny = max(int(round(pad.size_y_m / res)), pad.taxels_y)
+    gx = (np.arange(nx) + 0.5) / nx * pad.size_x_m - pad.size_x_m / 2
+    gy = (np.arange(ny) + 0.5) / ny * pad.size_y_m - pad.size_y_m / 2
+    X, Y = np.meshgrid(gx, gy)
+    dom = np.argmin((X.ravel()[:, None] - seeds[None, :, 0]) ** 2 + (Y.ravel()[:, None] - seeds[None, :, 1]) ** 2, axis=1)
+    ix = (np.arange(nx) * pad.taxels_x) // nx
+    iy = (np.arange(ny) * pad.taxels_y) // ny
+    flat = (iy[:, None] * pad.taxels_x + ix[None, :]).ravel()
+    counts = np.bincount(flat, minlength=n)
+    cell = np.bincount(flat, weights=levels[dom], minlength=n) / counts
+    xy = taxel_xy(cfg)
+    centre = np.argmin(((xy[:, None, :] - seeds[None]) ** 2).sum(-1), axis=1)
+    return cell, centre
+
+
 def taxel_xy(cfg: SceneConfig) -> np.ndarray:
     from sensors.taxels import taxel_xy_m  # geometry helper (numpy only)
 
     return taxel_xy_m(cfg)
 
 
-def film_params(cfg: SceneConfig, z_g: np.ndarray, z_c: np.ndarray) -> FilmParams:
+def film_params(cfg: SceneConfig, z_g: np.ndarray, z_c: np.ndarray, level: np.ndarray | None = None) -> FilmParams:
     f, c = cfg.sensor.film, cfg.sensor.creep
     area = cfg.pad.size_x_m * cfg.pad.size_y_m / cfg.pad.n_taxels
     g_area = 1.0 / (f.resistance_at_ref_ohm * 1e-4)  # S/m^2 at p_ref
     dt = 1.0 / cfg.sampling.sample_rate_hz
     taus = np.asarray(c.times_s, float)
+    aging = dict(model="aging", dt_s=dt, renewal_pa=c.renewal_pressure_pa, cutoff_s=c.cutoff_time_s,
+                 recovery_decay=float(np.exp(-dt / c.recovery_time_s))) if c.model == "aging" else {}
     return FilmParams(
-        g_ref_s=g_area * area * np.exp(f.conductance_spread * z_g),
+        g_ref_s=g_area * area * np.exp(f.conductance_spread * z_g + (0.0 if level is None else level)),
         creep_drive=c.amplitude * c.saturation_pressure_pa * np.exp(f.creep_spread * z_c),
         p_ref_pa=f.reference_pressure_pa,
         p_c_pa=c.saturation_pressure_pa,
         exponent=f.exponent,
         decay=np.exp(-dt / taus),
         weight=np.full(len(taus), 1.0 / len(taus)),
+        **aging,
     )
 
 
@@ -129,9 +174,10 @@ class VelostatSensor:
         f = cfg.sensor.film
         self.film_seed = int(cfg.generation.root_seed if f.field_seed is None else f.field_seed)
         self.z_g, self.z_c = film_field(cfg, self.film_seed)
+        self.domain_level, self.domain = film_domains(cfg, self.film_seed)
         self.xy = taxel_xy(cfg)
         self.area = cfg.pad.size_x_m * cfg.pad.size_y_m / cfg.pad.n_taxels
-        self.fp = film_params(cfg, self.z_g, self.z_c)
+        self.fp = film_params(cfg, self.z_g, self.z_c, self.domain_level)
         self.rp = readout_params(cfg, self.xy)
         self.n_taxels = cfg.pad.n_taxels
 
@@ -209,6 +255,7 @@ class VelostatSensor:
             "compliance_v": r.compliance_v,
             "position_wiring": r.position_wiring,
             "control": self.cfg.protocol.control,
-            "field_conductance_log": self.z_g * self.cfg.sensor.film.conductance_spread,
+            "field_conductance_log": self.z_g * self.cfg.sensor.film.conductance_spread + self.domain_level,
+            "film_domain": self.domain,
             "field_creep_log": self.z_c * self.cfg.sensor.film.creep_spread,
         }

@@ -1,11 +1,20 @@
 """Numpy reference of the `velostat` chain (paper key `velostat`); sensors/velostat/kernels.py must match it.
 
-Film, per taxel and sample step (dt = 1 / sample rate), pressure p >= 0 (Pa):
-  creep   Phi(p) = a f_c(x, y) p_c ln(1 + p / p_c)              (Schapery-type nonlinear creep drive;
-          c_k' = d_k c_k + (1 - d_k) w_k Phi(p'),  d_k = exp(-dt / tau_k), w_k = 1 / K,
-          tau_k log-spaced -> log-time growth of the contact (Dieterich & Kilgore 1994); unloaded, the
-          states recover toward 0 with the same times
-  conduct G = g_ref f_g(x, y) ((p + sum_k c_k) / p_ref)^n  for p > 0, else 0
+Film, per taxel and sample step (dt = 1 / sample rate), pressure p >= 0 (Pa), creep pressure c (Pa):
+  model "aging" (default; contact aging, Dieterich & Kilgore, PAGEOPH 143, 1994; aging law of rate-and-state
+          friction, Ruina 1983): contact age theta' = 1 - theta r, r = max(p', 0) / dp_c (a rising load renews
+          the contact population, as slip does in the aging law); a new contact is born at the steady-state age
+          1 / r of its loading. The aging gain grows only while the age grows,
+            a += ln((theta_new + theta_c) / (theta_old + theta_c))  when theta_new > theta_old,
+          so a constant-rate ramp adds nothing (creep during loading negligible, velostat Fig. 5), a hold adds
+          ln(1 + t / (theta_0 + theta_c)) with theta_0 = dp_c / p' of the preceding ramp (faster ramp, younger
+          contact, more creep in the hold), and the gains of successive holds accumulate (eq. 2, Fig. 22a).
+          c = D f_c(x, y) p_c ln(1 + p / p_c) a; unloaded, a recovers exp(-dt / tau_rec) per step.
+          State per taxel: (theta, a, p_prev).
+  model "spectrum" (the earlier one, kept for comparison and sensors/velostat/fit.py): Schapery-type drive
+          Phi(p) = D f_c p_c ln(1 + p / p_c); c_k' = d_k c_k + (1 - d_k) w_k Phi(p'), d_k = exp(-dt / tau_k),
+          w_k = 1 / K, tau_k log-spaced (creep builds from the first pascal of every ramp); c = sum_k c_k.
+  conduct G = g_ref f_g(x, y) ((p + c) / p_ref)^n  for p > 0, else 0
           (interface contact conductance ~ load^n, n ~ 1: Holm, Electric Contacts, 1967; velostat eq. 1)
 Readout, per sample (velostat eq. 1, Fig. 1d; 4-/5-wire ITO position layers, sect. 5.1):
   force   paths film + ITO in parallel: G_f = sum_n 1 / (1/G_n + R_ito,f(x_n, y_n)); V_f = min(I / G_f, V_c)
@@ -34,12 +43,17 @@ class FilmParams:
     p_ref_pa: float
     p_c_pa: float
     exponent: float
-    decay: np.ndarray  # [K] exp(-dt / tau_k)
-    weight: np.ndarray  # [K] 1 / K
+    decay: np.ndarray  # [K] exp(-dt / tau_k) (spectrum)
+    weight: np.ndarray  # [K] 1 / K (spectrum)
+    model: str = "spectrum"  # "aging" | "spectrum"
+    dt_s: float = 0.1  # sample step (aging)
+    renewal_pa: float = 2500.0  # dp_c: pressure rise that renews the contact (aging)
+    cutoff_s: float = 0.5  # theta_c: cutoff time of the aging law (aging)
+    recovery_decay: float = 1.0  # exp(-dt / tau_rec): memory of an unloaded contact per step (aging)
 
     @property
     def n_creep(self) -> int:
-        return len(self.decay)
+        return 3 if self.model == "aging" else len(self.decay)
 
 
 @dataclass(frozen=True)
@@ -63,7 +77,10 @@ class ReadoutParams:
 
 
 def film_chain_numpy(pressure: np.ndarray, p: FilmParams, state: np.ndarray | None = None):
-    """pressure [E, T, N] (Pa) -> conductance [E, T, N] (S), final creep state [E*N, K] (Pa)."""
+    """pressure [E, T, N] (Pa) -> conductance [E, T, N] (S), final creep state [E*N, K] (spectrum: Pa;
+    aging: K = 3, (theta s, a, p_prev Pa))."""
+    if p.model == "aging":
+        return _aging_numpy(pressure, p, state)
     E, T, N = pressure.shape
     K = p.n_creep
     c = np.zeros((E, N, K), f32) if state is None else state.reshape(E, N, K).astype(f32).copy()
@@ -82,6 +99,37 @@ def film_chain_numpy(pressure: np.ndarray, p: FilmParams, state: np.ndarray | No
         g = g_ref * np.power((pk + cs) * inv_pref, n, dtype=f32)
         out[:, k, :] = np.where(pk > 0, g, f32(0.0))
     return out, c.reshape(E * N, K)
+
+
+def _aging_numpy(pressure: np.ndarray, p: FilmParams, state: np.ndarray | None):
+    E, T, N = pressure.shape
+    st = np.zeros((E, N, 3), f32) if state is None else state.reshape(E, N, 3).astype(f32).copy()
+    th, a, pp = st[..., 0].copy(), st[..., 1].copy(), st[..., 2].copy()
+    drive = p.creep_drive.astype(f32)
+    g_ref = p.g_ref_s.astype(f32)
+    inv_pc, inv_pref, n = f32(1.0 / p.p_c_pa), f32(1.0 / p.p_ref_pa), f32(p.exponent)
+    inv_dt, dt = f32(1.0 / p.dt_s), f32(p.dt_s)
+    inv_dpc, thc, rec = f32(1.0 / p.renewal_pa), f32(p.cutoff_s), f32(p.recovery_decay)
+    one, zero = f32(1.0), f32(0.0)
+    out = np.zeros((E, T, N), f32)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for k in range(T):
+            pk = np.maximum(pressure[:, k, :].astype(f32), zero)
+            on = pk > zero
+            r = (np.maximum((pk - pp) * inv_dt, zero) * inv_dpc).astype(f32)
+            rising = r > zero
+            th_ss = np.where(rising, one / np.where(rising, r, one), zero).astype(f32)
+            relax = (th_ss + (th - th_ss) * np.exp(-r * dt).astype(f32)).astype(f32)
+            th_new = np.where(pp > zero, np.where(rising, relax, th + dt), th_ss).astype(f32)
+            gain = np.log((th_new + thc) / (th + thc)).astype(f32)
+            a_on = np.where((pp > zero) & (th_new > th), a + gain, a).astype(f32)
+            a = np.where(on, a_on, a * rec).astype(f32)
+            th = np.where(on, th_new, zero).astype(f32)
+            c = (drive * np.log1p(pk * inv_pc).astype(f32) * a).astype(f32)
+            g = g_ref * np.power((pk + c) * inv_pref, n, dtype=f32)
+            out[:, k, :] = np.where(on, g, zero)
+            pp = pk
+    return out, np.stack([th, a, pp], -1).reshape(E * N, 3)
 
 
 def quantise(v: np.ndarray, bits: int, range_v: float) -> tuple[np.ndarray, np.ndarray]:
