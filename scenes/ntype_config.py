@@ -12,7 +12,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
-from scenes.base import NonNegFloat, PositiveFloat, Strict
+from scenes.base import Between, NonNeg, Pos, Strict
 
 
 class NtypeElementConfig(Strict):
@@ -29,14 +29,14 @@ class NtypeElementConfig(Strict):
 
     elements_x: Annotated[int, Field(ge=1, le=64)] = 6  # ntype: 6 x 6 array
     elements_y: Annotated[int, Field(ge=1, le=64)] = 6  # ntype
-    youngs_modulus_pa: PositiveFloat = 6.1e6  # ntype sect. 2.1 (conductive rubber)
+    youngs_modulus_pa: Pos(1e10) = 6.1e6  # ntype sect. 2.1 (conductive rubber)
     poisson_ratio: Annotated[float, Field(ge=0.0, lt=0.5)] = 0.49  # ntype sect. 2.1
-    column_area_m2: PositiveFloat = 4e-6  # ntype sect. 2.2: 4 mm^2 cross-section
-    normal_length_m: PositiveFloat = 0.010  # ntype sect. 2.2: 1 cm
-    inclined_length_m: PositiveFloat = 0.014142135623730951  # ntype sect. 2.2: sqrt(2) cm
+    column_area_m2: Pos(0.01) = 4e-6  # ntype sect. 2.2: 4 mm^2 cross-section
+    normal_length_m: Pos(0.1) = 0.010  # ntype sect. 2.2: 1 cm
+    inclined_length_m: Pos(0.1) = 0.014142135623730951  # ntype sect. 2.2: sqrt(2) cm
     inclination_deg: Annotated[float, Field(gt=0, lt=90)] = 45.0  # ntype sect. 2.2
     inclined_azimuth_deg: Annotated[float, Field(ge=0, le=90)] = 60.0  # estimate: F_y observable, normal column still most sensitive to F_z
-    filler_stiffness_n_per_m: NonNegFloat = 300.0  # estimate: insulating GD-401 filler around the element, isotropic
+    filler_stiffness_n_per_m: NonNeg(1e9) = 300.0  # estimate: insulating GD-401 filler around the element, isotropic
 
     @property
     def n_elements(self) -> int:
@@ -50,9 +50,9 @@ class NtypeResistanceConfig(Strict):
     (ntype sect. 3.2: normal column 16-25 kOhm, inclined 32-50 kOhm) are honoured rather than equal volumes.
     """
 
-    rest_normal_ohm: PositiveFloat = 25e3  # ntype sect. 3.2: top of the 16-25 kOhm range (unloaded)
-    rest_inclined_ohm: PositiveFloat = 50e3  # ntype sect. 3.2: top of the 32-50 kOhm range (unloaded)
-    piezo_coefficient: float = 0.7  # estimate: beta of rho(e) = rho0 exp(beta e); places 4.8 N of F_z near 16 kOhm
+    rest_normal_ohm: Pos(1e9) = 25e3  # ntype sect. 3.2: top of the 16-25 kOhm range (unloaded)
+    rest_inclined_ohm: Pos(1e9) = 50e3  # ntype sect. 3.2: top of the 32-50 kOhm range (unloaded)
+    piezo_coefficient: Between(-100.0, 100.0) = 0.7  # estimate: beta of rho(e) = rho0 exp(beta e); places 4.8 N of F_z near 16 kOhm
     min_strain: Annotated[float, Field(gt=-0.9, lt=0)] = -0.6  # estimate: strain clamp (column fully squeezed)
 
 
@@ -63,8 +63,8 @@ class NtypeLayerConfig(Strict):
     Source: Johnson, Contact Mechanics (1985), eq. 3.21 (sigma_z under a point load).
     """
 
-    depth_m: PositiveFloat = 0.010  # estimate: the array's 1 cm thickness (ntype sect. 2.2); gives ~1/3 at 1 cm, a few % at 2 cm (sect. 3.3: 1-2 cm)
-    electrode_size_m: PositiveFloat = 0.010  # ntype sect. 2.2: the element spans 1 cm
+    depth_m: Pos(0.1) = 0.010  # estimate: the array's 1 cm thickness (ntype sect. 2.2); gives ~1/3 at 1 cm, a few % at 2 cm (sect. 3.3: 1-2 cm)
+    electrode_size_m: Pos(0.1) = 0.010  # ntype sect. 2.2: the element spans 1 cm
     quadrature: Annotated[int, Field(ge=2, le=32)] = 8  # points per electrode side
 
 
@@ -73,14 +73,14 @@ class NtypeDynamicsConfig(Strict):
     Source: Ferry, Viscoelastic Properties of Polymers (1980) (standard linear solid)."""
 
     lag_fraction: Annotated[float, Field(ge=0, lt=1)] = 0.05  # estimate
-    lag_time_s: PositiveFloat = 0.3  # estimate
+    lag_time_s: Pos(1e4) = 0.3  # estimate
 
 
 class NtypeReadoutConfig(Strict):
     """Scanning ohmmeter over the 6 x 6 x 3 columns (upper wire x lower wire, ntype sect. 2.2)."""
 
-    noise_fraction: NonNegFloat = 0.002  # estimate: relative rms noise per reading
-    resolution_ohm: NonNegFloat = 1.0  # estimate: readout quantum (0 disables)
+    noise_fraction: NonNeg(1.0) = 0.002  # estimate: relative rms noise per reading
+    resolution_ohm: NonNeg(1e6) = 1.0  # estimate: readout quantum (0 disables)
 
 
 class NtypeSensorConfig(Strict):
