@@ -115,6 +115,7 @@ def import_(
     calibration: Annotated[Optional[Path], typer.Option(help="'counts kg' pairs, e.g. futek_calibration.txt.")] = None,
     sensor_units: Annotated[str, typer.Option(help="Units of the sensor values.")] = "raw",
     family: Annotated[str, typer.Option(help="Sensor family recorded in /sensor.")] = "velostat",
+    force: Annotated[bool, typer.Option("--force", help="Replace the -o recording if it exists.")] = False,
 ) -> None:
     """Import a sensor log and a load-cell log (host unix time) into a recording with source="real"."""
     from sensors.data.real_import import ImportLogError, import_runs, lupasic_pairs
@@ -122,6 +123,12 @@ def import_(
     n_logs = (sensor_log is not None) + (force_log is not None)
     if (lupasic_dir is None and n_logs != 2) or (lupasic_dir is not None and n_logs):
         fail("give either SENSOR_LOG FORCE_LOG or --dir FOLDER")
+    if rate is not None and not (rate > 0 and rate < float("inf")):
+        fail(f"--rate must be a finite number > 0 Hz (got {rate}; leave it out for the sensor's own rate)")
+    if out.is_dir():
+        fail(f"-o '{out}' is a folder, not a recording file")
+    if out.exists() and not force:
+        fail(f"'{out}' exists; add --force to replace it")
     _check_writable(out.parent if str(out.parent) else Path("."))
     try:
         pairs = lupasic_pairs(lupasic_dir) if lupasic_dir is not None else [(sensor_log, force_log)]
