@@ -122,8 +122,11 @@ def inspect(path: Annotated[Path, typer.Argument(help="A recording (.h5) or a da
             fail(str(exc))
         console.print(
             f"dataset [bold]{m.get('name')}[/]: {m.get('total_episodes', '?')} episodes in {len(m['shards'])} shards, "
-            f"root_seed={m.get('root_seed')}, splits " + ", ".join(f"{k}={len(v)}" for k, v in m["splits"].items())
+            f"root_seed={m.get('root_seed')}, splits " + ", ".join(f"{k}={len(v)}" for k, v in m["splits"].items()),
+            highlight=False, soft_wrap=True,
         )
+        console.print(f"content_sha256 {m.get('content_sha256') or '- (manifest written before content hashes)'}",
+                      highlight=False, soft_wrap=True)
         for s in m["shards"]:
             _print_summary(path / s["file"])
         return

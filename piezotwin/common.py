@@ -50,6 +50,12 @@ def _check_writable(out: Path) -> None:
 SetOpt = Annotated[Optional[list[str]], typer.Option("--set", help="Override a config field: key.path=value (repeatable).")]
 
 
+def unreadable(path: Path, exc: BaseException) -> None:
+    """fail() with one line for a recording that cannot be read (wrong format, damaged HDF5)."""
+    msg = (str(exc).splitlines() or [type(exc).__name__])[0].removeprefix(f"{path}: ")
+    fail(f"'{path}' is not a readable recording: {msg}")
+
+
 def _print_summary(path: Path) -> None:
     from sensors.data.recording import RecordingError, read_recording_summary
 
@@ -57,12 +63,13 @@ def _print_summary(path: Path) -> None:
         fail(f"'{path}' does not exist")
     try:
         s = read_recording_summary(path)
-    except (RecordingError, OSError) as exc:
-        fail(f"'{path}' is not a readable recording: {str(exc).splitlines()[0]}")
+    except (RecordingError, OSError, RuntimeError) as exc:
+        unreadable(path, exc)
     console.print(
         f"[bold]{path}[/]  source={s['source']}  episodes={s['n_episodes']}  duration={s['duration_s']:.1f} s  "
-        f"samples={s['n_samples']}  seed={s['root_seed']}  shard={s['shard_index']}"
+        f"samples={s['n_samples']}  seed={s['root_seed']}  shard={s['shard_index']}", highlight=False, soft_wrap=True,
     )
+    console.print(f"content_sha256 {s['content_sha256']}", highlight=False, soft_wrap=True)
     t = Table(show_header=True, header_style="bold")
     for col in ("channel", "units", "dims", "frame", "min", "max"):
         t.add_column(col, justify="right" if col in ("min", "max") else "left")
