@@ -123,7 +123,7 @@ def show(
                 show_window(ev, field, k, opts)
                 return
             if out is None:
-                out = Path(f"{recording.stem}-{ev.ep_id}-{field}.png")
+                out = Path(f"{Path(ev.path).stem}-{ev.ep_id}-{field}.png")  # the shard read, also for a dataset folder
                 _check_writable(Path("."))
                 console.print("no display: rendering offscreen")
             _, info = render_frame(ev, field, k, out, opts)
@@ -138,7 +138,7 @@ def show(
 @app.command()
 def export(
     recording: Annotated[Path, typer.Argument(help="A recording (.h5) or a dataset folder (its first shard).")],
-    out: Annotated[Path, typer.Option("-o", "--out", help="Output folder for <episode>.pvd + .vtu files.")] = Path("vtk"),
+    out: Annotated[Path, typer.Option("-o", "--out", help="Output folder: <episode>.pvd + <episode>/body_NNNNNN.vtu, indenter_NNNNNN.vtu per sample.")] = Path("vtk"),
     episode: Episode = None,
     stride: Annotated[int, typer.Option(help="Write every N-th sample.")] = 1,
 ) -> None:
