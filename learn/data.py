@@ -116,7 +116,7 @@ def stratified_split(
 
 def dataset_fingerprint(directory: str | Path) -> dict[str, Any]:
     """What a checkpoint records about its data: the manifest's own sha256, its dataset_sha256
-    (over the shard files' sha256) and config_sha256."""
+    (over the shard files' sha256), content_sha256 (over the shards' data) and config_sha256."""
     directory = Path(directory)
     raw = (directory / "manifest.json").read_bytes()
     m = read_manifest(directory)
@@ -124,6 +124,7 @@ def dataset_fingerprint(directory: str | Path) -> dict[str, Any]:
         "path": str(directory),
         "manifest_sha256": hashlib.sha256(raw).hexdigest(),
         "dataset_sha256": m.get("dataset_sha256"),
+        "content_sha256": m.get("content_sha256"),  # equal for equal data (dataset_sha256 covers timestamps)
         "config_sha256": m.get("config_sha256"),
         "name": m.get("name"),
         "total_episodes": m.get("total_episodes"),

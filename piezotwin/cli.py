@@ -13,7 +13,10 @@ from typing import Annotated, Optional
 import typer
 from rich.table import Table
 
-from piezotwin.common import SetOpt, _check_writable, _load, _print_summary, _quiet_warp, app, console, err, fail  # noqa: F401
+from piezotwin.common import (  # noqa: F401
+    SetOpt, _check_writable, _load, _print_dataset_header, _print_dataset_summary, _print_summary, _quiet_warp, app, console,
+    err, fail,
+)
 
 
 
@@ -118,9 +121,7 @@ def generate(
         console.print(f"resumed: {len(skipped)} complete shard(s) kept")
     console.print(f"wrote {manifest}")
     console.print(chosen.line(), highlight=False, soft_wrap=True)
-    from sensors.data.manifest import shard_path
-
-    _print_summary(shard_path(out, 0))
+    _print_dataset_summary(out)
 
 
 @app.command()
@@ -133,10 +134,7 @@ def inspect(path: Annotated[Path, typer.Argument(help="A recording (.h5) or a da
             m = read_manifest(path)
         except ManifestError as exc:
             fail(str(exc))
-        console.print(
-            f"dataset [bold]{m.get('name')}[/]: {m.get('total_episodes', '?')} episodes in {len(m['shards'])} shards, "
-            f"root_seed={m.get('root_seed')}, splits " + ", ".join(f"{k}={len(v)}" for k, v in m["splits"].items())
-        )
+        _print_dataset_header(m)
         for s in m["shards"]:
             _print_summary(path / s["file"])
         return

@@ -116,19 +116,25 @@ def import_(
     sensor_units: Annotated[str, typer.Option(help="Units of the sensor values.")] = "raw",
     family: Annotated[str, typer.Option(help="Sensor family recorded in /sensor.")] = "velostat",
     spec: Annotated[Optional[str], typer.Option("--spec", help="Column-log spec: a YAML file or a built-in layout (lupasic-sweep, tams); see docs/real-sensors.md.")] = None,
+    force: Annotated[bool, typer.Option("--force", help="Replace the -o recording if it exists.")] = False,
 ) -> None:
     """Import a sensor log and a load-cell log (host unix time) into a recording with source="real"."""
     from sensors.data.real_import import ImportLogError, import_runs, lupasic_pairs
 
+    n_logs = (sensor_log is not None) + (force_log is not None)
+    if spec is None and ((lupasic_dir is None and n_logs != 2) or (lupasic_dir is not None and n_logs)):
+        fail("give either SENSOR_LOG FORCE_LOG or --dir FOLDER")
+    if rate is not None and not (rate > 0 and rate < float("inf")):
+        fail(f"--rate must be a finite number > 0 Hz (got {rate}; leave it out for the sensor's own rate)")
+    if out.is_dir():
+        fail(f"-o '{out}' is a folder, not a recording file")
+    if out.exists() and not force:
+        fail(f"'{out}' exists; add --force to replace it")
+    _check_writable(out.parent if str(out.parent) else Path("."))
     if spec is not None:
         from piezotwin.cmd_real import import_with_spec
 
         return import_with_spec(spec, sensor_log, force_log, out, rate)
-
-    n_logs = (sensor_log is not None) + (force_log is not None)
-    if (lupasic_dir is None and n_logs != 2) or (lupasic_dir is not None and n_logs):
-        fail("give either SENSOR_LOG FORCE_LOG or --dir FOLDER")
-    _check_writable(out.parent if str(out.parent) else Path("."))
     try:
         pairs = lupasic_pairs(lupasic_dir) if lupasic_dir is not None else [(sensor_log, force_log)]
         p = import_runs(pairs, out, rate_hz=rate, force_units=force_units, calibration=calibration,

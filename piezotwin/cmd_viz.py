@@ -12,7 +12,7 @@ from typing import Annotated, Iterator, Optional
 
 import typer
 
-from piezotwin.common import _check_writable, app, console, err, fail
+from piezotwin.common import _check_writable, app, console, err, fail, unreadable
 
 
 @contextmanager
@@ -29,11 +29,15 @@ def _open(path: Path, episode: Optional[str], fields: list[str] | None) -> Itera
         fail(f"'{path}' does not exist")
     try:
         rec = Recording(path)
-    except (RecordingError, OSError) as exc:
-        fail(f"'{path}' is not a readable recording: {str(exc).splitlines()[0]}")
+    except (RecordingError, OSError, RuntimeError) as exc:
+        unreadable(path, exc)
     try:
         with rec:
-            yield load_episode(rec, episode, fields)
+            try:
+                ev = load_episode(rec, episode, fields)
+            except (RecordingError, OSError, RuntimeError) as exc:  # damaged data (failed checksum, B-tree)
+                unreadable(path, exc)
+            yield ev
     except FieldError as exc:
         fail(str(exc))
 
@@ -90,8 +94,10 @@ def show(
     if animate:
         if out is None or out.suffix.lower() not in (".mp4", ".gif"):
             fail("--animate needs -o FILE.mp4 or -o FILE.gif")
-        if fps <= 0:
+        if not fps > 0:
             fail(f"--fps must be > 0 (got {fps})")
+    if max_frames is not None and max_frames < 1:
+        fail(f"--max-frames must be >= 1 (got {max_frames}; leave it out for every frame)")
     elif out is not None and out.suffix.lower() != ".png":
         fail(f"-o '{out}' must end in .png (for a movie add --animate)")
     if out is not None:
@@ -117,7 +123,7 @@ def show(
                 show_window(ev, field, k, opts)
                 return
             if out is None:
-                out = Path(f"{recording.stem}-{ev.ep_id}-{field}.png")
+                out = Path(f"{Path(ev.path).stem}-{ev.ep_id}-{field}.png")  # the shard read, also for a dataset folder
                 _check_writable(Path("."))
                 console.print("no display: rendering offscreen")
             _, info = render_frame(ev, field, k, out, opts)
@@ -132,7 +138,7 @@ def show(
 @app.command()
 def export(
     recording: Annotated[Path, typer.Argument(help="A recording (.h5) or a dataset folder (its first shard).")],
-    out: Annotated[Path, typer.Option("-o", "--out", help="Output folder for <episode>.pvd + .vtu files.")] = Path("vtk"),
+    out: Annotated[Path, typer.Option("-o", "--out", help="Output folder: <episode>.pvd + <episode>/body_NNNNNN.vtu, indenter_NNNNNN.vtu per sample.")] = Path("vtk"),
     episode: Episode = None,
     stride: Annotated[int, typer.Option(help="Write every N-th sample.")] = 1,
 ) -> None:

@@ -11,12 +11,30 @@ from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
-from rich.console import Console
+from rich.console import Console, ConsoleDimensions
 from rich.table import Table
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, help="Piezoresistive tactile sensor simulator.")
-console = Console()
-err = Console(stderr=True)
+
+PIPE_WIDTH = 250  # columns when the output is not a terminal: tables never cut names ("resistance_meas…")
+
+
+class _Console(Console):
+    """A console that, written to a pipe or a file, is wide enough that tables keep whole names (a terminal
+    keeps its own width)."""
+
+    @property
+    def size(self) -> ConsoleDimensions:
+        s = Console.size.fget(self)
+        return s if self.is_terminal or self._width is not None else ConsoleDimensions(max(s.width, PIPE_WIDTH), s.height)
+
+    @size.setter
+    def size(self, new_size: tuple[int, int]) -> None:
+        Console.size.fset(self, new_size)
+
+
+console = _Console()
+err = _Console(stderr=True)
 
 
 def fail(msg: str) -> None:
@@ -50,23 +68,76 @@ def _check_writable(out: Path) -> None:
 SetOpt = Annotated[Optional[list[str]], typer.Option("--set", help="Override a config field: key.path=value (repeatable).")]
 
 
-def _print_summary(path: Path) -> None:
+def unreadable(path: Path, exc: BaseException) -> None:
+    """fail() with one line for a recording that cannot be read (wrong format, damaged HDF5)."""
+    msg = (str(exc).splitlines() or [type(exc).__name__])[0].removeprefix(f"{path}: ")
+    fail(f"'{path}' is not a readable recording: {msg}")
+
+
+def _summary(path: Path) -> dict:
     from sensors.data.recording import RecordingError, read_recording_summary
 
     if not path.is_file():
         fail(f"'{path}' does not exist")
     try:
-        s = read_recording_summary(path)
-    except (RecordingError, OSError) as exc:
-        fail(f"'{path}' is not a readable recording: {str(exc).splitlines()[0]}")
-    console.print(
-        f"[bold]{path}[/]  source={s['source']}  episodes={s['n_episodes']}  duration={s['duration_s']:.1f} s  "
-        f"samples={s['n_samples']}  seed={s['root_seed']}  shard={s['shard_index']}"
-    )
-    t = Table(show_header=True, header_style="bold")
+        return read_recording_summary(path)
+    except (RecordingError, OSError, RuntimeError) as exc:
+        unreadable(path, exc)
+    raise AssertionError  # unreachable: unreadable() exits
+
+
+def _channel_table(channels: dict, title: str | None = None) -> Table:
+    t = Table(show_header=True, header_style="bold", title=title)
     for col in ("channel", "units", "dims", "frame", "min", "max"):
         t.add_column(col, justify="right" if col in ("min", "max") else "left")
-    for name, c in s["channels"].items():
-        fmt = lambda v: "-" if v is None else f"{v:.4g}"  # noqa: E731
+    fmt = lambda v: "-" if v is None else f"{v:.4g}"  # noqa: E731
+    for name, c in channels.items():
         t.add_row(name, c["units"], ",".join(c["dim_names"]), str(c["frame_shape"]), fmt(c["min"]), fmt(c["max"]))
-    console.print(t)
+    return t
+
+
+def _print_summary(path: Path) -> None:
+    s = _summary(path)
+    console.print(
+        f"[bold]{path}[/]  source={s['source']}  episodes={s['n_episodes']}  duration={s['duration_s']:.1f} s  "
+        f"samples={s['n_samples']}  seed={s['root_seed']}  shard={s['shard_index']}", highlight=False, soft_wrap=True,
+    )
+    console.print(f"content_sha256 {s['content_sha256']}", highlight=False, soft_wrap=True)
+    console.print(_channel_table(s["channels"]))
+
+
+def _print_dataset_header(m: dict) -> None:
+    console.print(
+        f"dataset [bold]{m.get('name')}[/]: {m.get('total_episodes', '?')} episodes in {len(m['shards'])} shards, "
+        f"root_seed={m.get('root_seed')}, splits " + ", ".join(f"{k}={len(v)}" for k, v in m["splits"].items()),
+        highlight=False, soft_wrap=True,
+    )
+    console.print(f"content_sha256 {m.get('content_sha256') or '- (manifest written before content hashes)'}",
+                  highlight=False, soft_wrap=True)
+
+
+def _print_dataset_summary(directory: Path, max_shards: int = 8) -> None:
+    """The whole dataset in one table: totals from the manifest, channel ranges merged over its shards (the
+    first `max_shards` of a larger one, said so in the title)."""
+    from sensors.data.manifest import ManifestError, read_manifest
+
+    try:
+        m = read_manifest(directory)
+    except ManifestError as exc:
+        fail(str(exc))
+    _print_dataset_header(m)
+    files = [directory / s["file"] for s in m["shards"]]
+    sums = [_summary(p) for p in files[:max_shards]]
+    chans: dict[str, dict] = {}
+    for s in sums:
+        for name, c in s["channels"].items():
+            d = chans.setdefault(name, dict(c))
+            for key, pick in (("min", min), ("max", max)):
+                vals = [v for v in (d[key], c[key]) if v is not None]
+                d[key] = pick(vals) if vals else None
+    seconds = sum(s["duration_s"] for s in sums)
+    samples = sum(s["n_samples"] for s in sums)
+    over = (f"all {len(files)} shards" if len(sums) == len(files)
+            else f"the first {len(sums)} of {len(files)} shards (piezotwin inspect {directory} reads all)")
+    console.print(f"{samples} samples, {seconds:.1f} s of recording in {over}", highlight=False, soft_wrap=True)
+    console.print(_channel_table(chans, title=f"channels, ranges over {over}"))

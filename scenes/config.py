@@ -14,7 +14,7 @@ from typing import Annotated, Literal, Optional, Union
 from pydantic import Field, field_validator, model_validator
 
 
-from scenes.base import Fraction, NonNegFloat, PositiveFloat, Strict  # noqa: F401  (re-exported)
+from scenes.base import Between, Fraction, NonNeg, NonNegFloat, Pos, PositiveFloat, Strict  # noqa: F401  (re-exported)
 from scenes.fabric_config import FabricSensorConfig
 from scenes.ntype_config import NtypeSensorConfig
 from scenes.velostat_config import VelostatSensorConfig
@@ -23,15 +23,15 @@ from scenes.velostat_config import VelostatSensorConfig
 class PadConfig(Strict):
     """The sensing pad: a box of elastomer with a regular taxel grid on its top surface."""
 
-    size_x_m: PositiveFloat = 0.030  # cnt_pdms Table 1
-    size_y_m: PositiveFloat = 0.030  # cnt_pdms Table 1
-    thickness_m: PositiveFloat = 0.005  # cnt_pdms Table 1
+    size_x_m: Pos(1.0) = 0.030  # cnt_pdms Table 1
+    size_y_m: Pos(1.0) = 0.030  # cnt_pdms Table 1
+    thickness_m: Pos(0.1) = 0.005  # cnt_pdms Table 1
     taxels_x: Annotated[int, Field(ge=1, le=1024)] = 15  # estimate: 2 mm pitch
     taxels_y: Annotated[int, Field(ge=1, le=1024)] = 15  # estimate
-    youngs_modulus_pa: PositiveFloat = 1.85e6  # cnt_pdms Table 1
+    youngs_modulus_pa: Pos(1e10) = 1.85e6  # cnt_pdms Table 1
     poisson_ratio: Annotated[float, Field(ge=0.0, lt=0.5)] = 0.49  # estimate: near-incompressible PDMS
-    density_kg_per_m3: PositiveFloat = 1030.0  # estimate: Sylgard 184
-    spread_length_m: PositiveFloat = 0.0015  # estimate: elastic-layer kernel width ~ 0.3 x thickness
+    density_kg_per_m3: Pos(25_000.0) = 1030.0  # estimate: Sylgard 184
+    spread_length_m: Pos(0.1) = 0.0015  # estimate: elastic-layer kernel width ~ 0.3 x thickness
 
     @property
     def n_taxels(self) -> int:
@@ -42,13 +42,13 @@ class IndenterConfig(Strict):
     """A rigid indenter on a vertical slide joint (with x/y set per episode)."""
 
     shape: Literal["box", "sphere"] = "box"
-    size_x_m: PositiveFloat = 0.010  # estimate: 10 x 10 mm flat punch
-    size_y_m: PositiveFloat = 0.010  # estimate
-    radius_m: PositiveFloat = 0.005  # used when shape == "sphere"
-    mass_kg: PositiveFloat = 0.05  # estimate
-    friction: NonNegFloat = 0.8  # estimate: PDMS on steel
-    position_jitter_m: NonNegFloat = 0.003  # estimate: random x/y offset of the press per episode
-    start_gap_m: NonNegFloat = 0.0  # gap between indenter and pad at t=0
+    size_x_m: Pos(1.0) = 0.010  # estimate: 10 x 10 mm flat punch
+    size_y_m: Pos(1.0) = 0.010  # estimate
+    radius_m: Pos(0.5) = 0.005  # used when shape == "sphere"
+    mass_kg: Pos(100.0) = 0.05  # estimate
+    friction: NonNeg(10.0) = 0.8  # estimate: PDMS on steel
+    position_jitter_m: NonNeg(1.0) = 0.003  # estimate: random x/y offset of the press per episode
+    start_gap_m: NonNeg(0.1) = 0.0  # gap between indenter and pad at t=0
     count: Annotated[int, Field(ge=1, le=8)] = 1  # indenters in the scene (protocol kind "press_stroke" uses > 1)
 
 
@@ -74,30 +74,30 @@ class ProtocolConfig(Strict):
         "velostat_steps", "velostat_staircase", "velostat_calibration", "velostat_calibration_sweep", "velostat_mix",
     ] = "sinusoid"
     control: Literal["displacement", "force"] = "displacement"
-    frequencies_hz: list[PositiveFloat] = Field(default_factory=lambda: [0.1, 0.5, 1.0, 2.0])  # cnt_pdms
+    frequencies_hz: list[Pos(1000.0)] = Field(default_factory=lambda: [0.1, 0.5, 1.0, 2.0])  # cnt_pdms
     cycles: Annotated[int, Field(ge=1, le=1000)] = 3  # estimate
-    amplitude_min: NonNegFloat = 4.0e-5  # m (displacement) or N (force); estimate: spans 0-Fmax
-    amplitude_max: PositiveFloat = 1.6e-4  # m or N; estimate: Fmax ~ 5 N (cnt_pdms R^2/RMSE imply ~1.2 N std)
-    ramp_s: PositiveFloat = 0.5  # for kind="hold"
-    duration_s: PositiveFloat = 20.0  # for kind="hold"; sinusoids last cycles / f
-    settle_s: NonNegFloat = 0.2  # rest before loading starts
-    stair_step_n: PositiveFloat = 0.1  # fabric sect. 3.3: 0.1 N between force levels
-    stair_dwell_s: PositiveFloat = 2.0  # fabric sect. 3.3: 2 s from a new force level to the reading
-    stair_ramp_s: NonNegFloat = 0.1  # estimate: time to apply a new level by hand
+    amplitude_min: NonNeg(1000.0) = 4.0e-5  # m (displacement) or N (force); estimate: spans 0-Fmax
+    amplitude_max: Pos(1000.0) = 1.6e-4  # m or N; estimate: Fmax ~ 5 N (cnt_pdms R^2/RMSE imply ~1.2 N std)
+    ramp_s: Pos(3600.0) = 0.5  # for kind="hold"
+    duration_s: Pos(3600.0) = 20.0  # for kind="hold"; sinusoids last cycles / f
+    settle_s: NonNeg(3600.0) = 0.2  # rest before loading starts
+    stair_step_n: Pos(1000.0) = 0.1  # fabric sect. 3.3: 0.1 N between force levels
+    stair_dwell_s: Pos(3600.0) = 2.0  # fabric sect. 3.3: 2 s from a new force level to the reading
+    stair_ramp_s: NonNeg(3600.0) = 0.1  # estimate: time to apply a new level by hand
     stair_cycles_min: Annotated[int, Field(ge=1, le=50)] = 4  # fabric sect. 3.3: four to six cycles
     stair_cycles_max: Annotated[int, Field(ge=1, le=50)] = 6  # fabric sect. 3.3
-    stair_return_points_n: list[PositiveFloat] = Field(default_factory=list)  # fixed peaks; empty: random
-    stroke_s: PositiveFloat = 0.5  # for kind="press_stroke": duration of the tangential stroke; estimate
-    shear_ratio_max: NonNegFloat = 1.2  # for kind="press_stroke": target shear / (friction x normal force); estimate
+    stair_return_points_n: list[Pos(1000.0)] = Field(default_factory=list)  # fixed peaks; empty: random
+    stroke_s: Pos(3600.0) = 0.5  # for kind="press_stroke": duration of the tangential stroke; estimate
+    shear_ratio_max: NonNeg(10.0) = 1.2  # for kind="press_stroke": target shear / (friction x normal force); estimate
     active_probability: Fraction = 0.7  # for kind="press_stroke": chance that each extra indenter presses; estimate
     # velostat kinds (compression testing machine, force control; velostat sects. 3.1, 4.1, 5.4):
-    hold_min_s: PositiveFloat = 5.0  # velostat: holds of 5-30 s
-    hold_max_s: PositiveFloat = 30.0
-    loading_speeds_m_per_s: list[PositiveFloat] = Field(default_factory=lambda: [k / 60000.0 for k in (1, 2, 3, 4, 5, 6)])  # velostat Fig. 5: 1-6 mm/min
-    machine_stiffness_n_per_m: PositiveFloat = 20_000.0  # estimate: crosshead travel -> force (tip + protective layers)
-    step_force_n: PositiveFloat = 1.0  # velostat: staircases in 1 N steps
-    step_hold_s: PositiveFloat = 10.0  # velostat Fig. 6: 10 s per step
-    staircase_max_n: PositiveFloat = 10.0  # velostat Fig. 6: 1 N to 10 N
+    hold_min_s: Pos(3600.0) = 5.0  # velostat: holds of 5-30 s
+    hold_max_s: Pos(3600.0) = 30.0
+    loading_speeds_m_per_s: list[Pos(1.0)] = Field(default_factory=lambda: [k / 60000.0 for k in (1, 2, 3, 4, 5, 6)])  # velostat Fig. 5: 1-6 mm/min
+    machine_stiffness_n_per_m: Pos(1e9) = 20_000.0  # estimate: crosshead travel -> force (tip + protective layers)
+    step_force_n: Pos(1000.0) = 1.0  # velostat: staircases in 1 N steps
+    step_hold_s: Pos(3600.0) = 10.0  # velostat Fig. 6: 10 s per step
+    staircase_max_n: Pos(1000.0) = 10.0  # velostat Fig. 6: 1 N to 10 N
 
     @model_validator(mode="after")
     def _check(self) -> "ProtocolConfig":
@@ -119,8 +119,8 @@ class ProtocolConfig(Strict):
 
 
 class SamplingConfig(Strict):
-    sample_rate_hz: PositiveFloat = 100.0  # cnt_pdms Table 1
-    physics_timestep_s: PositiveFloat = 0.001  # MuJoCo step; estimate
+    sample_rate_hz: Pos(1e6) = 100.0  # cnt_pdms Table 1
+    physics_timestep_s: Between(1e-6, 1.0) = 0.001  # MuJoCo step; estimate
 
     @model_validator(mode="after")
     def _check(self) -> "SamplingConfig":
@@ -141,8 +141,8 @@ class MechanicsConfig(Strict):
     """Nonlinear elastic law + generalized Maxwell (Prony) series. Source: Ferry, Viscoelastic Properties of Polymers (1980)."""
 
     lock_strain: Annotated[float, Field(gt=0, le=1)] = 0.5  # estimate: sigma = E e / (1 - e/e_lock)
-    prony_fractions: list[NonNegFloat] = Field(default_factory=lambda: [0.01, 0.01, 0.02])  # estimate: small, see README (filter lag dominates)
-    prony_times_s: list[PositiveFloat] = Field(default_factory=lambda: [0.05, 0.5, 5.0])  # estimate: one per decade over 0.1-2 Hz
+    prony_fractions: list[NonNeg(1.0)] = Field(default_factory=lambda: [0.01, 0.01, 0.02])  # estimate: small, see README (filter lag dominates)
+    prony_times_s: list[Pos(1e6)] = Field(default_factory=lambda: [0.05, 0.5, 5.0])  # estimate: one per decade over 0.1-2 Hz
 
     @model_validator(mode="after")
     def _check(self) -> "MechanicsConfig":
@@ -156,9 +156,9 @@ class MechanicsConfig(Strict):
 class HysteresisConfig(Strict):
     """Prandtl-Ishlinskii play bank on the network strain. Source: Brokate & Sprekels, Hysteresis and Phase Transitions (1996)."""
 
-    play_thresholds: list[NonNegFloat] = Field(default_factory=lambda: [0.0005, 0.001, 0.002, 0.004])  # estimate, strain
-    play_weights: list[NonNegFloat] = Field(default_factory=lambda: [0.006, 0.006, 0.006, 0.006])  # estimate
-    recovery_time_s: PositiveFloat = 30.0  # estimate: slow relaxation of play states toward the input at rest
+    play_thresholds: list[NonNeg(1.0)] = Field(default_factory=lambda: [0.0005, 0.001, 0.002, 0.004])  # estimate, strain
+    play_weights: list[NonNeg(1.0)] = Field(default_factory=lambda: [0.006, 0.006, 0.006, 0.006])  # estimate
+    recovery_time_s: Pos(1e6) = 30.0  # estimate: slow relaxation of play states toward the input at rest
 
     @model_validator(mode="after")
     def _check(self) -> "HysteresisConfig":
@@ -174,24 +174,24 @@ class HysteresisConfig(Strict):
 class TunnelingConfig(Strict):
     """Tunneling/percolation resistance R = R0 (1 - e) exp(-gamma s0 e). Source: Simmons, J. Appl. Phys. 34, 1793 (1963)."""
 
-    conductivity_s_per_m: PositiveFloat = 0.12  # cnt_pdms Table 1
-    gamma_s0: PositiveFloat = 20.0  # estimate: tunneling barrier x initial gap
-    gap_time_s: PositiveFloat = 0.001  # estimate: network gap strain lags the mechanical strain
+    conductivity_s_per_m: Pos(1e8) = 0.12  # cnt_pdms Table 1
+    gamma_s0: Pos(1000.0) = 20.0  # estimate: tunneling barrier x initial gap
+    gap_time_s: Pos(1000.0) = 0.001  # estimate: network gap strain lags the mechanical strain
 
 
 class ElectronicsConfig(Strict):
     """Wheatstone bridge + in-amp + ADC + digital Butterworth. Source: cnt_pdms sect. 2.2; NI USB-6009 datasheet."""
 
-    excitation_v: PositiveFloat = 1.0  # estimate
-    bridge_resistance_ohm: PositiveFloat | None = None  # None: balanced at the unloaded sensor resistance
-    amp_gain: PositiveFloat = 300.0  # estimate: ~75 % of the ADC range at F_max
-    amp_offset_v: float = 0.0
-    white_noise_v: NonNegFloat = 5e-4  # estimate: rms at the ADC input
-    pink_noise_v: NonNegFloat = 5e-4  # estimate: rms of the 1/f component at the ADC input
+    excitation_v: Pos(100.0) = 1.0  # estimate
+    bridge_resistance_ohm: Pos(1e12) | None = None  # None: balanced at the unloaded sensor resistance
+    amp_gain: Pos(1e6) = 300.0  # estimate: ~75 % of the ADC range at F_max
+    amp_offset_v: Between(-100.0, 100.0) = 0.0
+    white_noise_v: NonNeg(100.0) = 5e-4  # estimate: rms at the ADC input
+    pink_noise_v: NonNeg(100.0) = 5e-4  # estimate: rms of the 1/f component at the ADC input
     adc_bits: Annotated[int, Field(ge=4, le=24)] = 14  # cnt_pdms Table 1 (NI USB-6009)
-    adc_range_v: PositiveFloat = 10.0  # NI USB-6009 differential +-10 V
+    adc_range_v: Pos(100.0) = 10.0  # NI USB-6009 differential +-10 V
     filter_order: Annotated[int, Field(ge=0, le=8)] = 4  # cnt_pdms sect. 2.2 (0 disables)
-    filter_cutoff_hz: PositiveFloat = 10.0  # cnt_pdms sect. 2.2
+    filter_cutoff_hz: Pos(1e6) = 10.0  # cnt_pdms sect. 2.2
 
     @field_validator("filter_order")
     @classmethod

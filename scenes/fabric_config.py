@@ -14,7 +14,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
-from scenes.base import NonNegFloat, PositiveFloat, Strict
+from scenes.base import Between, NonNeg, Pos, Strict
 
 
 class FabricStackConfig(Strict):
@@ -29,23 +29,23 @@ class FabricStackConfig(Strict):
     x is the effective compaction load (N) after creep and hysteresis.
     """
 
-    layer_thickness_m: PositiveFloat = 0.38e-3  # fabric sect. 3.1 (EeonTex, 0.38 mm)
-    layer_r_inf_ohm: NonNegFloat = 242.368  # fit to fabric eq. 6 (sensors/fabric/calibrate.py)
-    layer_r_amp_ohm: NonNegFloat = 855.664  # fit to fabric eq. 6
-    layer_force_n: PositiveFloat = 0.758332  # fit to fabric eq. 6
+    layer_thickness_m: Pos(0.01) = 0.38e-3  # fabric sect. 3.1 (EeonTex, 0.38 mm)
+    layer_r_inf_ohm: NonNeg(1e9) = 242.368  # fit to fabric eq. 6 (sensors/fabric/calibrate.py)
+    layer_r_amp_ohm: NonNeg(1e9) = 855.664  # fit to fabric eq. 6
+    layer_force_n: Pos(1000.0) = 0.758332  # fit to fabric eq. 6
     layer_beta: Annotated[float, Field(gt=0, le=4)] = 1.39721  # fit to fabric eq. 6
-    contact_r0_ohm: NonNegFloat = 1021.62  # fit to fabric eq. 6
-    contact_force_n: PositiveFloat = 0.225262  # fit to fabric eq. 6: preload of the sewn stack
+    contact_r0_ohm: NonNeg(1e9) = 1021.62  # fit to fabric eq. 6
+    contact_force_n: Pos(1000.0) = 0.225262  # fit to fabric eq. 6: preload of the sewn stack
     contact_exponent: Annotated[float, Field(ge=0.33, le=0.5)] = 0.5  # Holm: 1/3 elastic .. 1/2 plastic
-    lead_resistance_ohm: NonNegFloat = 30.0  # fabric sect. 3.2: silver thread < 300 ohm/m, 2 x 5 cm leads  # estimate
+    lead_resistance_ohm: NonNeg(1e6) = 30.0  # fabric sect. 3.2: silver thread < 300 ohm/m, 2 x 5 cm leads  # estimate
 
 
 class FabricCreepConfig(Strict):
     """Prony creep of the fabric's compaction under force: u = F + sum q_i, q_i -> g_i F with time constant tau_i.
     Source: Ferry, Viscoelastic Properties of Polymers (1980) (generalized Kelvin-Voigt creep compliance)."""
 
-    prony_fractions: list[NonNegFloat] = Field(default_factory=lambda: [0.04, 0.06])  # estimate
-    prony_times_s: list[PositiveFloat] = Field(default_factory=lambda: [1.0, 30.0])  # estimate
+    prony_fractions: list[NonNeg(1.0)] = Field(default_factory=lambda: [0.04, 0.06])  # estimate
+    prony_times_s: list[Pos(1e6)] = Field(default_factory=lambda: [1.0, 30.0])  # estimate
 
     @model_validator(mode="after")
     def _check(self) -> "FabricCreepConfig":
@@ -62,9 +62,9 @@ class FabricHysteresisConfig(Strict):
     force depends on the last peak (minor loops return at different points). Slow recovery at rest.
     Source: Brokate & Sprekels, Hysteresis and Phase Transitions (1996); Al Janaideh et al. (generalized PI)."""
 
-    play_thresholds_n: list[NonNegFloat] = Field(default_factory=lambda: [0.05, 0.15, 0.3, 0.5])  # estimate, tuned to 24.2 % FSO
-    play_weights: list[NonNegFloat] = Field(default_factory=lambda: [0.1, 0.1, 0.1, 0.1])  # estimate, tuned to 24.2 % FSO
-    recovery_time_s: PositiveFloat = 120.0  # estimate: slow release of the compaction at rest
+    play_thresholds_n: list[NonNeg(1000.0)] = Field(default_factory=lambda: [0.05, 0.15, 0.3, 0.5])  # estimate, tuned to 24.2 % FSO
+    play_weights: list[NonNeg(1.0)] = Field(default_factory=lambda: [0.1, 0.1, 0.1, 0.1])  # estimate, tuned to 24.2 % FSO
+    recovery_time_s: Pos(1e6) = 120.0  # estimate: slow release of the compaction at rest
 
     @model_validator(mode="after")
     def _check(self) -> "FabricHysteresisConfig":
@@ -92,12 +92,12 @@ class FabricPressConfig(Strict):
     Draws come from the episode seed (stream 2), press by press; without seeds every press is the mean one.
     """
 
-    onset_force_n: NonNegFloat = 0.05  # estimate: half the paper's 0.1 N step, a touch of the hand on the sample
-    release_force_n: NonNegFloat = 0.02  # estimate: below it the plate has left the sample
+    onset_force_n: NonNeg(100.0) = 0.05  # estimate: half the paper's 0.1 N step, a touch of the hand on the sample
+    release_force_n: NonNeg(100.0) = 0.02  # estimate: below it the plate has left the sample
     area_sigma: Annotated[float, Field(ge=0, le=1)] = 0.05  # estimate: a hand-placed plate engages a few % more or less of a 1 x 1 cm knit
     set_fraction_mean: Annotated[float, Field(ge=0, le=1)] = 0.3  # estimate, fit: piezotwin calibrate fabric (1-layer hysteresis 24.2 %)
     set_fraction_sigma: Annotated[float, Field(ge=0, le=2)] = 1.0  # estimate: the set of a hand press varies by about its own size (Kawabata RC spread)
-    set_recovery_time_s: PositiveFloat = 60.0  # estimate: fibre stress relaxation of polyamide/spandex knits, ~1 min
+    set_recovery_time_s: Pos(1e5) = 60.0  # estimate: fibre stress relaxation of polyamide/spandex knits, ~1 min
     max_presses: Annotated[int, Field(ge=1, le=4096)] = 256  # draws per episode; press k uses draw k mod max_presses
 
     @model_validator(mode="after")
@@ -111,10 +111,10 @@ class MultimeterConfig(Strict):
     """2-wire handheld multimeter (fabric sect. 3.3): autoranging, finite counts, a few readings per second,
     sample-and-hold between readings. Reading = round(R (1 + gain_error) / resolution + noise) counts."""
 
-    ranges_ohm: list[PositiveFloat] = Field(default_factory=lambda: [600.0, 6e3, 60e3, 600e3, 6e6])  # estimate: 6000-count meter
+    ranges_ohm: list[Pos(1e12)] = Field(default_factory=lambda: [600.0, 6e3, 60e3, 600e3, 6e6])  # estimate: 6000-count meter
     counts: Annotated[int, Field(ge=100, le=1_000_000)] = 6000  # estimate
-    readings_per_s: PositiveFloat = 2.5  # estimate: "a few readings per second"
-    noise_counts: NonNegFloat = 0.5  # estimate: rms, in least-significant counts
+    readings_per_s: Pos(1e4) = 2.5  # estimate: "a few readings per second"
+    noise_counts: NonNeg(1000.0) = 0.5  # estimate: rms, in least-significant counts
     gain_error: Annotated[float, Field(ge=-0.1, le=0.1)] = 0.0  # estimate: calibration error (fraction)
 
     @model_validator(mode="after")

@@ -113,6 +113,43 @@ def _unknown(loc: str, name: str, allowed: list[str]) -> str:
     return f"unknown field '{loc}'{hint}; allowed: {', '.join(allowed)}"
 
 
+_BOUND_ERRORS = ("finite_number", "greater_than", "greater_than_equal", "less_than", "less_than_equal")
+
+
+def _constraints(ann: Any) -> list[Any]:
+    """The annotated_types bounds (Gt, Ge, Lt, Le) inside an annotation: Annotated[float, Field(...)], a list of
+    those, or an Optional of those."""
+    import annotated_types as at
+
+    out: list[Any] = []
+    if typing.get_origin(ann) is typing.Annotated:
+        for meta in typing.get_args(ann)[1:]:
+            out += [m for m in getattr(meta, "metadata", [meta]) if isinstance(m, (at.Gt, at.Ge, at.Lt, at.Le))]
+        return out
+    for a in typing.get_args(ann):
+        out += _constraints(a)
+    return out
+
+
+def allowed_range(loc: list[str]) -> str:
+    """'0 < value <= 0.1' for the float field at a dotted location inside SceneConfig ('' when unknown)."""
+    import annotated_types as at
+
+    models: list[type[BaseModel]] = [SceneConfig]
+    for part in loc[:-1]:
+        models = [x for m in models if part in m.model_fields for x in _union_members(m.model_fields[part].annotation)]
+    fields = [m.model_fields[loc[-1]] for m in models if loc and loc[-1] in m.model_fields]
+    if not fields:
+        return ""
+    f = fields[0]
+    cons = list(f.metadata) + _constraints(f.annotation)
+    lo = next((f"{c.gt:g} < " for c in cons if isinstance(c, at.Gt)), "") or next(
+        (f"{c.ge:g} <= " for c in cons if isinstance(c, at.Ge)), "")
+    hi = next((f" < {c.lt:g}" for c in cons if isinstance(c, at.Lt)), "") or next(
+        (f" <= {c.le:g}" for c in cons if isinstance(c, at.Le)), "")
+    return f"a finite number, {lo}value{hi}" if lo or hi else "a finite number (not inf or nan)"
+
+
 def format_validation_error(exc: ValidationError) -> str:
     """One line naming the first offending field and the allowed values."""
     err = exc.errors()[0]
@@ -127,6 +164,10 @@ def format_validation_error(exc: ValidationError) -> str:
     inner = re.match(r"^'([A-Za-z0-9_]+)' (.*)$", msg)  # unit errors name the field inside the section
     if inner:
         return f"field '{dotted}.{inner.group(1)}' {inner.group(2)}" if loc else f"field '{inner.group(1)}' {inner.group(2)}"
+    if err["type"] in _BOUND_ERRORS:
+        allowed = allowed_range(loc)
+        if allowed:
+            return f"field '{dotted}': got {err.get('input')!r}; allowed: {allowed}"
     if err["type"] == "literal_error":
         return f"field '{dotted}': {msg} (got {err.get('input')!r})"
     if dotted == "<root>" or msg.startswith(loc[-1] if loc else "\0") or "'" in msg[:40]:

@@ -12,7 +12,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
-from scenes.base import NonNegFloat, PositiveFloat, Strict
+from scenes.base import Between, NonNeg, Pos, Strict
 
 
 class NtypeElementConfig(Strict):
@@ -41,16 +41,16 @@ class NtypeElementConfig(Strict):
 
     elements_x: Annotated[int, Field(ge=1, le=64)] = 6  # ntype: 6 x 6 array
     elements_y: Annotated[int, Field(ge=1, le=64)] = 6  # ntype
-    youngs_modulus_pa: PositiveFloat = 6.1e6  # ntype sect. 2.1 (conductive rubber)
+    youngs_modulus_pa: Pos(1e10) = 6.1e6  # ntype sect. 2.1 (conductive rubber)
     poisson_ratio: Annotated[float, Field(ge=0.0, lt=0.5)] = 0.49  # ntype sect. 2.1
-    column_area_m2: PositiveFloat = 4e-6  # ntype sect. 2.2: 4 mm^2 cross-section
-    normal_length_m: PositiveFloat = 0.010  # ntype sect. 2.2: 1 cm
-    inclined_length_m: PositiveFloat = 0.014142135623730951  # ntype sect. 2.2: sqrt(2) cm
+    column_area_m2: Pos(0.01) = 4e-6  # ntype sect. 2.2: 4 mm^2 cross-section
+    normal_length_m: Pos(0.1) = 0.010  # ntype sect. 2.2: 1 cm
+    inclined_length_m: Pos(0.1) = 0.014142135623730951  # ntype sect. 2.2: sqrt(2) cm
     inclination_deg: Annotated[float, Field(gt=0, lt=90)] = 45.0  # ntype sect. 2.2
     reading: Literal["crossed", "coplanar", "eq8"] = "crossed"  # estimate: Figure 1 read as above (crossed wires)
     inclined_azimuth_deg: Annotated[float, Field(ge=0, le=90)] = 45.0  # "eq8" only: eq. 8's phi, not given; estimate: 45 puts the two projections at right angles like the wires
-    filler_youngs_modulus_pa: NonNegFloat = 6.1e6  # estimate: GD-401 filler as stiff as the conductive rubber (ntype sect. 2.1 gives only the latter)
-    filler_shear_modulus_pa: NonNegFloat = 2.05e6  # estimate: likewise, the paper's 2.05 MPa
+    filler_youngs_modulus_pa: NonNeg(1e10) = 6.1e6  # estimate: GD-401 filler as stiff as the conductive rubber (ntype sect. 2.1 gives only the latter)
+    filler_shear_modulus_pa: NonNeg(1e10) = 2.05e6  # estimate: likewise, the paper's 2.05 MPa
 
     @property
     def n_elements(self) -> int:
@@ -64,9 +64,9 @@ class NtypeResistanceConfig(Strict):
     (ntype sect. 3.2: normal column 16-25 kOhm, inclined 32-50 kOhm) are honoured rather than equal volumes.
     """
 
-    rest_normal_ohm: PositiveFloat = 25e3  # ntype sect. 3.2: top of the 16-25 kOhm range (unloaded)
-    rest_inclined_ohm: PositiveFloat = 50e3  # ntype sect. 3.2: top of the 32-50 kOhm range (unloaded)
-    piezo_coefficient: float = 215.0  # estimate: beta of rho(e) = rho0 exp(beta e); places 4.8 N of F_z (0.2 % strain of the stiff cell) at 16 kOhm
+    rest_normal_ohm: Pos(1e12) = 25e3  # ntype sect. 3.2: top of the 16-25 kOhm range (unloaded)
+    rest_inclined_ohm: Pos(1e12) = 50e3  # ntype sect. 3.2: top of the 32-50 kOhm range (unloaded)
+    piezo_coefficient: Between(-1e4, 1e4) = 215.0  # estimate: beta of rho(e) = rho0 exp(beta e); places 4.8 N of F_z (0.2 % strain of the stiff cell) at 16 kOhm
     min_strain: Annotated[float, Field(gt=-0.9, lt=0)] = -0.6  # estimate: strain clamp (column fully squeezed)
 
 
@@ -77,8 +77,8 @@ class NtypeLayerConfig(Strict):
     Source: Johnson, Contact Mechanics (1985), eq. 3.21 (sigma_z under a point load).
     """
 
-    depth_m: PositiveFloat = 0.010  # estimate: the array's 1 cm thickness (ntype sect. 2.2); gives ~1/3 at 1 cm, a few % at 2 cm (sect. 3.3: 1-2 cm)
-    electrode_size_m: PositiveFloat = 0.010  # ntype sect. 2.2: the element spans 1 cm
+    depth_m: Pos(0.1) = 0.010  # estimate: the array's 1 cm thickness (ntype sect. 2.2); gives ~1/3 at 1 cm, a few % at 2 cm (sect. 3.3: 1-2 cm)
+    electrode_size_m: Pos(0.1) = 0.010  # ntype sect. 2.2: the element spans 1 cm
     quadrature: Annotated[int, Field(ge=2, le=32)] = 8  # points per electrode side
 
 
@@ -87,7 +87,7 @@ class NtypeDynamicsConfig(Strict):
     Source: Ferry, Viscoelastic Properties of Polymers (1980) (standard linear solid)."""
 
     lag_fraction: Annotated[float, Field(ge=0, lt=1)] = 0.05  # estimate
-    lag_time_s: PositiveFloat = 0.3  # estimate
+    lag_time_s: Pos(1e4) = 0.3  # estimate
 
 
 class NtypeReadoutConfig(Strict):
@@ -107,11 +107,11 @@ class NtypeReadoutConfig(Strict):
     """
 
     scan: Literal["ideal", "floating", "grounded", "feedback"] = "feedback"  # estimate: the usual suppression for a resistive matrix
-    drive_v: PositiveFloat = 5.0  # estimate: scan voltage (only ratios matter without noise in volts)
-    switch_on_ohm: NonNegFloat = 100.0  # estimate: analog multiplexer on-resistance (CD4067-class, ~100 ohm at 5 V)
-    reference_ohm: PositiveFloat = 1e3  # estimate: a low sense resistor keeps the read wire near ground (what grounding needs to suppress; ~1/30 of a column)
-    noise_fraction: NonNegFloat = 0.002  # estimate: relative rms noise per reading
-    resolution_ohm: NonNegFloat = 1.0  # estimate: readout quantum (0 disables)
+    drive_v: Pos(1000.0) = 5.0  # estimate: scan voltage (only ratios matter without noise in volts)
+    switch_on_ohm: NonNeg(1e9) = 100.0  # estimate: analog multiplexer on-resistance (CD4067-class, ~100 ohm at 5 V)
+    reference_ohm: Pos(1e12) = 1e3  # estimate: a low sense resistor keeps the read wire near ground (what grounding needs to suppress; ~1/30 of a column)
+    noise_fraction: NonNeg(1.0) = 0.002  # estimate: relative rms noise per reading
+    resolution_ohm: NonNeg(1e9) = 1.0  # estimate: readout quantum (0 disables)
 
 
 class NtypeSensorConfig(Strict):

@@ -10,7 +10,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
-from scenes.base import Fraction, NonNegFloat, PositiveFloat, Strict
+from scenes.base import Between, Fraction, NonNeg, Pos, Strict
 
 
 class VelostatFilmConfig(Strict):
@@ -23,16 +23,16 @@ class VelostatFilmConfig(Strict):
     (Holm, Electric Contacts, 1967): conductance ~ pressure^n with n ~ 1 (velostat sect. 2, Fig. 19).
     """
 
-    resistance_at_ref_ohm: PositiveFloat = 20_000.0  # estimate: 1 cm^2 of film at p_ref (1 N on a 1 cm^2 tip)
-    reference_pressure_pa: PositiveFloat = 10_000.0  # estimate: 1 N on 1 cm^2
+    resistance_at_ref_ohm: Pos(1e12) = 20_000.0  # estimate: 1 cm^2 of film at p_ref (1 N on a 1 cm^2 tip)
+    reference_pressure_pa: Pos(1e9) = 10_000.0  # estimate: 1 N on 1 cm^2
     exponent: Annotated[float, Field(gt=0.2, le=3.0)] = 1.05  # estimate: power law n ~ 1 (velostat Fig. 13b)
     field_seed: Annotated[int, Field(ge=0)] | None = None  # None: the part follows generation.root_seed
-    correlation_length_m: PositiveFloat = 0.030  # estimate: 20-40 mm patches (velostat Figs. 18, 19)
-    conductance_spread: NonNegFloat = 0.06  # estimate: std of log conductance within a domain (smooth field)
+    correlation_length_m: Pos(1.0) = 0.030  # estimate: 20-40 mm patches (velostat Figs. 18, 19)
+    conductance_spread: NonNeg(5.0) = 0.06  # estimate: std of log conductance within a domain (smooth field)
     domains: Annotated[int, Field(ge=1, le=64)] = 5  # estimate: zones of carbon-black loading; the paper's Ward elbow finds about 5 groups of units (Fig. 12)
     domain_spread: Annotated[float, Field(ge=0.0, lt=1.0)] = 0.65  # estimate: resistivity factors 1 -/+ domain_spread evenly over the domains (unit-to-unit inconsistency, Figs. 13, 19)
-    creep_spread: NonNegFloat = 0.35  # estimate: std of log creep amplitude over the film
-    field_resolution_m: PositiveFloat = 0.002  # grid on which the random field is drawn
+    creep_spread: NonNeg(5.0) = 0.35  # estimate: std of log creep amplitude over the film
+    field_resolution_m: Between(1e-4, 0.1) = 0.002  # grid on which the random field is drawn
 
 
 class VelostatCreepConfig(Strict):
@@ -47,12 +47,12 @@ class VelostatCreepConfig(Strict):
     every ramp; Schapery, Polym. Eng. Sci. 9, 1969), kept for comparison and for sensors/velostat/fit.py."""
 
     model: Literal["aging", "spectrum"] = "aging"
-    amplitude: NonNegFloat = 0.4  # estimate (aging: per e-fold of contact age): ~3 N error after a 30 s hold at 7 N, ~5 N after the 1-7 N staircase (velostat sect. 5.4, Fig. 22a: up to 5 N)
-    saturation_pressure_pa: PositiveFloat = 8_000.0  # estimate: p_c; relative creep falls over the 1-15 N of the paper (velostat Fig. 3a), p_c ~ 3 N on a 10 mm tip at a taxel corner
-    renewal_pressure_pa: PositiveFloat = 10_000.0  # estimate (aging): dp_c; contact age at the end of a ramp = dp_c / (dp/dt): 2 s at 6 mm/min, 12 s at 1 mm/min on a 10 mm tip at a taxel corner, so the creep rate at the start of a hold stays in the paper's creep band (eqs. 8-9)
-    cutoff_time_s: PositiveFloat = 0.5  # estimate (aging): theta_c of ln(1 + t / theta_c), Dieterich & Kilgore 1994 report ~1 s
-    recovery_time_s: PositiveFloat = 20.0  # estimate (aging): an unloaded film forgets its contact history (re-expansion of the matrix)
-    times_s: list[PositiveFloat] = Field(default_factory=lambda: [0.5, 1.5, 5.0, 15.0, 50.0, 150.0])  # estimate (spectrum): half-decade spacing over the 1-100 s of the paper's holds
+    amplitude: NonNeg(100.0) = 0.4  # estimate (aging: per e-fold of contact age): ~3 N error after a 30 s hold at 7 N, ~5 N after the 1-7 N staircase (velostat sect. 5.4, Fig. 22a: up to 5 N)
+    saturation_pressure_pa: Pos(1e9) = 8_000.0  # estimate: p_c; relative creep falls over the 1-15 N of the paper (velostat Fig. 3a), p_c ~ 3 N on a 10 mm tip at a taxel corner
+    renewal_pressure_pa: Pos(1e9) = 10_000.0  # estimate (aging): dp_c; contact age at the end of a ramp = dp_c / (dp/dt): 2 s at 6 mm/min, 12 s at 1 mm/min on a 10 mm tip at a taxel corner, so the creep rate at the start of a hold stays in the paper's creep band (eqs. 8-9)
+    cutoff_time_s: Pos(3600.0) = 0.5  # estimate (aging): theta_c of ln(1 + t / theta_c), Dieterich & Kilgore 1994 report ~1 s
+    recovery_time_s: Pos(1e5) = 20.0  # estimate (aging): an unloaded film forgets its contact history (re-expansion of the matrix)
+    times_s: list[Pos(1e6)] = Field(default_factory=lambda: [0.5, 1.5, 5.0, 15.0, 50.0, 150.0])  # estimate (spectrum): half-decade spacing over the 1-100 s of the paper's holds
 
     @model_validator(mode="after")
     def _check(self) -> "VelostatCreepConfig":
@@ -66,16 +66,16 @@ class VelostatReadoutConfig(Strict):
     source's compliance limit, and ITO position decoding (velostat sect. 5.1: 4-wire [20], 5-wire [21])."""
 
     sheet_resistance_ohm: Annotated[float, Field(ge=100.0, le=500.0)] = 300.0  # velostat sect. 5.1: PET-ITO 100-500 ohm/sq
-    lead_resistance_ohm: NonNegFloat = 20.0  # estimate: silver busbars + leads
+    lead_resistance_ohm: NonNeg(1e6) = 20.0  # estimate: silver busbars + leads
     current_a: Annotated[float, Field(gt=0, le=0.1)] = 50e-6  # estimate: constant-current source
-    compliance_v: PositiveFloat = 3.0  # estimate: 5 V battery minus source headroom
+    compliance_v: Pos(100.0) = 3.0  # estimate: 5 V battery minus source headroom
     position_wiring: Literal["4-wire", "5-wire"] = "4-wire"  # velostat sect. 5.1
-    drive_v: PositiveFloat = 3.3  # estimate: gradient excitation across the ITO sheet
-    input_resistance_ohm: PositiveFloat = 1.0e6  # estimate: probe load (switch leakage + ADC) -> 3 mm at 1 N (velostat sect. 4.1)
+    drive_v: Pos(100.0) = 3.3  # estimate: gradient excitation across the ITO sheet
+    input_resistance_ohm: Pos(1e15) = 1.0e6  # estimate: probe load (switch leakage + ADC) -> 3 mm at 1 N (velostat sect. 4.1)
     five_wire_bow: Annotated[float, Field(ge=0.0, lt=0.5)] = 0.02  # estimate: residual pincushion of corner-driven field
-    noise_v: NonNegFloat = 1.0e-3  # estimate: white noise rms per channel at the ADC
+    noise_v: NonNeg(100.0) = 1.0e-3  # estimate: white noise rms per channel at the ADC
     adc_bits: Annotated[int, Field(ge=4, le=24)] = 12  # estimate: STM32 ADC (velostat Fig. 20)
-    adc_range_v: PositiveFloat = 3.3  # estimate: unipolar 0-3.3 V
+    adc_range_v: Pos(100.0) = 3.3  # estimate: unipolar 0-3.3 V
 
     @model_validator(mode="after")
     def _check(self) -> "VelostatReadoutConfig":

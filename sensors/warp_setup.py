@@ -14,12 +14,49 @@ import warp as wp
 _done = False
 
 
+NO_DRIVER_WARNING = "Could not find or load the NVIDIA CUDA driver"
+
+
 def init_warp() -> None:
+    """wp.init() once, quietly: on a machine without CUDA, Warp's native code prints "Warp CUDA warning: Could
+    not find or load the NVIDIA CUDA driver" to the process's stderr on every command; that line is dropped
+    (CPU is what such a machine has; asking for a CUDA device still says there is none). Anything else
+    wp.init() prints is passed on."""
     global _done
     if not _done:
         wp.config.log_level = logging.WARNING
-        wp.init()
+        _init_without_driver_warning()
         _done = True
+
+
+def _init_without_driver_warning() -> None:
+    import os
+    import sys
+    import tempfile
+
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError, AttributeError):  # no file descriptor 2 to redirect: plain init
+        wp.init()
+        return
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            wp.init()
+        finally:
+            try:
+                sys.stderr.flush()
+            except (OSError, ValueError):
+                pass
+            os.dup2(saved, 2)
+            os.close(saved)
+        tmp.seek(0)
+        text = tmp.read().decode("utf-8", errors="replace")
+    rest = "".join(line for line in text.splitlines(keepends=True) if NO_DRIVER_WARNING not in line)
+    if rest:
+        sys.stderr.write(rest)
+        sys.stderr.flush()
 
 
 def resolve_device(device: str) -> str:

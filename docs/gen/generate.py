@@ -233,6 +233,31 @@ def bench_streaming() -> str:
             + table(["model", "median (ms)", "p99 (ms)", "paper (ms)", "context (samples)"], rows))
 
 
+def bench_checksum() -> str:
+    d = load("checksum-cpu.json")
+    if not d:
+        return missing("The checksum cost", "Run `PYTHONPATH=. python bench/bench_checksum.py`.")
+    rows = []
+    for comp, r in d["results"].items():
+        a, b = r["plain"], r["fletcher32"]
+        rows.append([comp, num(a["write_s_min"]), num(b["write_s_min"]), f"x{num(r['write_time_ratio'])}",
+                     f"x{num(r['write_cpu_ratio'])}" if "write_cpu_ratio" in r else "–",
+                     f"x{num(r['read_time_ratio'])}", f"{a['file_bytes']:,}", f"+{r['extra_bytes']:,}",
+                     f"x{r['size_ratio']:.5f}"])
+    hashed = ""
+    if "content_hash_cpu_s" in d:
+        hashed = (f"\n\nHashing the same {d['episodes_per_file']} episodes for `content_sha256` (in the writer, from memory) "
+                  f"takes {num(d['content_hash_cpu_s'])} s of CPU, {pct(d['content_hash_share_of_lzf_write_cpu'])} of "
+                  "the lzf write's CPU time (included in the write times above).")
+    return (f"Cost of the Fletcher-32 checksums (`bench/bench_checksum.py`, `checksum-cpu.json`): a shard of "
+            f"{d['episodes_per_file']} episodes of the `{d['preset']}` preset at {d['frequency_hz']:g} Hz "
+            f"({d['samples_per_episode']} samples, {d['raw_bytes_per_episode'] / 1e6:.2f} MB raw per episode), "
+            f"fastest of {d['repeats']} writes each, HDF5 {d['machine']['hdf5']}, on the shared 2-core machine "
+            "(differences of a few % are within its noise):\n\n"
+            + table(["compression", "write, plain (s)", "write, Fletcher-32 (s)", "write time", "write CPU",
+                     "read time", "file, plain (bytes)", "checksums (bytes)", "file size"], rows) + hashed)
+
+
 # ----------------------------------------------------------------------------------------------- characterization
 def characterization(preset: str) -> str:
     d = load(f"characterize-{preset}.json")
@@ -629,6 +654,8 @@ def channels_common() -> str:
            "when the protocol is force-controlled):\n", table(["channel", "unit", "dims", "description"], rows)]
     rows = [[f"`{k}`", f"`{v}`"] for k, v in _root_attrs()]
     rows.append(["`version_<library>`", "`_library_versions()`: one attribute per library"])
+    rows.append(["`content_sha256`", "`content_sha256(...)` when the file is complete: hash of the data and the "
+                 "attributes that are not times or versions (see *Checking a dataset*)"])
     rows += [[f"`{k}`", f"`{v}`"] for k, v in _extra_attrs()]
     out += ["Root attributes of every shard (`RecordingWriter` in `sensors/data/recording.py`, "
             "`shard_writer` in `simulate/generation/run.py`):\n", table(["attribute", "set from"], rows)]
@@ -680,6 +707,7 @@ def outputs() -> dict[Path, Callable[[], str]]:
         GEN / "bench-cpu.md": bench_cpu,
         GEN / "bench-gpu.md": bench_gpu,
         GEN / "bench-streaming.md": bench_streaming,
+        GEN / "bench-checksum.md": bench_checksum,
         GEN / "channels-common.md": channels_common,
         GEN / "cli.md": cli,
     }

@@ -13,6 +13,11 @@ episode_seed(root_seed, k)``, and a seed never depends on how many episodes or s
 ``shard_seed(root_seed, i)`` uses the two-element key ``(SHARD_KEY, i)``, which never collides
 with an episode's one-element key.
 
+Content hash. Each shard entry carries the recording's ``content_sha256`` (a hash of its data and of the
+attributes that are not timestamps or code versions, sensors.data.recording) and the manifest a
+``content_sha256`` over them: equal for equal data, so a regenerated dataset is checked by one number, where
+``dataset_sha256`` (over the files' bytes, which hold their creation time) differs between identical runs.
+
 Resumption. A shard counts as present when its file opens as a recording whose config_sha256 is
 the dataset's (``is_shard_complete``); ``first_missing_shards`` lists those still to generate.
 Because shards are renamed into place only when whole, an interrupted run leaves at most a
@@ -147,7 +152,7 @@ def first_missing_shards(
 
 
 def describe_shard(path: str | os.PathLike, *, with_sha256: bool = True) -> dict[str, Any]:
-    """Manifest entry of one shard: file, sha256, episodes, episode_seeds, shard_seed, bytes.
+    """Manifest entry of one shard: file, sha256, content_sha256, episodes, episode_seeds, shard_seed, bytes.
 
     Episode seeds come from each episode's ``seed`` attribute and the shard seed from the root
     attribute ``shard_seed`` (None where absent).
@@ -158,19 +163,25 @@ def describe_shard(path: str | os.PathLike, *, with_sha256: bool = True) -> dict
         seeds = [rec.episode_attrs(ep).get("seed") for ep in eps]
         sseed = rec.attrs.get("shard_seed")
         cfg = rec.config_sha256
-    return shard_entry(path, eps, seeds, cfg, sseed, with_sha256=with_sha256)
+        content = rec.content_sha256
+    return shard_entry(path, eps, seeds, cfg, sseed, with_sha256=with_sha256, content_sha256=content)
 
 
 def shard_entry(
     path: str | os.PathLike, episodes: list[str], episode_seeds: list, config_sha256: str, shard_seed: int | None = None,
-    *, with_sha256: bool = True,
+    *, with_sha256: bool = True, content_sha256: str | None = None,
 ) -> dict[str, Any]:
     """Manifest entry of a shard whose episodes and seeds the caller knows (the process that just wrote it:
-    no need to read every episode back); `describe_shard` reads them from the file."""
+    no need to read every episode back); `describe_shard` reads them from the file. content_sha256: the
+    writer's (RecordingWriter.content_sha256); None reads it from the file's root attribute."""
     path = Path(path)
+    if content_sha256 is None:
+        with Recording(path) as rec:
+            content_sha256 = rec.content_sha256
     return {
         "file": path.name,
         "sha256": file_sha256(path) if with_sha256 else None,
+        "content_sha256": content_sha256,
         "bytes": path.stat().st_size,
         "episodes": list(episodes),
         "episode_seeds": list(episode_seeds),
@@ -243,6 +254,16 @@ def _dataset_sha256(shards: Sequence[Mapping[str, Any]]) -> str:
     return h.hexdigest()
 
 
+def _content_sha256(shards: Sequence[Mapping[str, Any]]) -> str | None:
+    """Hash over the shards' content hashes (None when a shard has none: an entry from an older manifest)."""
+    if any(not s.get("content_sha256") for s in shards):
+        return None
+    h = hashlib.sha256()
+    for s in shards:
+        h.update(f"{s['file']} {s['content_sha256']}\n".encode())
+    return h.hexdigest()
+
+
 def _manifest_text(manifest: Mapping[str, Any]) -> str:
     """The manifest as JSON, one top-level key, shard or split per line: readable, and written by json's C
     encoder (an indented dump of 200k episode ids took seconds in the pure-Python one)."""
@@ -292,6 +313,7 @@ def write_manifest(
         "episodes_per_shard": episodes_per_shard,
         "total_episodes": sum(len(s["episodes"]) for s in shard_list),
         "dataset_sha256": _dataset_sha256(shard_list),
+        "content_sha256": _content_sha256(shard_list),
         "shards": shard_list,
         "splits": {k: list(splits[k]) for k in SPLIT_NAMES},
     }
@@ -356,7 +378,8 @@ def build_manifest(
 
     def entry(i: int) -> dict[str, Any]:
         d, path = described.get(i), shard_path(directory, i)
-        return d if d is not None and d["bytes"] == path.stat().st_size else describe_shard(path)
+        usable = d is not None and d["bytes"] == path.stat().st_size and d.get("content_sha256")
+        return d if usable else describe_shard(path)
 
     shards = [entry(i) for i in range(n_shards)]
     ids = [episode_key(s["file"], ep) for s in shards for ep in s["episodes"]]

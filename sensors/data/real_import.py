@@ -25,6 +25,7 @@ import numpy as np
 
 G = 9.80665
 FORCE_UNITS = ("N", "kg", "counts")
+MAX_UPSAMPLE = 10.0  # the common clock may run at most this many times faster than the faster of the two logs
 _NAME_BAD = re.compile(r"[^A-Za-z0-9_.\-]")
 
 __all__ = ["ImportLogError", "import_logs", "import_runs", "lupasic_pairs", "read_calibration", "read_log"]
@@ -145,6 +146,8 @@ def import_runs(
 
     if force_units not in FORCE_UNITS:
         raise ImportLogError(f"force units must be one of {', '.join(FORCE_UNITS)}; got {force_units!r}")
+    if rate_hz is not None and not (math.isfinite(rate_hz) and rate_hz > 0):
+        raise ImportLogError(f"rate must be a finite number > 0 Hz (got {rate_hz}; leave it out for the sensor's own rate)")
     cal = None
     if force_units == "counts":
         if calibration is None:
@@ -159,7 +162,8 @@ def import_runs(
         episodes[ep], ep_attrs[ep] = _import_pair(Path(sensor_log), Path(force_log), rate_hz, force_units, cal,
                                                   sensor_units)
         runs.append({"episode": ep, "sensor_log": Path(sensor_log).name, "force_log": Path(force_log).name})
-        rate_hz = rate_hz or ep_attrs[ep]["rate_hz"]  # one clock rate for every run of the file
+        if rate_hz is None:
+            rate_hz = ep_attrs[ep]["rate_hz"]  # one clock rate for every run of the file
     rate = rate_hz
     cfg = {"import": {"runs": runs, "rate_hz": rate, "force_units": force_units, "calibration": cal,
                       "sensor_units": sensor_units}}
@@ -190,9 +194,13 @@ def _import_pair(sensor_log: Path, force_log: Path, rate_hz, force_units: str, c
     if not t1 > t0:
         raise ImportLogError(f"{sensor_log} and {force_log} do not overlap in time")
     rs, rf = _rate(st), _rate(ft)
-    rate = float(rate_hz) if rate_hz else float(round(rs))
+    rate = float(rate_hz) if rate_hz is not None else float(round(rs))
     if not rate > 0:
         raise ImportLogError(f"rate must be > 0 Hz, got {rate}")
+    top = MAX_UPSAMPLE * max(rs, rf)
+    if not rate <= top:
+        raise ImportLogError(f"rate {rate:g} Hz is more than {MAX_UPSAMPLE:g}x the logs' own rates (sensor {rs:.1f} Hz, "
+                             f"force {rf:.1f} Hz): allowed 0 < rate <= {top:.0f} Hz")
     n = int(math.floor((t1 - t0) * rate)) + 1
     t_rel = np.arange(n) / rate  # exact; absolute unix times near 1.6e9 s carry only ~0.2 us resolution
     grid = t0 + t_rel

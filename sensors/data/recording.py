@@ -12,6 +12,8 @@ Layout (see DESIGN.md section 4)::
 
 Time series are chunked along time in blocks of whole frames (a length that divides T where one
 is close to the target), compressed with lzf + shuffle by default (gzip level 1 + shuffle, Blosc2 zstd / lz4 level 1 + shuffle, or none).
+Every chunked dataset carries HDF5's Fletcher-32 checksum per chunk: damaged data fails to read
+(RecordingError naming the file) instead of reading back as wrong numbers.
 
 Attribute values: numbers, strings, bools and numeric arrays are stored as HDF5 attributes; dicts,
 lists of strings and other JSON-able values are stored as JSON strings and the attribute name is
@@ -20,6 +22,13 @@ listed in the group's ``_json_attrs`` attribute, so they read back as the same P
 
 Writing is atomic: the file is written to ``<path>.tmp`` in the same directory and renamed with
 ``os.replace`` only once it is complete, so a crash never leaves a file at the final name.
+
+Content hash. The root attribute ``content_sha256`` is a SHA-256 of what the recording says, not of its bytes:
+every channel's data (dtype, shape, bytes) with its units, dim_names and description, every episode's
+attributes, the sensor attributes, the MJCF and the root attributes except those that name the time and the
+code that wrote it (``VOLATILE_ATTRS``: created_utc, generator*, version_*). Two runs that make the same data
+have the same content hash even though their files differ (timestamps); `content_sha256` defines it,
+`Recording.compute_content_sha256` recomputes it from the file.
 """
 
 from __future__ import annotations
@@ -67,6 +76,8 @@ def _blosc2(cname: str) -> dict[str, Any]:
 
 __all__ = [
     "RecordingWriter",
+    "VOLATILE_ATTRS",
+    "content_sha256",
     "FORMAT",
     "FORMAT_VERSION",
     "Channel",
@@ -243,6 +254,64 @@ def _get_attrs(obj: h5py.HLObject) -> dict[str, Any]:
     return out
 
 
+# --------------------------------------------------------------------------- content hash
+
+# root attributes left out of the content hash: when and by which code/library versions a file was written
+VOLATILE_ATTRS = ("created_utc", "generator", "generator_version", "generator_commit", "content_sha256")
+_VOLATILE_PREFIX = "version_"
+
+
+def _canon_default(o: Any) -> Any:
+    if isinstance(o, np.ndarray):
+        return {"__ndarray__": o.dtype.str, "shape": list(o.shape), "values": o.tolist()}
+    if isinstance(o, (complex, np.complexfloating)):
+        return {"__complex__": [float(o.real), float(o.imag)]}
+    if isinstance(o, np.generic):
+        return o.item()
+    return _json_default(o)
+
+
+def _canon(attrs: Mapping[str, Any]) -> bytes:
+    """Canonical JSON of decoded attributes (as `_get_attrs` returns them)."""
+    return json.dumps(attrs, sort_keys=True, default=_canon_default, separators=(",", ":")).encode("utf-8")
+
+
+def _put(h: "hashlib._Hash", *parts: bytes | str) -> None:
+    """Length-prefixed parts: no two different sequences of parts feed the same bytes."""
+    for part in parts:
+        b = part.encode("utf-8") if isinstance(part, str) else part
+        h.update(len(b).to_bytes(8, "little"))
+        h.update(b)
+
+
+def _channel_hash(h: "hashlib._Hash", name: str, data: np.ndarray, units: str, dim_names: tuple[str, ...],
+                  description: str) -> None:
+    a = np.ascontiguousarray(data)
+    _put(h, "channel", name, units, json.dumps(list(dim_names)), description, a.dtype.str, json.dumps(list(a.shape)))
+    if a.size:
+        h.update(memoryview(a.reshape(-1)).cast("B"))  # the bytes in place, no copy
+
+
+def _episode_digest(ep_id: str, attrs: Mapping[str, Any], channels: Mapping[str, tuple]) -> bytes:
+    """channels: name -> (data, units, dim_names, description)."""
+    h = hashlib.sha256()
+    _put(h, "episode", ep_id, _canon(attrs))
+    for name in sorted(channels):
+        _channel_hash(h, name, *channels[name])
+    return h.digest()
+
+
+def content_sha256(root_attrs: Mapping[str, Any], sensor_attrs: Mapping[str, Any], mjcf: str | None,
+                   episode_digests: Mapping[str, bytes]) -> str:
+    """The content hash of a recording from its decoded attributes and the digests of its episodes."""
+    h = hashlib.sha256()
+    root = {k: v for k, v in root_attrs.items() if k not in VOLATILE_ATTRS and not k.startswith(_VOLATILE_PREFIX)}
+    _put(h, FORMAT, "root", _canon(root), "sensor", _canon(sensor_attrs), "mjcf", "" if mjcf is None else mjcf)
+    for ep in _natural_sorted(episode_digests):
+        _put(h, ep, episode_digests[ep])
+    return h.hexdigest()
+
+
 # --------------------------------------------------------------------------- writing
 
 
@@ -265,9 +334,10 @@ def _chunk_len(n_time: int, frame_bytes: int) -> int:
 
 
 def _write_channel(
-    group: h5py.Group, name: str, ch: Channel, compression: str, *, with_data: bool = True
+    group: h5py.Group, name: str, ch: Channel, compression: str, *, with_data: bool = True, checksum: bool = True
 ) -> h5py.Dataset:
-    """Create the dataset of one channel, with its attributes; ``with_data=False``: no data written."""
+    """Create the dataset of one channel, with its attributes; ``with_data=False``: no data written.
+    ``checksum``: Fletcher-32 per chunk on chunked datasets."""
     data = ch.data
     kwargs: dict[str, Any] = {}
     if data.ndim >= 1 and data.size > 0:
@@ -276,6 +346,8 @@ def _write_channel(
             kwargs["chunks"] = (_chunk_len(data.shape[0], frame_bytes),) + data.shape[1:]
         else:
             kwargs["chunks"] = True
+        if checksum:  # per-chunk checksum: a flipped byte is a read error, not a wrong number
+            kwargs["fletcher32"] = True
         if compression == "lzf":
             kwargs.update(compression="lzf", shuffle=True)
         elif compression == "gzip":
@@ -335,14 +407,14 @@ class _Template:
     """
 
     def __init__(self, channels: Mapping[str, Channel], encoded: Mapping[str, tuple[Any, bool]],
-                 arrays: Mapping[str, np.ndarray], compression: str):
+                 arrays: Mapping[str, np.ndarray], compression: str, checksum: bool = True):
         self.file = h5py.File(f"piezotwin-template-{next(_template_names)}", "w", driver="core",
                               backing_store=False)
         try:
             g = self.file.create_group("ep")
             _write_attrs(g, encoded)
             for name, ch in channels.items():
-                _write_channel(g, name, ch, compression, with_data=False)
+                _write_channel(g, name, ch, compression, with_data=False, checksum=checksum)
         except BaseException:
             self.close()
             raise
@@ -390,6 +462,7 @@ class RecordingWriter:
         mjcf: str | None = None,
         extra_attrs: Mapping[str, Any] | None = None,
         compression: Literal["lzf", "gzip", "none", "zstd", "lz4"] = "lzf",
+        checksum: bool = True,
         _fast: bool = True,  # tests only: False writes every episode object by object
     ):
         if source not in ("sim", "real"):
@@ -402,11 +475,12 @@ class RecordingWriter:
             json.loads(config_json)
         except json.JSONDecodeError as e:
             raise ValueError(f"config_json is not valid JSON: {e}") from e
-        reserved = {"format", "format_version", "source", "config_json", "config_sha256"}
+        reserved = {"format", "format_version", "source", "config_json", "config_sha256", "content_sha256"}
         if extra_attrs and reserved & set(extra_attrs):
             raise ValueError(f"extra_attrs may not override {sorted(reserved & set(extra_attrs))}")
         self.path = Path(path)
         self.compression = compression
+        self.checksum = checksum
         gen = generator_info()
         self._root: dict[str, Any] = {
             "format": FORMAT,
@@ -429,6 +503,8 @@ class RecordingWriter:
         self._eps: h5py.Group | None = None
         self._fast = _fast
         self._templates: OrderedDict[tuple, _Template] = OrderedDict()
+        self._digests: dict[str, bytes] = {}
+        self.content_sha256: str | None = None  # set when the file is complete
         self.n_episodes = 0
         self.tmp = self.path.with_name(self.path.name + ".tmp")
 
@@ -458,7 +534,11 @@ class RecordingWriter:
             g = self._eps.create_group(ep_id)
             _write_attrs(g, encoded)
             for name, ch in channels.items():
-                _write_channel(g, name, ch, self.compression)
+                _write_channel(g, name, ch, self.compression, checksum=self.checksum)
+        # the attributes as a reader decodes them (read back: a few small reads), the data from memory
+        self._digests[ep_id] = _episode_digest(
+            ep_id, _get_attrs(self._eps[ep_id]),
+            {name: (ch.data, ch.units, ch.dim_names, ch.description) for name, ch in channels.items()})
         self.n_episodes += 1
 
     def _template(self, channels: Mapping[str, Channel], encoded: Mapping[str, tuple[Any, bool]],
@@ -471,7 +551,7 @@ class RecordingWriter:
         )
         tmpl = self._templates.get(key)
         if tmpl is None:
-            tmpl = self._templates[key] = _Template(channels, encoded, arrays, self.compression)
+            tmpl = self._templates[key] = _Template(channels, encoded, arrays, self.compression, self.checksum)
             if len(self._templates) > _TEMPLATES_PER_WRITER:
                 self._templates.popitem(last=False)[1].close()
         self._templates.move_to_end(key)
@@ -503,6 +583,9 @@ class RecordingWriter:
             return
         try:
             self._close_templates()
+            self.content_sha256 = content_sha256(_get_attrs(self._f), _get_attrs(self._f["sensor"]), self._mjcf,
+                                                 self._digests)
+            self._f.attrs["content_sha256"] = self.content_sha256
             self._f.close()
             self._f = self._eps = None
             _fsync(self.tmp)
@@ -529,6 +612,7 @@ def write_recording(
     episode_attrs: Mapping[str, Mapping[str, Any]] | None = None,
     extra_attrs: Mapping[str, Any] | None = None,
     compression: Literal["lzf", "gzip", "none", "zstd", "lz4"] = "lzf",
+    checksum: bool = True,
 ) -> Path:
     """Write one recording (shard) atomically and return its final path.
 
@@ -538,7 +622,7 @@ def write_recording(
     """
     writer = RecordingWriter(
         path, source=source, config_json=config_json, root_seed=root_seed, shard_index=shard_index,
-        sensor_attrs=sensor_attrs, mjcf=mjcf, extra_attrs=extra_attrs, compression=compression,
+        sensor_attrs=sensor_attrs, mjcf=mjcf, extra_attrs=extra_attrs, compression=compression, checksum=checksum,
     )
     if not episodes:
         raise ValueError("episodes is empty: a recording needs at least one episode")
@@ -565,8 +649,32 @@ def _natural_sorted(names) -> list[str]:
     return sorted(names, key=_natural_key)
 
 
+def _first_line(e: BaseException) -> str:
+    return (str(e).splitlines() or [type(e).__name__])[0]
+
+
+def _damage_is_error(fn):
+    """HDF5 errors while reading (OSError, RuntimeError: a damaged B-tree, a failed checksum or decompression)
+    -> RecordingError naming the file, one line."""
+
+    @functools.wraps(fn)
+    def wrapper(self: "Recording", *args: Any, **kwargs: Any) -> Any:
+        try:
+            return fn(self, *args, **kwargs)
+        except FileNotFoundError:
+            raise
+        except (OSError, RuntimeError) as e:
+            raise RecordingError(f"{self.path}: damaged recording, HDF5 cannot read it ({_first_line(e)})") from None
+
+    return wrapper
+
+
 class Recording:
-    """Read access to one recording file; use as a context manager or call ``close()``."""
+    """Read access to one recording file; use as a context manager or call ``close()``.
+
+    A damaged file (unreadable HDF5 structure, a chunk that fails its Fletcher-32 checksum or does not
+    decompress) raises RecordingError naming the file, from the open or from the read that meets the damage.
+    """
 
     def __init__(self, path: str | os.PathLike):
         self.path = Path(path)
@@ -574,15 +682,15 @@ class Recording:
             self._f = h5py.File(self.path, "r")
         except FileNotFoundError:
             raise
-        except OSError as e:
-            msg = str(e).splitlines()[0] if str(e) else type(e).__name__
-            raise RecordingError(f"{self.path}: not a readable HDF5 file ({msg})") from None
+        except (OSError, RuntimeError) as e:
+            raise RecordingError(f"{self.path}: not a readable HDF5 file ({_first_line(e)})") from None
         try:
             self._validate()
         except BaseException:
             self._f.close()
             raise
 
+    @_damage_is_error
     def _validate(self) -> None:
         fmt = _decode_value(self._f.attrs.get("format"))
         if fmt is None:
@@ -620,6 +728,7 @@ class Recording:
 
     # metadata
     @functools.cached_property
+    @_damage_is_error
     def attrs(self) -> dict[str, Any]:
         return _get_attrs(self._f)
 
@@ -631,26 +740,53 @@ class Recording:
     def config_sha256(self) -> str:
         return self.attrs["config_sha256"]
 
+    @property
+    def content_sha256(self) -> str:
+        """The content hash stored when the file was written (computed from the file for older recordings)."""
+        return self.attrs.get("content_sha256") or self.compute_content_sha256()
+
+    @_damage_is_error
+    def compute_content_sha256(self) -> str:
+        """The content hash recomputed from what the file holds (reads every channel)."""
+        digests = {}
+        for ep in self.episode_ids:
+            g = self._group(ep)
+            chans = {}
+            for name in g.keys():
+                ds = g[name]
+                chans[name] = (np.asarray(ds[()]), self.units(ep, name), self.dim_names(ep, name),
+                               self.description(ep, name))
+            digests[ep] = _episode_digest(ep, self.episode_attrs(ep), chans)
+        return content_sha256(self.attrs, self.sensor_attrs, self.mjcf, digests)
+
     @functools.cached_property
+    @_damage_is_error
     def sensor_attrs(self) -> dict[str, Any]:
         return _get_attrs(self._f["sensor"]) if "sensor" in self._f else {}
 
     @property
+    @_damage_is_error
     def mjcf(self) -> str | None:
         if "scene" in self._f and "mjcf" in self._f["scene"]:
             return _decode_value(self._f["scene/mjcf"][()])
         return None
 
     @functools.cached_property
+    @_damage_is_error
     def episode_ids(self) -> list[str]:
         return _natural_sorted(self._f["episodes"].keys())
 
+    @_damage_is_error
     def _group(self, ep_id: str) -> h5py.Group:
         try:
             return self._f["episodes"][ep_id]
-        except KeyError:
+        except KeyError as e:
+            if ep_id in self.episode_ids:  # listed but cannot be opened: damaged
+                raise RecordingError(f"{self.path}: damaged recording, HDF5 cannot open episode {ep_id!r} "
+                                     f"({_first_line(e)})") from None
             raise KeyError(f"{self.path}: no episode {ep_id!r}") from None
 
+    @_damage_is_error
     def _ds(self, ep_id: str, name: str) -> h5py.Dataset:
         g = self._group(ep_id)
         if name not in g:
@@ -659,24 +795,31 @@ class Recording:
             )
         return g[name]
 
+    @_damage_is_error
     def channels(self, ep_id: str) -> list[str]:
         return sorted(self._group(ep_id).keys())
 
+    @_damage_is_error
     def episode_attrs(self, ep_id: str) -> dict[str, Any]:
         return _get_attrs(self._group(ep_id))
 
+    @_damage_is_error
     def units(self, ep_id: str, name: str) -> str:
         return _decode_value(self._ds(ep_id, name).attrs["units"])
 
+    @_damage_is_error
     def dim_names(self, ep_id: str, name: str) -> tuple[str, ...]:
         return tuple(json.loads(_decode_value(self._ds(ep_id, name).attrs["dim_names"])))
 
+    @_damage_is_error
     def description(self, ep_id: str, name: str) -> str:
         return _decode_value(self._ds(ep_id, name).attrs.get("description", ""))
 
+    @_damage_is_error
     def shape(self, ep_id: str, name: str) -> tuple[int, ...]:
         return tuple(self._ds(ep_id, name).shape)
 
+    @_damage_is_error
     def read(self, ep_id: str, name: str, sl: Any = slice(None)) -> np.ndarray:
         ds = self._ds(ep_id, name)
         if ds.ndim == 0:
@@ -702,6 +845,7 @@ class Recording:
         for i in range(0, ds.shape[0], step):
             yield ds[i : i + step]
 
+    @_damage_is_error
     def summary(self) -> dict[str, Any]:
         """Episodes, total duration (s) and per channel units, dims, shapes, min and max.
 
@@ -752,6 +896,7 @@ class Recording:
             "created_utc": a.get("created_utc"),
             "generator": a.get("generator"),
             "config_sha256": a.get("config_sha256"),
+            "content_sha256": self.content_sha256,
             "root_seed": a.get("root_seed"),
             "shard_index": a.get("shard_index"),
             "n_episodes": len(self.episode_ids),

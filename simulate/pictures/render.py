@@ -271,8 +271,10 @@ def frame_indices(view: EpisodeView, fps: float, stride: int | None = None, max_
     if stride is None:
         dt = float(np.median(np.diff(view.time_s))) if n > 1 else 1.0
         stride = max(1, int(round(1.0 / (fps * dt))))
+    if max_frames is not None and max_frames < 1:
+        raise ValueError(f"max_frames must be >= 1 (got {max_frames}; None for every frame)")
     idx = np.arange(0, n, stride)
-    if max_frames and len(idx) > max_frames:
+    if max_frames is not None and len(idx) > max_frames:
         idx = idx[np.linspace(0, len(idx) - 1, max_frames).round().astype(int)]
     return idx
 

@@ -1,0 +1,66 @@
+"""What the commands print is true and whole (issue 17, item 9): no Warp CUDA-driver warning on a CPU machine,
+tables keep whole names when piped, generate summarises the whole dataset, show's default file name is the
+one the docs give."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+from typer.testing import CliRunner
+
+from piezotwin.cli import app
+
+runner = CliRunner()
+FAST = ["--set", "protocol.frequencies_hz=[2.0]", "--set", "protocol.cycles=1", "--set", "pad.taxels_x=5",
+        "--set", "pad.taxels_y=5", "--set", "generation.episodes_per_shard=2", "--episodes", "3"]
+
+
+@pytest.fixture(scope="module")
+def generated(tmp_path_factory):
+    out = tmp_path_factory.mktemp("gen") / "ds"
+    res = runner.invoke(app, ["generate", "cnt_pdms", "-o", str(out)] + FAST)
+    assert res.exit_code == 0, res.output
+    return out, res.output
+
+
+def test_generate_summarises_the_whole_dataset(generated):
+    out, text = generated
+    assert "3 episodes in 2 shards" in text and "ranges over all 2 shards" in text
+    assert "episodes=2" not in text  # the old summary of shard 0 only
+
+
+def test_tables_keep_whole_names_when_piped(generated):
+    out, text = generated
+    assert "resistance_measured" in text and "…" not in text
+    res = runner.invoke(app, ["inspect", str(out / "shard-00000.h5")])
+    assert res.exit_code == 0 and "resistance_measured" in res.output and "…" not in res.output
+
+
+def test_init_warp_drops_only_the_no_driver_warning(monkeypatch, capfd):
+    from sensors import warp_setup
+
+    def fake_init():
+        os.write(2, b"Warp CUDA warning: Could not find or load the NVIDIA CUDA driver. GPU execution will not be available.\n")
+        os.write(2, b"something else Warp says\n")
+
+    monkeypatch.setattr(warp_setup, "_done", False)
+    monkeypatch.setattr(warp_setup.wp, "init", fake_init)
+    warp_setup.init_warp()
+    err = capfd.readouterr().err
+    assert "CUDA driver" not in err and "something else Warp says" in err
+
+
+def test_show_default_name_and_export_layout(offscreen, generated, tmp_path, monkeypatch):
+    out, _ = generated
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    monkeypatch.chdir(tmp_path)
+    res = runner.invoke(app, ["show", str(out), "-e", "1", "-f", "pressure", "--size", "160x120"])
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "shard-00000-ep-000001-pressure.png").is_file()  # docs/visualization.md's name
+    res = runner.invoke(app, ["export", str(out), "-e", "1", "-o", str(tmp_path / "vtk"), "--stride", "50"])
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "vtk" / "ep-000001.pvd").is_file()
+    assert (tmp_path / "vtk" / "ep-000001" / "body_000000.vtu").is_file()
+    assert (tmp_path / "vtk" / "ep-000001" / "indenter_000000.vtu").is_file()
