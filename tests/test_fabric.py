@@ -105,9 +105,25 @@ def test_press_draws_from_the_episode_seed(cfgs):
     assert np.all(a[..., 1] >= 0) and np.all(a[..., 1] <= 1) and np.all(a[..., 0] > 0)
     m = press_draws(None, p, 3)
     assert np.all(m[..., 0] == 1.0) and np.allclose(m[..., 1], p.set_mean)
-    # psi is lognormal of mean set_mean (clipping at 1 trims the tail a little)
-    big = press_draws(list(range(40)), p)[..., 1]
-    assert 0.8 * p.set_mean < big.mean() < 1.1 * p.set_mean
+    # psi ~ Beta of mean set_mean and coefficient of variation set_cv: strictly inside [0, 1) (a press cannot keep
+    # more than its peak compaction), no mass piled at a clip
+    big = press_draws(list(range(40)), p)[..., 1].astype(np.float64)
+    assert 0.95 * p.set_mean < big.mean() < 1.05 * p.set_mean
+    assert 0.85 * p.set_cv < big.std() / big.mean() < 1.15 * p.set_cv
+    assert np.all(big > 0) and np.all(big < 1) and np.mean(big == big.max()) < 1e-3
+    assert np.quantile(big, 0.999) < 0.8  # the set stays below the compression work a knit loses (Kawabata RC)
+
+
+def test_set_fraction_beta_moments_and_bounds():
+    from sensors.fabric.reference import set_fraction_beta
+
+    a, b = set_fraction_beta(0.2, 0.5)
+    m = a / (a + b)
+    sd = np.sqrt(a * b / ((a + b) ** 2 * (a + b + 1)))
+    assert m == pytest.approx(0.2) and sd / m == pytest.approx(0.5)
+    assert set_fraction_beta(0.2, 0.0) is None and set_fraction_beta(0.0, 0.5) is None
+    with pytest.raises(ValueError):
+        set_fraction_beta(0.2, 2.5)  # cv too large for a Beta of mean 0.2 (needs cv < 2)
 
 
 def test_knit_set_carries_into_the_next_press_and_recovers_at_rest(cfgs):

@@ -196,7 +196,9 @@ def test_experiment_fabric_tiny(tmp_path):
     for n, L in m["layers"].items():
         assert set(L["models"]) == {"mean", "linear", "bp_lm", "tcn"}
         tcn = L["models"]["tcn"]
-        assert tcn["hparams"]["log_inputs"] == [0]  # ours reads (R, ln R)
+        assert tcn["hparams"]["member"] == "tcn" and tcn["hparams"]["n_members"] == 2  # ours: a seed ensemble of TCNs
+        assert tcn["hparams"]["member_hparams"]["log_inputs"] == [0]  # reading (R, ln R)
+        assert [x["seed"] for x in tcn["members"]] == [0, 1] and all("valid" in x for x in tcn["members"])
         assert tcn["test"]["mse"] < min(L["models"][k]["test"]["mse"] for k in ("mean", "linear"))  # beats trivial baselines
         assert tcn["test"]["hyst_full_mean"] < raw_hyst(L) and tcn["latency"]["stream_vs_batch_max_abs"] < 1e-2
         assert {"dataset", "split", "target_poly", "raw", "table2"} <= set(L)

@@ -222,7 +222,7 @@ def run() -> "CalibrationResult":
     h5 = repeat_hysteresis(_with(cfg1, fit1, set_mean), REPEAT_SEEDS)
     res.rows.append(TargetRow("  same, % of highest output, average of the paper's 5 repeats (seeds 0-4)", "-",
                               h5["hysteresis_of_max_pct"], "%", None))
-    res.notes.append(f"knit set fraction (mean of the per-press lognormal) fitted on 1 layer: {set_mean:.4g}; "
+    res.notes.append(f"knit set fraction (mean of the per-press Beta) fitted on 1 layer: {set_mean:.4g}; "
                      "3, 6 and 12 layers take the same (same fabric)")
     for n in sorted(PAPER_CURVES):
         path = Path(PRESET_DIR) / f"fabric_{n}.yaml"

@@ -20,7 +20,7 @@ Per taxel and sample step (dt = 1 / sample rate), with f the taxel's load scaled
   column     R_taxel = n_taxels R_stack / kappa   (taxel columns in parallel give R_stack under a uniform press;
              the press's engaged area scales the conduction)
 Outputs: effective load x_s and conductance 1 / R_taxel per taxel, float32 like the Warp kernel.
-Press draws: `press_draws(seeds, p)` [E, M, 2] (kappa, psi) from each episode seed (stream 2); None = every
+Press draws: `press_draws(seeds, p)` [E, M, 2] (kappa, psi ~ Beta in [0, 1]) from each episode seed (stream 2); None = every
 press the mean one (kappa 1, psi = set_fraction_mean).
 """
 
@@ -54,7 +54,7 @@ class FabricParams:
     press_off_n: float = 0.02
     area_sigma: float = 0.0
     set_mean: float = 0.0
-    set_sigma: float = 0.0
+    set_cv: float = 0.0
     set_decay: float = 1.0  # c_set = exp(-dt / T_set)
     max_presses: int = 1
 
@@ -96,27 +96,40 @@ def fabric_params(cfg) -> FabricParams:
         press_off_n=s.press.release_force_n,
         area_sigma=s.press.area_sigma,
         set_mean=s.press.set_fraction_mean,
-        set_sigma=s.press.set_fraction_sigma,
+        set_cv=s.press.set_fraction_cv,
         set_decay=float(np.exp(-dt / s.press.set_recovery_time_s)),
         max_presses=s.press.max_presses,
     )
 
 
+def set_fraction_beta(mean: float, cv: float) -> tuple[float, float] | None:
+    """Beta(a, b) of mean `mean` and coefficient of variation `cv` (sd / mean) for the knit set fraction psi in
+    [0, 1]: a + b = (1 - mean) / (mean cv^2) - 1, a = mean (a + b). None where the draw is the constant mean
+    (cv 0, mean 0 or 1). Raises ValueError if cv is too large for a Beta of that mean (a + b <= 0)."""
+    if cv <= 0 or mean <= 0 or mean >= 1:
+        return None
+    k = (1.0 - mean) / (mean * cv * cv) - 1.0
+    if k <= 0:
+        raise ValueError(f"knit set: cv {cv:g} too large for a Beta of mean {mean:g} (need cv < {np.sqrt((1 - mean) / mean):.3g})")
+    return mean * k, (1.0 - mean) * k
+
+
 def press_draws(seeds: list[int] | None, p: FabricParams, n_episodes: int | None = None) -> np.ndarray:
     """[E, M, 2] float32 per-press draws (kappa, psi), M = p.max_presses: kappa = exp(area_sigma N(0,1)),
-    psi = set_mean exp(set_sigma N(0,1) - set_sigma^2 / 2) clipped to [0, 1] (lognormal of mean set_mean), from
-    np.random.default_rng([seed, 2]). seeds None: the mean press (kappa 1, psi set_mean) for n_episodes episodes."""
+    psi ~ Beta of mean set_mean and coefficient of variation set_cv (set_fraction_beta: bounded in [0, 1], a
+    press never keeps more than its peak compaction), from np.random.default_rng([seed, 2]). seeds None: the
+    mean press (kappa 1, psi set_mean) for n_episodes episodes."""
     M = p.max_presses
     if seeds is None:
         out = np.empty((n_episodes or 1, M, 2), np.float32)
         out[..., 0], out[..., 1] = 1.0, p.set_mean
         return out
+    ab = set_fraction_beta(p.set_mean, p.set_cv)
     out = np.empty((len(seeds), M, 2), np.float64)
     for e, s in enumerate(seeds):
         rng = np.random.default_rng([int(s), 2])
         out[e, :, 0] = np.exp(p.area_sigma * rng.standard_normal(M))
-        n = rng.standard_normal(M)
-        out[e, :, 1] = np.clip(p.set_mean * np.exp(p.set_sigma * n - 0.5 * p.set_sigma**2), 0.0, 1.0)
+        out[e, :, 1] = p.set_mean if ab is None else rng.beta(ab[0], ab[1], M)
     return out.astype(np.float32)
 
 
