@@ -282,8 +282,9 @@ class NtypeArrayGeometry(FamilyGeometry):
         vec = self.normals * self.lengths[:, None]  # (3, 3) bottom -> top
         off = np.zeros((3, 3))
         for j in range(3):
-            if abs(vec[j, 0]) + abs(vec[j, 1]) > 1e-12:  # inclined: midpoint offset opposite to its x lean
-                off[j, 0] = -np.sign(vec[j, 0]) * 0.2 * self.pitch
+            lean = vec[j, :2]
+            if np.linalg.norm(lean) > 1e-12:  # inclined: its top a quarter pitch from the element centre, along its lean
+                off[j, :2] = 0.25 * self.pitch * lean / np.linalg.norm(lean) - lean / 2
         mid = off[None, :, :] + np.column_stack([self.centres, np.full(self.M, 0.0)])[:, None, :]
         self.bottom = mid - vec[None, :, :] / 2
         self.bottom[..., 2] = 0.0
