@@ -187,7 +187,7 @@ class PercolationConfig(Strict):
     filler_density_kg_per_m3: PositiveFloat = 1750.0  # estimate: MWCNT 1.6-2.1 g/cm3
     matrix_density_kg_per_m3: PositiveFloat = 1030.0  # estimate: Sylgard 184
     exponent: PositiveFloat = 2.0  # estimate: universal 3-D conductivity exponent (Stauffer & Aharony); Hu et al. 2008 fit 1.8-2
-    strain_gain: NonNegFloat = 80.0  # estimate: compression raises the conducting fraction; calibrated (piezotwin calibrate cnt_pdms)
+    strain_gain: NonNegFloat = 180.0  # estimate: new tube contacts per unit strain, lumped as an effective fraction; fitted by piezotwin calibrate cnt_pdms (paper's linear R^2)
     floor: Annotated[float, Field(gt=0, le=1)] = 0.01  # estimate: leakage below threshold, of the rest path term
     formation_time_s: PositiveFloat = 0.004  # estimate: paths form as tubes are pushed together (fast, below the 2 Hz period / 100)
     breakdown_time_s: PositiveFloat = 0.02  # estimate: paths break as the matrix recoils (5x slower); loop area rising over 0.1-2 Hz
