@@ -155,7 +155,7 @@ class HysteresisConfig(Strict):
     a Prandtl-Ishlinskii play bank. Source: Brokate & Sprekels, Hysteresis and Phase Transitions (1996)."""
 
     play_thresholds: list[NonNegFloat] = Field(default_factory=lambda: [0.001, 0.002, 0.004, 0.008])  # estimate, strain: one per octave up to ~1/4 of the press range
-    play_weights: list[NonNegFloat] = Field(default_factory=lambda: [0.05, 0.05, 0.05, 0.05])  # estimate; scale calibrated (piezotwin calibrate cnt_pdms)
+    play_weights: list[NonNegFloat] = Field(default_factory=lambda: [0.067, 0.067, 0.067, 0.067])  # estimate; scale calibrated (piezotwin calibrate cnt_pdms)
     recovery_time_s: PositiveFloat = 30.0  # estimate: slow relaxation of play states toward the input at rest
 
     @model_validator(mode="after")
@@ -216,7 +216,7 @@ class ElectronicsConfig(Strict):
 
     excitation_v: PositiveFloat = 1.0  # estimate
     bridge_resistance_ohm: PositiveFloat | None = None  # None: balanced at the unloaded sensor resistance
-    amp_gain: PositiveFloat = 300.0  # estimate: ~75 % of the ADC range at F_max
+    amp_gain: PositiveFloat = 15.6  # estimate: ~75 % of the ADC range at F_max (piezotwin calibrate cnt_pdms)
     amp_offset_v: float = 0.0
     white_noise_v: NonNegFloat = 5e-4  # estimate: rms at the ADC input
     pink_noise_v: NonNegFloat = 5e-4  # estimate: rms of the 1/f component at the ADC input
@@ -238,7 +238,7 @@ class ElectronicsConfig(Strict):
         return v
 
 
-TAXEL_AMP_GAIN = 50.0  # estimate: cnt_pdms taxel readout, bridge -0.16 V for a held 160 um press -> 8.1 V of 10 V
+TAXEL_AMP_GAIN = 15.0  # estimate: cnt_pdms taxel readout, a pressed taxel's R falls ~100x (percolation): bridge -> -0.5 V -> 7.5 V of 10 V
 
 
 class CntPdmsSensorConfig(Strict):
