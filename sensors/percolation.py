@@ -12,7 +12,7 @@ Per element (a taxel's column of composite) and sample step, with e the compress
              for e linear in the step), tau = tau_form while the network compresses (e' > s: tubes approach,
              paths form) and tau_break while it relaxes (paths break as the matrix recoils): rate-dependent and
              asymmetric between loading and unloading
-  damage     D_eq = D_max (1 - exp(-e'/e_D)); D' = D + (D_eq - D)(1 - a_D) while D < D_eq (paths lost for good,
+  damage     D_eq = D_max e' / (e' + e_D) (saturating); D' = D + (D_eq - D)(1 - a_D) while D < D_eq (paths lost for good,
              progressive over the first cycles: Mullins-type), else D' = D c_D (slow recovery at rest)
   fraction   phi_eff = phi (1 - D)(1 + k x)     (x: network strain after the rate-independent play bank;
              compression brings tubes into contact, raising the effective conducting fraction; estimate)
@@ -63,6 +63,10 @@ class NetworkParams:
     damage_decay: float  # a_D = exp(-dt/tau_D)
     damage_recovery: float  # c_D = exp(-dt/T_recovery)
 
+    @property
+    def inv_span(self) -> float:
+        return 1.0 / (self.phi - self.phi_c)
+
 
 def network_params(dt_s: float, *, phi: float, phi_c: float, exponent: float, strain_gain: float, gamma_s0: float,
                    floor: float, formation_time_s: float, breakdown_time_s: float, damage_max: float,
@@ -93,7 +97,7 @@ def kinetics_numpy(s, e, e_new, p: NetworkParams):
 
 def damage_numpy(dmg, e_new, p: NetworkParams):
     f32 = np.float32
-    d_eq = f32(p.damage_max) * (f32(1.0) - np.exp(-e_new / f32(p.damage_strain)))
+    d_eq = f32(p.damage_max) * e_new / (e_new + f32(p.damage_strain))
     grow = dmg + (d_eq - dmg) * (f32(1.0) - f32(p.damage_decay))
     return np.where(d_eq > dmg, grow, dmg * f32(p.damage_recovery)).astype(f32)
 
@@ -103,8 +107,11 @@ def conductance_ratio_numpy(x, dmg, p: NetworkParams):
     f32 = np.float32
     phi, phi_c, t = f32(p.phi), f32(p.phi_c), f32(p.exponent)
     phi_eff = phi * (f32(1.0) - dmg) * (f32(1.0) + f32(p.strain_gain) * x)
-    rel = np.maximum((phi_eff - phi_c) / (phi - phi_c), f32(p.floor))
-    return (rel**t * np.exp(f32(p.gamma_s0) * x) / (f32(1.0) - x)).astype(f32)
+    rel = np.maximum((phi_eff - phi_c) * f32(p.inv_span), f32(p.floor))
+    if p.exponent == 2.0:  # as the kernel: t = 2 as a product (no log in the hot loop)
+        return (rel * rel * np.exp(f32(p.gamma_s0) * x) / (f32(1.0) - x)).astype(f32)
+    # otherwise rel^t exp(gamma s0 x) as one exp (one log, one exp per step)
+    return (np.exp(t * np.log(rel) + f32(p.gamma_s0) * x) / (f32(1.0) - x)).astype(f32)
 
 
 # ------------------------------------------------------------------------------------------------- Warp funcs
@@ -126,12 +133,14 @@ class NetworkWp:
     damage_strain: float
     damage_decay: float
     damage_recovery: float
+    inv_span: float
 
 
 def network_struct(p: NetworkParams) -> NetworkWp:
     s = NetworkWp()
     for k in NetworkParams.__dataclass_fields__:
         setattr(s, k, float(np.float32(getattr(p, k))))
+    s.inv_span = float(np.float32(p.inv_span))
     return s
 
 
@@ -147,7 +156,7 @@ def kinetics_wp(q: NetworkWp, s: float, e: float, e_new: float):
 
 @wp.func
 def damage_wp(q: NetworkWp, dmg: float, e_new: float):
-    d_eq = q.damage_max * (1.0 - wp.exp(-e_new / q.damage_strain))
+    d_eq = q.damage_max * e_new / (e_new + q.damage_strain)
     out = dmg * q.damage_recovery
     if d_eq > dmg:
         out = dmg + (d_eq - dmg) * (1.0 - q.damage_decay)
@@ -157,8 +166,10 @@ def damage_wp(q: NetworkWp, dmg: float, e_new: float):
 @wp.func
 def conductance_ratio_wp(q: NetworkWp, x: float, dmg: float):
     phi_eff = q.phi * (1.0 - dmg) * (1.0 + q.strain_gain * x)
-    rel = wp.max((phi_eff - q.phi_c) / (q.phi - q.phi_c), q.floor)
-    return wp.pow(rel, q.exponent) * wp.exp(q.gamma_s0 * x) / (1.0 - x)
+    rel = wp.max((phi_eff - q.phi_c) * q.inv_span, q.floor)
+    if q.exponent == 2.0:  # the 3-D universal value: a product instead of a log (same float32 result to an ulp)
+        return rel * rel * wp.exp(q.gamma_s0 * x) / (1.0 - x)
+    return wp.exp(q.exponent * wp.log(rel) + q.gamma_s0 * x) / (1.0 - x)
 
 
 @wp.kernel

@@ -155,10 +155,12 @@ def test_network_conductance_numpy_equals_warp(tp):
     below threshold the path term holds at its floor; Warp == numpy."""
     from sensors.percolation import conductance_ratio_numpy, conductance_ratio_warp
 
+    from dataclasses import replace
+
     x, dmg = np.meshgrid(np.linspace(0, 0.05, 40, dtype=np.float32), np.linspace(0, 0.9, 30, dtype=np.float32))
+    for q in (tp.net, replace(tp.net, exponent=1.8)):  # t = 2 takes the product path, others log/exp
+        np.testing.assert_allclose(conductance_ratio_warp(x, dmg, q), conductance_ratio_numpy(x, dmg, q), rtol=2e-6)
     a = conductance_ratio_numpy(x, dmg, tp.net)
-    b = conductance_ratio_warp(x, dmg, tp.net)
-    np.testing.assert_allclose(b, a, rtol=2e-6)
     assert a[0, 0] == pytest.approx(1.0)
     assert np.all(np.diff(a[0]) > 0) and np.all(np.diff(a[:, 0]) <= 0)
     assert a[-1, 0] == pytest.approx(tp.net.floor**tp.net.exponent, rel=1e-5)  # 90 % damaged: below threshold
