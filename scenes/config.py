@@ -200,8 +200,9 @@ class PercolationConfig(Strict):
 
 
 class MullinsConfig(Strict):
-    """Mullins-type damage D of the filled network over the first cycles, with slow recovery; it removes conducting
-    paths (phi (1 - D)) and softens the matrix (stress x (1 - softening D / damage_max)).
+    """Mullins-type damage D of the filled network over the first cycles, with slow recovery: D grows toward
+    D_eq = damage_max e / (e + damage_strain) with time constant damage_time_s while below it, else decays with
+    recovery_time_s; it removes conducting paths (phi (1 - D)) and softens the matrix (stress x (1 - softening D / damage_max)).
     Source: Mullins, Rubber Chem. Technol. 42, 339 (1969); Diani et al., Eur. Polym. J. 45, 601 (2009)."""
 
     damage_max: Annotated[float, Field(ge=0, lt=1)] = 0.03  # estimate: fraction of paths lost at large strain; calibrated

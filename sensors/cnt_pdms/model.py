@@ -143,4 +143,5 @@ class CntPdmsSensor:
             "bridge_resistance_ohm": self.ep.bridge_resistance_ohm,
             "rest_resistance_ohm": 1.0 / ((self.n_taxels // self.n_channels) / self.tp.rest_resistance_ohm),
             "control": self.cfg.protocol.control,
+            "filter_mode": self.ep.filter_mode,  # how voltage / resistance_measured were filtered (zero_phase, causal, off)
         }
