@@ -16,6 +16,7 @@ from piezotwin.common import app, console, fail  # noqa: E402
 # family -> "module:function" returning a sensors.calibration.CalibrationResult; each family adds one line
 CALIBRATIONS: dict[str, str] = {
     "fabric": "sensors.fabric.calibrate:run",
+    "cnt_pdms": "simulate.characterize.cnt_pdms:calibrate",
 }
 
 
@@ -81,4 +82,4 @@ def calibrate(
             write_preset_fields(Path(path), fields)
             console.print(f"wrote {len(fields)} fields into {path}")
         else:
-            console.print(f"{Path(path).name}: " + ", ".join(f"{k}={v:.6g}" for k, v in fields.items()) + "  (--write to save)")
+            console.print(f"{Path(path).name}: " + ", ".join(f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}" for k, v in fields.items()) + "  (--write to save)")

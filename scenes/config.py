@@ -141,7 +141,7 @@ class MechanicsConfig(Strict):
     """Nonlinear elastic law + generalized Maxwell (Prony) series. Source: Ferry, Viscoelastic Properties of Polymers (1980)."""
 
     lock_strain: Annotated[float, Field(gt=0, le=1)] = 0.5  # estimate: sigma = E e / (1 - e/e_lock)
-    prony_fractions: list[NonNeg(1.0)] = Field(default_factory=lambda: [0.01, 0.01, 0.02])  # estimate: small, see README (filter lag dominates)
+    prony_fractions: list[NonNeg(1.0)] = Field(default_factory=lambda: [0.03, 0.03, 0.04])  # estimate: Sylgard 184 tan(delta) ~ 0.05 over 0.1-10 Hz
     prony_times_s: list[Pos(1e6)] = Field(default_factory=lambda: [0.05, 0.5, 5.0])  # estimate: one per decade over 0.1-2 Hz
 
     @model_validator(mode="after")
@@ -154,10 +154,11 @@ class MechanicsConfig(Strict):
 
 
 class HysteresisConfig(Strict):
-    """Prandtl-Ishlinskii play bank on the network strain. Source: Brokate & Sprekels, Hysteresis and Phase Transitions (1996)."""
+    """Rate-independent part of the network strain: internal friction and sliding of nanotubes (cnt_pdms sect. 3.1) as
+    a Prandtl-Ishlinskii play bank. Source: Brokate & Sprekels, Hysteresis and Phase Transitions (1996)."""
 
-    play_thresholds: list[NonNeg(1.0)] = Field(default_factory=lambda: [0.0005, 0.001, 0.002, 0.004])  # estimate, strain
-    play_weights: list[NonNeg(1.0)] = Field(default_factory=lambda: [0.006, 0.006, 0.006, 0.006])  # estimate
+    play_thresholds: list[NonNeg(1.0)] = Field(default_factory=lambda: [0.001, 0.002, 0.004, 0.008])  # estimate, strain: one per octave up to ~1/4 of the press range
+    play_weights: list[NonNeg(1.0)] = Field(default_factory=lambda: [0.067, 0.067, 0.067, 0.067])  # estimate; scale calibrated (piezotwin calibrate cnt_pdms)
     recovery_time_s: Pos(1e6) = 30.0  # estimate: slow relaxation of play states toward the input at rest
 
     @model_validator(mode="after")
@@ -172,11 +173,46 @@ class HysteresisConfig(Strict):
 
 
 class TunnelingConfig(Strict):
-    """Tunneling/percolation resistance R = R0 (1 - e) exp(-gamma s0 e). Source: Simmons, J. Appl. Phys. 34, 1793 (1963)."""
+    """Tunneling across the inter-tube gap, G ~ exp(gamma s0 x) / (1 - x) at network strain x (gap s0 (1 - x)).
+    Source: Simmons, J. Appl. Phys. 34, 1793 (1963)."""
 
-    conductivity_s_per_m: Pos(1e8) = 0.12  # cnt_pdms Table 1
-    gamma_s0: Pos(1000.0) = 20.0  # estimate: tunneling barrier x initial gap
-    gap_time_s: Pos(1000.0) = 0.001  # estimate: network gap strain lags the mechanical strain
+    conductivity_s_per_m: Pos(1e8) = 0.12  # cnt_pdms Table 1 (unloaded sensor)
+    gamma_s0: Pos(1000.0) = 20.0  # estimate: 4 pi s0 sqrt(2 m lambda)/h ~ 11-22 for s0 ~ 1.5-3 nm, lambda ~ 0.5 eV (Hu et al. 2008)
+
+
+class PercolationConfig(Strict):
+    """Percolating CNT network: G ~ (phi_eff - phi_c)^t, phi_eff = phi (1 - D)(1 + k x), with first-order kinetics
+    of network formation / breakdown (sensors/percolation.py). Sources: Kirkpatrick 1973; Stauffer & Aharony 1994;
+    Hu et al., Acta Mater. 56, 2929 (2008)."""
+
+    filler_wt_fraction: Annotated[float, Field(gt=0, lt=1)] = 0.005  # cnt_pdms Table 1: 0.5 wt% MWCNT
+    threshold_wt_fraction: Annotated[float, Field(gt=0, lt=1)] = 0.003  # estimate: MWCNT/PDMS thresholds 0.1-0.5 wt% (Bauhofer & Kovacs, Compos. Sci. Technol. 69, 1486, 2009)
+    filler_density_kg_per_m3: Pos(1e5) = 1750.0  # estimate: MWCNT 1.6-2.1 g/cm3
+    matrix_density_kg_per_m3: Pos(1e5) = 1030.0  # estimate: Sylgard 184
+    exponent: Pos(10.0) = 2.0  # estimate: universal 3-D conductivity exponent (Stauffer & Aharony); Hu et al. 2008 fit 1.8-2
+    strain_gain: NonNeg(1e5) = 180.0  # estimate: new tube contacts per unit strain, lumped as an effective fraction; fitted by piezotwin calibrate cnt_pdms (paper's linear R^2)
+    floor: Annotated[float, Field(gt=0, le=1)] = 0.01  # estimate: leakage below threshold, of the rest path term
+    formation_time_s: Pos(1e6) = 0.004  # estimate: paths form as tubes are pushed together (fast, below the 2 Hz period / 100)
+    breakdown_time_s: Pos(1e6) = 0.02  # estimate: paths break as the matrix recoils (5x slower); loop area rising over 0.1-2 Hz
+
+    @model_validator(mode="after")
+    def _check(self) -> "PercolationConfig":
+        if self.threshold_wt_fraction >= self.filler_wt_fraction:
+            raise ValueError("sensor.percolation.threshold_wt_fraction must be below filler_wt_fraction (the sensor conducts at rest)")
+        return self
+
+
+class MullinsConfig(Strict):
+    """Mullins-type damage D of the filled network over the first cycles, with slow recovery: D grows toward
+    D_eq = damage_max e / (e + damage_strain) with time constant damage_time_s while below it, else decays with
+    recovery_time_s; it removes conducting paths (phi (1 - D)) and softens the matrix (stress x (1 - softening D / damage_max)).
+    Source: Mullins, Rubber Chem. Technol. 42, 339 (1969); Diani et al., Eur. Polym. J. 45, 601 (2009)."""
+
+    damage_max: Annotated[float, Field(ge=0, lt=1)] = 0.03  # estimate: fraction of paths lost at large strain; calibrated
+    damage_strain: Pos(1.0) = 0.03  # estimate: strain scale of the damage (the press range)
+    damage_time_s: Pos(1e6) = 3.0  # estimate: loading time to reach it: several cycles at 0.5-2 Hz
+    recovery_time_s: Pos(1e6) = 600.0  # estimate: slow recovery at rest (minutes; Mullins 1969)
+    softening: Annotated[float, Field(ge=0, lt=1)] = 0.05  # estimate: stress softening at D = damage_max
 
 
 class ElectronicsConfig(Strict):
@@ -184,7 +220,7 @@ class ElectronicsConfig(Strict):
 
     excitation_v: Pos(100.0) = 1.0  # estimate
     bridge_resistance_ohm: Pos(1e12) | None = None  # None: balanced at the unloaded sensor resistance
-    amp_gain: Pos(1e6) = 300.0  # estimate: ~75 % of the ADC range at F_max
+    amp_gain: Pos(1e6) = 15.6  # estimate: ~75 % of the ADC range at F_max (piezotwin calibrate cnt_pdms)
     amp_offset_v: Between(-100.0, 100.0) = 0.0
     white_noise_v: NonNeg(100.0) = 5e-4  # estimate: rms at the ADC input
     pink_noise_v: NonNeg(100.0) = 5e-4  # estimate: rms of the 1/f component at the ADC input
@@ -192,6 +228,11 @@ class ElectronicsConfig(Strict):
     adc_range_v: Pos(100.0) = 10.0  # NI USB-6009 differential +-10 V
     filter_order: Annotated[int, Field(ge=0, le=8)] = 4  # cnt_pdms sect. 2.2 (0 disables)
     filter_cutoff_hz: Pos(1e6) = 10.0  # cnt_pdms sect. 2.2
+    # how the recorded voltage is filtered: "zero_phase" = the Butterworth run forward and backward over the
+    # recorded episode (offline, no phase lag: the paper chose its filter "to avoid the phase distortion",
+    # sect. 2.2); "causal" = forward only, as a real-time filter (about 40 ms delay at 4th order, 10 Hz);
+    # "off" = the raw ADC voltage
+    filter_mode: Literal["zero_phase", "causal", "off"] = "zero_phase"  # cnt_pdms sect. 2.2
 
     @field_validator("filter_order")
     @classmethod
@@ -201,7 +242,7 @@ class ElectronicsConfig(Strict):
         return v
 
 
-TAXEL_AMP_GAIN = 50.0  # estimate: cnt_pdms taxel readout, bridge -0.16 V for a held 160 um press -> 8.1 V of 10 V
+TAXEL_AMP_GAIN = 15.0  # estimate: cnt_pdms taxel readout, a pressed taxel's R falls ~100x (percolation): bridge -> -0.5 V -> 7.5 V of 10 V
 
 
 class CntPdmsSensorConfig(Strict):
@@ -209,6 +250,8 @@ class CntPdmsSensorConfig(Strict):
     mechanics: MechanicsConfig = Field(default_factory=MechanicsConfig)
     hysteresis: HysteresisConfig = Field(default_factory=HysteresisConfig)
     tunneling: TunnelingConfig = Field(default_factory=TunnelingConfig)
+    percolation: PercolationConfig = Field(default_factory=PercolationConfig)
+    mullins: MullinsConfig = Field(default_factory=MullinsConfig)
     electronics: ElectronicsConfig = Field(default_factory=ElectronicsConfig)
     # "pad": one bridge over the whole pad, all taxel columns in parallel (cnt_pdms sect. 2);
     # "taxel": a tactile array, one bridge + ADC channel per taxel (isolated rows/columns)  # estimate

@@ -65,3 +65,43 @@ def loop_metrics(force_n, output, drive, frequency_hz: float, sample_rate_hz: fl
         phase_lag_deg=phase_lag_deg(force_n, output, frequency_hz, sample_rate_hz),
         force_max_n=float(force_n.max()),
     )
+
+
+def branch_gaps(force_n: np.ndarray, output: np.ndarray, drive: np.ndarray, n_grid: int = 200) -> tuple[np.ndarray, np.ndarray]:
+    """(output grid over the range both branches share, |F_load - F_unload| there, % of full-scale force)."""
+    load, unload = split_branches(drive)
+    yl, fl = output[load], force_n[load]
+    yu, fu = output[unload], force_n[unload]
+    lo, hi = max(yl.min(), yu.min()), min(yl.max(), yu.max())
+    if hi <= lo:
+        return np.empty(0), np.empty(0)
+    grid = np.linspace(lo, hi, n_grid)
+    ol, ou = np.argsort(yl), np.argsort(yu)
+    gap = np.abs(np.interp(grid, yl[ol], fl[ol]) - np.interp(grid, yu[ou], fu[ou]))
+    return grid, 100.0 * gap / max(float(force_n.max()), 1e-12)
+
+
+def third_gaps_fso(force_n: np.ndarray, output: np.ndarray, drive: np.ndarray) -> tuple[float, float]:
+    """Max force gap (% FSO) in the lower and in the upper third of the loop's output span: a symmetric
+    (elliptic) loop gives equal values, an asymmetric one does not."""
+    grid, gap = branch_gaps(force_n, output, drive)
+    if not len(grid):
+        return float("nan"), float("nan")
+    lo, hi = float(output.min()), float(output.max())
+    third = (hi - lo) / 3.0
+    low, up = gap[grid <= lo + third], gap[grid >= hi - third]
+    return (float(low.max()) if len(low) else float("nan")), (float(up.max()) if len(up) else float("nan"))
+
+
+def output_gap_span_pct(force_n: np.ndarray, output: np.ndarray, drive: np.ndarray, n_grid: int = 200) -> float:
+    """The other common definition: max output gap between the branches at equal force, % of the output span."""
+    load, unload = split_branches(drive)
+    fl, yl = force_n[load], output[load]
+    fu, yu = force_n[unload], output[unload]
+    lo, hi = max(fl.min(), fu.min()), min(fl.max(), fu.max())
+    if hi <= lo:
+        return float("nan")
+    grid = np.linspace(lo, hi, n_grid)
+    ol, ou = np.argsort(fl), np.argsort(fu)
+    gap = np.abs(np.interp(grid, fl[ol], yl[ol]) - np.interp(grid, fu[ou], yu[ou]))
+    return float(100.0 * gap.max() / max(float(np.ptp(output)), 1e-30))

@@ -212,6 +212,24 @@ def readout_numpy(g_s: np.ndarray, noise_v: np.ndarray, ep: ElectronicsParams, s
     return out, ElectronicsState(z.reshape(E * C, -1), primed.reshape(-1), st.pink.copy())
 
 
+def zero_phase(out: dict, ep) -> dict:
+    """Offline zero-phase filtering of a recorded episode (ep.filter_mode == "zero_phase"): the Butterworth run
+    forward and backward over each episode's ADC voltage (scipy.signal.sosfiltfilt, odd padding), so the
+    recorded output has no phase lag (cnt_pdms sect. 2.2). `out` holds "filtered_v" = the unfiltered ADC
+    voltage [E,T,C] from the readout; returns it with "filtered_v" and "resistance_measured" replaced.
+    Runs on the host after either backend, so numpy and Warp stay equal."""
+    from scipy.signal import sosfiltfilt
+
+    if ep.offline_sos is None or "filtered_v" not in out:
+        return out
+    v = np.asarray(out["filtered_v"], np.float64)
+    T = v.shape[1]
+    pad = min(3 * (2 * ep.offline_sos.shape[0] + 1), T - 1)
+    y = sosfiltfilt(ep.offline_sos, v, axis=1, padlen=max(pad, 0)) if T > 1 else v
+    ratio = (y - ep.amp_offset_v) / ep.amp_gain / ep.excitation_v + 0.5
+    return {**out, "filtered_v": y, "resistance_measured": ep.bridge_resistance_ohm * ratio / (1.0 - ratio)}
+
+
 # ------------------------------------------------------------------------------------------------ warp
 
 

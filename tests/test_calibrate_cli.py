@@ -39,3 +39,17 @@ def test_fabric_calibration_meets_targets():
     assert set(res.preset_fields) and all(len(v) == 8 for v in res.preset_fields.values())
     sets = {v["sensor.press.set_fraction_mean"] for v in res.preset_fields.values()}
     assert len(sets) == 1 and 0.0 < sets.pop() < 1.0  # one knit set fraction for the fabric, every layer count
+
+
+def test_cnt_pdms_calibration_meets_targets_and_preset_is_its_fit():
+    """The cnt_pdms fit meets its targets and the committed preset holds the fitted values (rerun
+    `piezotwin calibrate cnt_pdms --write` after a physics change)."""
+    from scenes import load_scene
+    from simulate.characterize.cnt_pdms import calibrate
+
+    res = calibrate()
+    assert all(r.met for r in res.rows if r.met is not None), [(r.name, r.result) for r in res.rows]
+    (fields,) = res.preset_fields.values()
+    cfg = load_scene("cnt_pdms")
+    assert cfg.sensor.percolation.strain_gain == pytest.approx(fields["sensor.percolation.strain_gain"], rel=0.02)
+    assert cfg.sensor.electronics.amp_gain == pytest.approx(fields["sensor.electronics.amp_gain"], rel=0.02)

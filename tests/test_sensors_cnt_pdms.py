@@ -1,5 +1,5 @@
 """Physics of the CNT-PDMS chain (no MuJoCo): creep, relaxation, monotone resistance, closed loops,
-rate dependence, ADC, and Warp == numpy reference."""
+rate dependence, percolation law, Mullins drift, asymmetric loops, filter modes, ADC, and Warp == numpy."""
 
 import numpy as np
 import pytest
@@ -47,11 +47,12 @@ def test_creep_grows_under_held_force(tp):
 
 
 def test_stress_relaxes_under_held_displacement(tp):
-    _, stress, _, _ = taxel_chain_numpy(hold(0.02), MODE_DISPLACEMENT, tp)
+    _, stress, _, st = taxel_chain_numpy(hold(0.02), MODE_DISPLACEMENT, tp)
     s = stress[0, :, 0]
-    assert np.all(np.diff(s[55:]) <= 1e-3)  # monotone relaxation after the ramp
+    assert np.all(np.diff(s[55:]) <= 1e-3)  # monotone relaxation (and Mullins softening) after the ramp
     assert s[55] > s[-1] * 1.02
-    e_inf = tp.youngs_modulus_pa * 0.02 / (1 - 0.02 / tp.lock_strain)
+    soft = 1.0 - tp.softening * float(st.damage[0])  # Mullins-type softening of the damaged matrix
+    e_inf = soft * tp.youngs_modulus_pa * 0.02 / (1 - 0.02 / tp.lock_strain)
     assert s[-1] == pytest.approx(e_inf, rel=0.02)  # relaxes toward the equilibrium law
 
 
@@ -74,7 +75,9 @@ def punch(cfg, strain):
 
 
 def test_loops_close_after_repeated_cycles(cfg):
-    sen = CntPdmsSensor(cfg, backend="numpy")
+    """Without the slow Mullins damage the chain reaches a periodic steady state and its loops close."""
+    sen = CntPdmsSensor(cfg.model_copy(update={"sensor": cfg.sensor.model_copy(update={
+        "mullins": cfg.sensor.mullins.model_copy(update={"damage_max": 0.0})})}), backend="numpy")
     f = 1.0
     d = sinus(0.02, f, cycles=8)
     out = sen.run(punch(cfg, d), [0])
@@ -88,23 +91,101 @@ def test_loops_close_after_repeated_cycles(cfg):
     assert abs(F[-n] - F[-1]) < 2e-3 * F.max()
 
 
-def test_hysteresis_grows_with_frequency(cfg):
+def test_material_hysteresis_grows_with_frequency_in_the_paper_band(cfg):
+    """The material (true resistance, no filter) carries the hysteresis: loop area and max error rise with
+    frequency, and at 0.5 Hz the max error is in the band around the paper's 12.4 % FSO."""
     sen = CntPdmsSensor(cfg, backend="numpy")
     errs, areas = [], []
     for f in (0.1, 0.5, 1.0, 2.0):
-        d = sinus(0.03, f, cycles=2)
+        d = sinus(0.032, f, cycles=3)
         out = sen.run(punch(cfg, d), [1])
         n = int(FS / f)
-        F, y = out["force"][0, -n:], out["resistance_measured"][0, -n:, 0]
+        F, y = out["force"][0, -n:], out["resistance"][0, -n:, 0]
         errs.append(hysteresis_error_fso(F, y, d[-n:]))
         areas.append(loop_area(F, y))
     assert errs == sorted(errs), errs
     assert areas == sorted(areas), areas
-    assert 10.0 <= errs[1] <= 15.0  # 0.5 Hz, paper 12.4 % FSO
+    assert 8.0 <= errs[1] <= 17.0, errs
+
+
+def test_loops_are_asymmetric_and_amplitude_dependent(cfg):
+    """Loading and unloading differ in shape, not only by a delay: the force gap in the lower and upper third of
+    the resistance span differ (>= 1.3x at full scale); a small press gives a more symmetric loop."""
+    from sensors.analysis import third_gaps_fso
+
+    sen = CntPdmsSensor(cfg, backend="numpy")
+    ratio = {}
+    for a in (0.008, 0.032):
+        d = sinus(a, 0.5, cycles=3)
+        out = sen.run(punch(cfg, d), [1])
+        n = int(FS / 0.5)
+        lo, up = third_gaps_fso(out["force"][0, -n:], out["resistance"][0, -n:, 0], d[-n:])
+        ratio[a] = max(lo, up) / min(lo, up)
+    assert ratio[0.032] >= 1.3, ratio
+    assert ratio[0.008] < ratio[0.032], ratio
+
+
+def test_mullins_drift_over_the_first_cycles(cfg):
+    """A fresh sample's R_min drifts over its first cycles (network damage) and the drift slows down."""
+    sen = CntPdmsSensor(cfg, backend="numpy")
+    f, cycles = 0.5, 6
+    d = sinus(0.032, f, cycles=cycles, settle=0)
+    r = sen.run(punch(cfg, d), [1])["resistance"][0, :, 0]
+    n = int(FS / f)
+    r_min = np.array([r[k * n:(k + 1) * n].min() for k in range(cycles)])
+    step = np.diff(r_min)
+    assert r_min[-1] > r_min[0] * 1.005, r_min  # drifts by more than 0.5 %
+    assert step[0] > step[-1] > 0, step  # and settles
+
+
+def test_percolation_power_law():
+    """R ~ (phi - phi_c)^-t above threshold (Kirkpatrick 1973; Stauffer & Aharony)."""
+    from sensors.percolation import percolation_conductivity
+
+    phi_c, t = 0.002, 2.0
+    phi = phi_c + np.logspace(-5, -3, 9)
+    r = 1.0 / percolation_conductivity(phi, phi_c, t, 1e4)
+    slope = np.polyfit(np.log(phi - phi_c), np.log(r), 1)[0]
+    assert slope == pytest.approx(-t, rel=1e-6)
+    assert percolation_conductivity(phi_c * 0.9, phi_c, t, 1e4) == 0.0
+
+
+def test_network_conductance_numpy_equals_warp(tp):
+    """The shared network stage: strain raises the conductance (paths + tunneling), damage lowers it,
+    below threshold the path term holds at its floor; Warp == numpy."""
+    from sensors.percolation import conductance_ratio_numpy, conductance_ratio_warp
+
+    from dataclasses import replace
+
+    x, dmg = np.meshgrid(np.linspace(0, 0.05, 40, dtype=np.float32), np.linspace(0, 0.9, 30, dtype=np.float32))
+    for q in (tp.net, replace(tp.net, exponent=1.8)):  # t = 2 takes the product path, others log/exp
+        np.testing.assert_allclose(conductance_ratio_warp(x, dmg, q), conductance_ratio_numpy(x, dmg, q), rtol=2e-6)
+    a = conductance_ratio_numpy(x, dmg, tp.net)
+    assert a[0, 0] == pytest.approx(1.0)
+    assert np.all(np.diff(a[0]) > 0) and np.all(np.diff(a[:, 0]) <= 0)
+    assert a[-1, 0] == pytest.approx(tp.net.floor**tp.net.exponent, rel=1e-5)  # 90 % damaged: below threshold
+
+
+def test_filter_modes(cfg):
+    """zero_phase (default, paper sect. 2.2) follows the material without lag; causal lags it; off = raw ADC."""
+    from sensors.analysis import phase_lag_deg
+
+    d = sinus(0.032, 2.0, cycles=3)
+    lag = {}
+    for mode in ("zero_phase", "causal", "off"):
+        c = cfg.model_copy(update={"sensor": cfg.sensor.model_copy(update={
+            "electronics": cfg.sensor.electronics.model_copy(update={"filter_mode": mode})})})
+        out = CntPdmsSensor(c, backend="numpy").run(punch(cfg, d), [2])
+        n = 50
+        lag[mode] = phase_lag_deg(out["resistance"][0, -n:, 0], out["resistance_measured"][0, -n:, 0], 2.0, FS)
+    assert abs(lag["zero_phase"]) < 1.0 and abs(lag["off"]) < 1.0, lag
+    assert lag["causal"] > 10.0, lag  # ~40 ms of a 500 ms cycle
 
 
 def test_adc_quantizes_and_clips(cfg):
-    ep = electronics_params(cfg)
+    from dataclasses import replace
+
+    ep = replace(electronics_params(cfg), amp_gain=300.0)  # a gain that can reach both rails
     rb = ep.bridge_resistance_ohm
     # conductances spanning from far below to far above the bridge balance
     r = np.array([rb * 0.2, rb * 0.9, rb, rb * 1.05, rb * 5.0])

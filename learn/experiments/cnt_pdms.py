@@ -1,8 +1,9 @@
 """cnt_pdms experiment (paper 002): stacked LSTM + baselines + our TCN, Tables 3 and 4 beside the paper's.
 
   data     simulate.generation.run.generate on the cnt_pdms preset (reused when the folder already holds it):
-           displacement-controlled sinusoids at 0.1/0.5/1/2 Hz, random amplitude; input
-           `resistance_measured` (ohm; z-scored, so equal to the paper's Delta R up to the offset),
+           displacement-controlled sinusoids at 0.1/0.5/1/2 Hz, random amplitude, each episode on a fresh sample
+           (Mullins damage 0: sensors/cnt_pdms/model.py); input `resistance_measured` (ohm, zero-phase
+           filtered; z-scored, so equal to the paper's Delta R up to the offset),
            label `force` (N, the viscoelastic reference), drive `target` (m, for loop analysis).
   split    episodes, pooled over frequencies and amplitudes, 70/10/20 train/valid/test stratified by
            frequency: the paper's 80/20 with a tenth carved out of the 80 for early stopping.
@@ -296,11 +297,14 @@ def report(m: dict[str, Any]) -> str:
 
 
 DIFFERENCES = """
-- **The sensor.** Ours is simulated (`piezotwin characterize cnt_pdms`): its resistance-force map is close to
-  linear over the press range and its hysteresis is mostly the 4th-order 10 Hz Butterworth's ~40 ms delay
-  (material loss is small, all `# estimate`). So static models do far better here than in the paper
-  (R^2 ~0.97 against 0.76-0.88), and the gap to the temporal models is the filter lag, which grows with
-  frequency. The paper's static baselines face a lossier real composite whose loop does not shrink at 0.1 Hz.
+- **The sensor.** Ours is simulated (`piezotwin characterize cnt_pdms`): a percolating, tunneling CNT network
+  (sensors/percolation.py) whose strain gain is fitted to the paper's linear-regression R^2 and whose play bank is
+  fitted to the paper's 12.4 % FSO at 0.5 Hz (`piezotwin calibrate cnt_pdms`); network kinetics, Prony terms and
+  Mullins-type damage of a fresh sample are literature estimates. The material carries the hysteresis: the
+  Butterworth runs zero-phase (sect. 2.2), so it adds no lag. Our R(F) is a smooth, strongly nonlinear map and
+  its loops are about as wide as the paper's, so the flexible static models (cubic, MLP) recover more than the
+  paper's (which face a real composite with session-to-session variation that we do not model), while the
+  linear baseline matches the paper's.
 - **Max error.** Per cycle we take the paper's definition (max force gap between the loading and unloading
   branches at equal output, over that cycle's peak force) and report the mean over held-out cycles (the worst
   cycle is in metrics.json). The paper does not say how it aggregates; its uncompensated 12.4 % matches our

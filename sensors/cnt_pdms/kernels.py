@@ -20,6 +20,7 @@ import warp as wp
 
 from sensors.cnt_pdms.params import TaxelParams
 from sensors.cnt_pdms.reference import MAX_STRAIN_FRACTION, TaxelState
+from sensors.percolation import NetworkWp, conductance_ratio_wp, damage_wp, kinetics_wp, network_struct
 from sensors.warp_setup import init_warp, resolve_device
 
 @functools.cache
@@ -37,13 +38,12 @@ def taxel_kernels(n_prony: int, n_play: int):
         play_w: vec_k
         e_inf: float
         e_lock: float
-        gap_a: float
-        gap_b: float
         recovery: float
-        gamma: float
+        softening: float
         g0: float
+        net: NetworkWp
 
-    def step(p: Params, mode: int, d: float, e: float, phi: float, h: vec_p, s: float, z: vec_k):
+    def step(p: Params, mode: int, d: float, e: float, phi: float, h: vec_p, s: float, z: vec_k, dmg: float):
         e_max = strain_frac * p.e_lock
         eb_sum = float(0.0)
         w_sum = float(0.0)
@@ -53,9 +53,10 @@ def taxel_kernels(n_prony: int, n_play: int):
             w_sum += p.play_w[j]
         e_new = float(0.0)
         phi_new = float(0.0)
+        m = 1.0 - p.softening * dmg
         if mode == 1:
             phi_max = e_max / (1.0 - e_max / p.e_lock)
-            phi_new = wp.clamp((d - wp.dot(p.prony_decay, h) + eb_sum * phi) / (p.e_inf + eb_sum), 0.0, phi_max)
+            phi_new = wp.clamp((d / m - wp.dot(p.prony_decay, h) + eb_sum * phi) / (p.e_inf + eb_sum), 0.0, phi_max)
             e_new = phi_new / (1.0 + phi_new / p.e_lock)
         else:
             e_new = wp.clamp(d, 0.0, e_max)
@@ -64,7 +65,9 @@ def taxel_kernels(n_prony: int, n_play: int):
         sig = p.e_inf * phi_new
         for i in range(n_prony):
             sig += h_new[i]
-        s_new = p.gap_a * s + (1.0 - p.gap_a) * e + (1.0 - p.gap_b) * (e_new - e)
+        sig = m * sig
+        s_new = kinetics_wp(p.net, s, e, e_new)
+        dmg_new = damage_wp(p.net, dmg, e_new)
         e_net = (1.0 - w_sum) * s_new
         z_new = z
         for j in range(n_play):
@@ -72,8 +75,8 @@ def taxel_kernels(n_prony: int, n_play: int):
             zj = s_new + (zj - s_new) * p.recovery
             z_new[j] = zj
             e_net += p.play_w[j] * zj
-        g = p.g0 / ((1.0 - e_net) * wp.exp(-p.gamma * e_net))
-        return e_new, phi_new, h_new, s_new, z_new, sig, g
+        g = p.g0 * conductance_ratio_wp(p.net, e_net, dmg_new)
+        return e_new, phi_new, h_new, s_new, z_new, dmg_new, sig, g
 
     step.__name__ = step.__qualname__ = f"taxel_step_p{n_prony}_k{n_play}"
     step_f = wp.func(step)
@@ -89,6 +92,7 @@ def taxel_kernels(n_prony: int, n_play: int):
         st_prony: wp.array(dtype=vec_p),
         st_gap: wp.array(dtype=wp.float32),
         st_play: wp.array(dtype=vec_k),
+        st_damage: wp.array(dtype=wp.float32),
         out_strain: wp.array(dtype=wp.float32),  # [E*T*N]
         out_stress: wp.array(dtype=wp.float32),
         out_cond: wp.array(dtype=wp.float32),
@@ -101,10 +105,11 @@ def taxel_kernels(n_prony: int, n_play: int):
         h = st_prony[tid]
         s = st_gap[tid]
         z = st_play[tid]
+        dmg = st_damage[tid]
         base = ep * n_steps * n_taxels + n
         for k in range(n_steps):
             idx = base + k * n_taxels
-            e, phi, h, s, z, sig, g = step_f(p, mode, drive[idx], e, phi, h, s, z)
+            e, phi, h, s, z, dmg, sig, g = step_f(p, mode, drive[idx], e, phi, h, s, z, dmg)
             out_strain[idx] = e
             out_stress[idx] = sig
             out_cond[idx] = g
@@ -113,6 +118,7 @@ def taxel_kernels(n_prony: int, n_play: int):
         st_prony[tid] = h
         st_gap[tid] = s
         st_play[tid] = z
+        st_damage[tid] = dmg
 
     chain.__name__ = chain.__qualname__ = f"taxel_chain_p{n_prony}_k{n_play}"
     k_chain = wp.kernel(chain, module="unique", enable_backward=False)
@@ -143,10 +149,9 @@ class TaxelChainWarp:
         s.play_w = k["vec_k"](*p.play_weight.astype(f32))
         s.e_inf = float(p.youngs_modulus_pa)
         s.e_lock = float(p.lock_strain)
-        s.gap_a = float(p.gap_decay)
-        s.gap_b = float(p.gap_gain)
         s.recovery = float(p.recovery_decay)
-        s.gamma = float(p.gamma_s0)
+        s.softening = float(p.softening)
+        s.net = network_struct(p.net)
         s.g0 = float(1.0 / p.rest_resistance_ohm)
         return s
 
@@ -158,14 +163,16 @@ class TaxelChainWarp:
         self.st_prony = wp.array(st.prony_pa, dtype=self.k["vec_p"], device=d)
         self.st_gap = wp.array(st.gap_strain, dtype=wp.float32, device=d)
         self.st_play = wp.array(st.play, dtype=self.k["vec_k"], device=d)
+        self.st_damage = wp.array(st.damage, dtype=wp.float32, device=d)
 
     def state(self) -> TaxelState:
         return TaxelState(
-            self.st_strain.numpy(), self.st_phi.numpy(), self.st_prony.numpy(), self.st_gap.numpy(), self.st_play.numpy()
+            self.st_strain.numpy(), self.st_phi.numpy(), self.st_prony.numpy(), self.st_gap.numpy(), self.st_play.numpy(),
+            self.st_damage.numpy(),
         )
 
     def _state_args(self):
-        return [self.st_strain, self.st_phi, self.st_prony, self.st_gap, self.st_play]
+        return [self.st_strain, self.st_phi, self.st_prony, self.st_gap, self.st_play, self.st_damage]
 
     def run_device(self, drive: wp.array, n_steps: int, mode: int, outs: list | None = None):
         """Launch on a flat device array [E*T*N]; returns (strain, stress, conductance) device arrays."""

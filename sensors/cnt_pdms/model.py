@@ -3,7 +3,10 @@
 Pipeline (ground truth and measurement both kept, as in Genesis' sensors):
   drive [E,T,N] (strain from the deformation field, or pressure)  -> taxel chain (sensors/taxel_*.py):
   strain, stress, conductance per taxel -> columns in parallel per channel + total force (label, from the
-  viscoelastic stress) -> bridge, in-amp, noise, ADC, Butterworth (sensors/electronics.py).
+  viscoelastic stress) -> bridge, in-amp, noise, ADC, Butterworth (sensors/electronics.py): causal in the readout kernel, or
+  zero-phase over the recorded episode (sensor.electronics.filter_mode, default "zero_phase": cnt_pdms sect. 2.2).
+Every episode starts from a fresh sample (network damage D = 0, all states at rest): a recording session after
+the sample has rested for many Mullins recovery times (sensor.mullins.recovery_time_s).
 backend "warp" runs the Warp kernels on `device` ("cpu" or "cuda:0"); backend "numpy" runs the reference.
 """
 
@@ -89,6 +92,7 @@ class CntPdmsSensor:
             strain, stress, cond, _ = taxel_chain_numpy(drive, self.mode, self.tp, TaxelState.zeros(E * N, self.tp))
             g, force = el.sum_channels_numpy(cond, stress, self.taxel_channel, self.n_channels, self.tp.taxel_area_m2)
             ro, _ = el.readout_numpy(g, self.noise(seeds, T), self.ep)
+            ro = el.zero_phase(ro, self.ep)
         else:
             import warp as wp
 
@@ -102,10 +106,13 @@ class CntPdmsSensor:
                 c_d, st_d, self.taxel_channel, self.n_channels, self.tp.taxel_area_m2, (E, T, N), self.device
             )
             keep_ro = {ro_names[k] for k in want if k in ro_names}
+            if self.ep.offline_sos is not None and keep_ro & {"filtered_v", "resistance_measured"}:
+                keep_ro |= {"filtered_v"}  # the zero-phase pass filters the ADC voltage on the host
             e = self.cfg.sensor.electronics
             noise = el.NoiseSeeds(seeds, e.white_noise_v, e.pink_noise_v)  # drawn in the readout kernel
             ro, _ = el.readout_warp(g_d, (E, T, self.n_channels), noise, self.ep, None, self.device, keep=keep_ro,
                                     adc_dtype=adc_dtype)
+            ro = el.zero_phase(ro, self.ep)
             force = to_host(f_d, "cnt_pdms force").reshape(E, T) if "force" in want else None
             strain = to_host(s_d, "cnt_pdms strain").reshape(E, T, N) if "strain" in want else None
             stress = None
@@ -136,4 +143,5 @@ class CntPdmsSensor:
             "bridge_resistance_ohm": self.ep.bridge_resistance_ohm,
             "rest_resistance_ohm": 1.0 / ((self.n_taxels // self.n_channels) / self.tp.rest_resistance_ohm),
             "control": self.cfg.protocol.control,
+            "filter_mode": self.ep.filter_mode,  # how voltage / resistance_measured were filtered (zero_phase, causal, off)
         }

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from scenes.config import SceneConfig
+from sensors.percolation import NetworkParams, network_params, wt_to_volume_fraction
 
 MODE_DISPLACEMENT = 0  # drive = compressive strain (-)
 MODE_FORCE = 1  # drive = compressive stress (Pa)
@@ -27,12 +28,11 @@ class TaxelParams:
     prony_decay: np.ndarray  # [P] a_i = exp(-dt/tau_i)
     prony_gain: np.ndarray  # [P] b_i = tau_i/dt (1 - a_i): exact for piecewise-linear strain
     prony_modulus_pa: np.ndarray  # [P] E_i = g_i E_inf
-    gap_decay: float  # a = exp(-dt/tau_gap)
-    gap_gain: float  # b = tau_gap/dt (1 - a)
+    net: NetworkParams  # percolation / tunneling network, its kinetics and damage (sensors/percolation.py)
+    softening: float  # Mullins stress softening per unit damage: sigma x (1 - softening D)
     play_threshold: np.ndarray  # [K] r_k (strain)
     play_weight: np.ndarray  # [K] w_k
     recovery_decay: float  # exp(-dt/T_recovery) pulling play states toward the input
-    gamma_s0: float  # tunneling exponent factor
     taxel_area_m2: float
     rest_resistance_ohm: float  # one taxel's through-thickness resistance at rest: h / (sigma0 A)
 
@@ -57,6 +57,10 @@ class ElectronicsParams:
     adc_range_v: float
     sos: np.ndarray = field(repr=False)  # [n_sections, 6] Butterworth second-order sections (b0 b1 b2 a0 a1 a2)
     sos_zi: np.ndarray = field(repr=False)  # [n_sections, 2] steady-state filter state for a unit input
+    # filter_mode "zero_phase": the readout kernel passes the ADC voltage through (sos = identity) and the
+    # Butterworth runs forward-backward over the recorded episode afterwards (sensors.electronics.zero_phase)
+    filter_mode: str = "causal"
+    offline_sos: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def lsb_v(self) -> float:
@@ -81,7 +85,14 @@ def taxel_params(cfg: SceneConfig) -> TaxelParams:
     b = tau / dt * (1.0 - a)
     r = np.asarray(hyst.play_thresholds or [0.0], dtype=np.float64)
     w = np.asarray(hyst.play_weights or [0.0], dtype=np.float64)
-    a_gap = float(np.exp(-dt / tun.gap_time_s))
+    perc, mul = cfg.sensor.percolation, cfg.sensor.mullins
+    vol = lambda w: wt_to_volume_fraction(w, perc.filler_density_kg_per_m3, perc.matrix_density_kg_per_m3)  # noqa: E731
+    net = network_params(
+        dt, phi=vol(perc.filler_wt_fraction), phi_c=vol(perc.threshold_wt_fraction), exponent=perc.exponent,
+        strain_gain=perc.strain_gain, gamma_s0=tun.gamma_s0, floor=perc.floor, formation_time_s=perc.formation_time_s,
+        breakdown_time_s=perc.breakdown_time_s, damage_max=mul.damage_max, damage_strain=mul.damage_strain,
+        damage_time_s=mul.damage_time_s, recovery_time_s=mul.recovery_time_s,
+    )
     area = cfg.pad.size_x_m * cfg.pad.size_y_m / cfg.pad.n_taxels
     return TaxelParams(
         dt_s=dt,
@@ -90,12 +101,11 @@ def taxel_params(cfg: SceneConfig) -> TaxelParams:
         prony_decay=a,
         prony_gain=b,
         prony_modulus_pa=g * cfg.pad.youngs_modulus_pa,
-        gap_decay=a_gap,
-        gap_gain=tun.gap_time_s / dt * (1.0 - a_gap),
+        net=net,
+        softening=mul.softening / mul.damage_max if mul.damage_max > 0 else 0.0,
         play_threshold=r,
         play_weight=w,
         recovery_decay=float(np.exp(-dt / hyst.recovery_time_s)),
-        gamma_s0=tun.gamma_s0,
         taxel_area_m2=area,
         rest_resistance_ohm=cfg.pad.thickness_m / (tun.conductivity_s_per_m * area),
     )
@@ -115,10 +125,14 @@ def electronics_params(cfg: SceneConfig) -> ElectronicsParams:
 
     el = cfg.sensor.electronics
     fs = cfg.sampling.sample_rate_hz
-    if el.filter_order:
+    mode = el.filter_mode if el.filter_order else "off"
+    offline = None
+    if mode == "causal":
         sos = signal.butter(el.filter_order, el.filter_cutoff_hz, btype="low", fs=fs, output="sos")
         zi = signal.sosfilt_zi(sos)
     else:
+        if mode == "zero_phase":
+            offline = np.ascontiguousarray(signal.butter(el.filter_order, el.filter_cutoff_hz, btype="low", fs=fs, output="sos"))
         sos = np.array([[1.0, 0.0, 0.0, 1.0, 0.0, 0.0]])
         zi = np.zeros((1, 2))
     rb = el.bridge_resistance_ohm or rest_sensor_resistance_ohm(cfg)
@@ -131,4 +145,6 @@ def electronics_params(cfg: SceneConfig) -> ElectronicsParams:
         adc_range_v=el.adc_range_v,
         sos=np.ascontiguousarray(sos, dtype=np.float64),
         sos_zi=np.ascontiguousarray(zi, dtype=np.float64),
+        filter_mode=mode,
+        offline_sos=offline,
     )

@@ -1,15 +1,18 @@
 """Numpy reference of the per-taxel CNT-PDMS chain; the Warp kernel in sensors/cnt_pdms/kernels.py must match it.
 
 Per taxel and sample step (dt = 1 / sample rate), compressive strain e >= 0 and stress sigma >= 0:
-  mechanics  sigma = E_inf phi(e) + sum_i h_i,  phi(e) = e / (1 - e/e_lock)        (nonlinear elastic law)
+  mechanics  sigma = m (E_inf phi(e) + sum_i h_i),  phi(e) = e / (1 - e/e_lock)    (nonlinear elastic law;
+             m = 1 - softening D: Mullins stress softening by the network damage D of the previous step)
              h_i' = a_i h_i + E_i b_i (phi' - phi)   (generalized Maxwell / Prony, exponential integrator,
              exact for phi linear within a step; Ferry, Viscoelastic Properties of Polymers, 1980)
              displacement control: e is given -> sigma; force control: sigma is given -> phi' in closed form
-  gap        s' = a s + (1 - a) e + (1 - b)(e' - e)   (network gap strain lags the mechanical strain)
+  network    s' = first-order kinetics of the network strain toward e, tau_form loading / tau_break unloading;
+             D' = Mullins-type damage (sensors/percolation.py: kinetics, damage)
   hysteresis z_k' = max(s' - r_k, min(s' + r_k, z_k)), then z_k' -> s' + (z_k' - s') c (slow recovery);
              e_net = (1 - sum w) s' + sum w_k z_k'   (Prandtl-Ishlinskii play bank, return-point memory;
              Brokate & Sprekels 1996)
-  conduction R = R0 (1 - e_net) exp(-gamma s0 e_net)   (tunneling across the inter-tube gap; Simmons 1963)
+  conduction G = G0 ratio(e_net, D')   (percolation paths x Simmons tunneling x path length; Hu et al. 2008;
+             sensors/percolation.py)
 Outputs are the strain, the stress and the conductance G = 1/R of every taxel.
 """
 
@@ -20,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sensors.cnt_pdms.params import MODE_FORCE, TaxelParams
+from sensors.percolation import conductance_ratio_numpy, damage_numpy, kinetics_numpy
 
 MAX_STRAIN_FRACTION = 0.95  # of lock_strain: the law diverges at e_lock
 
@@ -34,11 +38,13 @@ class TaxelState:
     prony_pa: np.ndarray
     gap_strain: np.ndarray
     play: np.ndarray
+    damage: np.ndarray  # Mullins-type network damage D (fresh sample: 0)
 
     @classmethod
     def zeros(cls, n: int, p: TaxelParams) -> "TaxelState":
         z = np.zeros(n, np.float32)
-        return cls(z.copy(), z.copy(), np.zeros((n, p.n_prony), np.float32), z.copy(), np.zeros((n, p.n_play), np.float32))
+        return cls(z.copy(), z.copy(), np.zeros((n, p.n_prony), np.float32), z.copy(), np.zeros((n, p.n_play), np.float32),
+                   z.copy())
 
 
 def _phi(e: np.ndarray, e_lock: float) -> np.ndarray:
@@ -66,17 +72,17 @@ def taxel_chain_numpy(
     h = st.prony_pa.reshape(E, N, p.n_prony).astype(f32).copy()
     s = st.gap_strain.reshape(E, N).astype(f32).copy()
     z = st.play.reshape(E, N, p.n_play).astype(f32).copy()
+    dmg = st.damage.reshape(E, N).astype(f32).copy()
+    soft = f32(p.softening)
 
     a, b, Ei = (x.astype(f32) for x in (p.prony_decay, p.prony_gain, p.prony_modulus_pa))
     r, w = p.play_threshold.astype(f32), p.play_weight.astype(f32)
     e_inf, e_lock = f32(p.youngs_modulus_pa), f32(p.lock_strain)
     e_max = f32(MAX_STRAIN_FRACTION * p.lock_strain)
     phi_max = _phi(e_max, e_lock)
-    ga, gb = f32(p.gap_decay), f32(p.gap_gain)
     rec = f32(p.recovery_decay)
     w_direct = f32(1.0) - w.sum(dtype=f32)
     g0 = f32(1.0 / p.rest_resistance_ohm)
-    gamma = f32(p.gamma_s0)
     stiff = e_inf + (Ei * b).sum(dtype=f32)
 
     strain = np.empty((E, T, N), f32)
@@ -84,23 +90,25 @@ def taxel_chain_numpy(
     cond = np.empty((E, T, N), f32)
     for k in range(T):
         d = drive[:, k, :].astype(f32)
+        m = f32(1.0) - soft * dmg
         if mode == MODE_FORCE:
-            rhs = d - (a * h).sum(-1, dtype=f32) + (Ei * b).sum(dtype=f32) * phi
+            rhs = d / m - (a * h).sum(-1, dtype=f32) + (Ei * b).sum(dtype=f32) * phi
             phi_new = np.clip(rhs / stiff, f32(0.0), phi_max)
             e_new = _phi_inv(phi_new, e_lock)
         else:
             e_new = np.clip(d, f32(0.0), e_max)
             phi_new = _phi(e_new, e_lock)
         h = a * h + Ei * b * (phi_new - phi)[..., None]
-        sig = e_inf * phi_new + h.sum(-1, dtype=f32)
-        s = ga * s + (f32(1.0) - ga) * e + (f32(1.0) - gb) * (e_new - e)
+        sig = m * (e_inf * phi_new + h.sum(-1, dtype=f32))
+        s = kinetics_numpy(s, e, e_new, p.net)
+        dmg = damage_numpy(dmg, e_new, p.net)
         z = np.maximum(s[..., None] - r, np.minimum(s[..., None] + r, z))
         z = s[..., None] + (z - s[..., None]) * rec
         e_net = w_direct * s + (w * z).sum(-1, dtype=f32)
-        g = g0 / ((f32(1.0) - e_net) * np.exp(-gamma * e_net))
+        g = g0 * conductance_ratio_numpy(e_net, dmg, p.net)
         e, phi = e_new, phi_new
         strain[:, k], stress[:, k], cond[:, k] = e, sig, g
     out_state = TaxelState(
-        e.reshape(-1), phi.reshape(-1), h.reshape(-1, p.n_prony), s.reshape(-1), z.reshape(-1, p.n_play)
+        e.reshape(-1), phi.reshape(-1), h.reshape(-1, p.n_prony), s.reshape(-1), z.reshape(-1, p.n_play), dmg.reshape(-1)
     )
     return strain, stress, cond, out_state
