@@ -199,6 +199,13 @@ def test_experiment_velostat_tiny(tmp_path):
         assert {"holds", "ae", "test"} <= set(j["models"][k])
         assert {"max_err_mean", "drift_mean"} <= set(j["models"][k]["holds"])
     assert j["creep"]["r_drift_comp_mean"] < j["creep"]["r_drift_raw_mean"]
+    # Fig. 22a: one compensated-calibration BP read on measured and on compensated R
+    sb = j["creep"]["force_same_bp"]
+    assert sb["bp"] == "paper_cluster" and sb["raw"]["n_holds"] == sb["compensated"]["n_holds"] > 0
+    assert F["creep_drift_removed_frac"] == pytest.approx(sb["drift_removed_frac"])
+    # ours: both input sets trained, the one with the lower validation RMSE kept
+    assert set(T["valid_rmse_by_inputs"]) == {"raw", "compensated"}
+    assert T["inputs"] == min(T["valid_rmse_by_inputs"], key=T["valid_rmse_by_inputs"].get)
     text = (out / "report.md").read_text()
     assert "0.931" in text and "Where we differ" in text
     for p in ("delta_clusters.png", "units.png", "creep.png", "ae_error.png"):
@@ -228,6 +235,24 @@ def test_experiment_velostat_quick(tmp_path):
         assert all(V[met].values()), (met, V[met])
     F = m["findings"]["tcn_beats_best_paper"]
     assert F["rmse"] and F["hold_max_err"] and F["ae_max"]
+
+
+def test_calibration_holds_do_not_depend_on_the_loading_speed():
+    """The experiment's calibrations hold every level 5 s at 1 and 6 mm/min alike (the A-E test's holds)."""
+    from learn.experiments.velostat import CAL, CAL_HOLD_S, CAL_S
+    from sensors.data.manifest import episode_seed
+    from simulate.protocols.indenter import make_episode_protocol
+
+    holds = {}
+    for v in (1.0, 6.0):
+        cfg = load_scene("velostat", [*CAL, f"protocol.duration_s={CAL_S}", f"protocol.loading_speeds_m_per_s=[{v / 6e4}]"])
+        p = make_episode_protocol(cfg, episode_seed(0, 0), 0).params
+        t, f = np.asarray(p["knots_t_s"]), np.asarray(p["knots_f_n"])
+        flat = (np.diff(f) == 0) & (f[1:] > 0)
+        holds[v] = np.diff(t)[flat]
+        assert len(holds[v]) == 15 and t[-1] <= CAL_S
+    np.testing.assert_allclose(holds[1.0], CAL_HOLD_S)
+    np.testing.assert_allclose(holds[6.0], CAL_HOLD_S)
 
 
 def test_calibration_sweep_covers_every_unit_and_split_keeps_the_first_round():

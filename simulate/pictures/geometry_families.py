@@ -232,7 +232,7 @@ class VelostatFilmGeometry(FamilyGeometry):
                 z1 = self.top_z_m + 0.2 * L
                 stem = pv.Cylinder(center=(float(xy[0]), float(xy[1]), 0.5 * (self.top_z_m + z1)), direction=(0, 0, 1),
                                    radius=0.004 * L, height=z1 - self.top_z_m)
-                head = pv.Sphere(radius=0.015 * L, center=(float(xy[0]), float(xy[1]), z1))
+                head = pv.Sphere(radius=0.025 * L, center=(float(xy[0]), float(xy[1]), z1))
                 parts.append((stem.merge(head), dict(color="red", lighting=True)))
         return parts
 
