@@ -164,6 +164,9 @@ def test_experiment_ntype_tiny(tmp_path):
     f = m["findings"]
     assert {"table1_best_spread", "table1_interior_optimum", "window5_beats_no_window", "best_paper_model",
             "map_cnn_beats_best_paper_model", "elem_mlp_beats_best_paper_model"} <= set(f)
+    g = f["nearest_centre_median"]  # the report's reason for a best spread at the sweep's end
+    assert set(g) == {"rbf_col_Fx", "rbf_col_Fy", "rbf_col_Fz", "rbf_w1", "rbf_w5"} and min(g.values()) > 0
+    assert g["rbf_w5"] > g["rbf_w1"]  # 15 inputs that vary independently leave the centres farther apart than 3
     folds = m["protocol"]["fold_episodes"]
     assert len(folds) == 3 and len({k for g in folds for k in g}) == m["protocol"]["episodes"]
     # the window models beat the trivial mean in MAE on the held-out folds

@@ -176,6 +176,30 @@ def test_network_solve_equals_direct_kirchhoff(scheme):
     assert U == L == 12 and len({(u, l) for u, l in zip(up.ravel(), lo.ravel())}) == 108  # one column per crossing
 
 
+@pytest.mark.parametrize("nx,ny,r_on", [(6, 6, 100.0), (6, 6, 0.0), (6, 6, 5e3), (5, 3, 100.0)])
+def test_scan_feedback_warp_equals_numpy(nx, ny, r_on):
+    """The Warp kernel (one thread per frame, Gaussian elimination with partial pivoting in float64) reads what the
+    numpy batched Schur solve reads, on the CPU device, for ideal to poor switches and a non-square array."""
+    from sensors.ntype.scan import scan_apparent
+
+    rng = np.random.default_rng(11)
+    R = rng.uniform(5e3, 80e3, (40, nx * ny, 3))
+    R[:3] = rng.uniform(16e3, 50e3, 3)  # also frames where every column reads alike (symmetric networks)
+    a = scan_apparent(R, nx, ny, "feedback", 5.0, r_on, 1e3)
+    b = scan_apparent(R, nx, ny, "feedback", 5.0, r_on, 1e3, backend="warp", device="cpu")
+    np.testing.assert_allclose(b, a, rtol=1e-9)
+    assert np.abs(b / R - 1).max() > (1e-3 if r_on > 0 else -1)  # the scan did act (sneak residue with R_on > 0)
+
+
+def test_scan_warp_backend_keeps_numpy_for_the_comparison_schemes():
+    from sensors.ntype.scan import scan_apparent
+
+    R = np.random.default_rng(4).uniform(16e3, 50e3, (2, 36, 3))
+    for s in ("ideal", "floating", "grounded"):
+        np.testing.assert_array_equal(scan_apparent(R, 6, 6, s, 5.0, 100.0, 1e3, backend="warp"),
+                                      scan_apparent(R, 6, 6, s, 5.0, 100.0, 1e3))
+
+
 def _sneak(scheme):
     """Relative change of the reading of an unloaded element's columns when every other column falls by 30 %."""
     from sensors.ntype.scan import scan_apparent

@@ -123,6 +123,13 @@ def bench_cpu() -> str:
             ["end to end", f"{num(pl['end_to_end']['samples_per_s'])} sensor samples/s ("
              + ", ".join(f"{k.split('_')[0]} {pct(v)}" for k, v in pl["end_to_end"]["share"].items()) + ")"],
         ]
+        n = tr.get("ntype_cpu")
+        if n:
+            c, u = n["feedback_over_ideal_cpu"], n["cpu_us_per_frame"]
+            rows.append([f"ntype chain, scanned readout (feedback) over the ideal ohmmeter ({n['frames']} frames, "
+                         "process CPU time; issue 14 allows 1.5x)",
+                         f"Warp {num(c['warp'], 2)}x ({num(u['warp_feedback'], 2)} vs {num(u['warp_ideal'], 2)} us/frame), "
+                         f"numpy {num(c['numpy'], 2)}x; scan alone Warp {num(n['scan_numpy_over_warp'], 2)}x faster than numpy"])
         out += ["Stage by stage on the 2-core CI-class machine (`bench/bench_transduction.py`, `bench/bench_pipeline.py`; "
                 "`transduction-cpu.json`, `pipeline-cpu.json`):\n", table(["what", "figure"], rows)]
     for name, title in (("scale-cpu.json", "the 2-core machine, shared with other jobs"),

@@ -178,7 +178,8 @@ class NtypeSensor:
 
             disp, strain, res, _ = ntype_chain_warp(electrode_force, self.p, self.device)
         rd, el = self.cfg.sensor.readout, self.cfg.sensor.element
-        seen = scan_apparent(res, el.elements_x, el.elements_y, rd.scan, rd.drive_v, rd.switch_on_ohm, rd.reference_ohm)
+        seen = scan_apparent(res, el.elements_x, el.elements_y, rd.scan, rd.drive_v, rd.switch_on_ohm, rd.reference_ohm,
+                             self.backend, self.device)
         meas = np.empty_like(res)
         for e, s in enumerate(seeds):
             rng = np.random.default_rng(np.random.SeedSequence(int(s), spawn_key=(1,)))

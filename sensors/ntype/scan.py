@@ -58,9 +58,12 @@ def _laplacian(G: np.ndarray) -> np.ndarray:
 
 
 def scan_apparent(R: np.ndarray, elements_x: int, elements_y: int, scheme: str, drive_v: float,
-                  switch_on_ohm: float, reference_ohm: float) -> np.ndarray:
+                  switch_on_ohm: float, reference_ohm: float, backend: str = "numpy",
+                  device: str = "cpu") -> np.ndarray:
     """Apparent resistances [..., M, 3] (ohm) that the scan reads for true column resistances R [..., M, 3]
-    (float64 batched solves; frames are independent)."""
+    (float64 batched solves; frames are independent). backend "warp" solves the default "feedback" scheme in
+    a Warp kernel (sensors/ntype/kernels.py scan_feedback_warp, one thread per frame, tests compare it with
+    this numpy path); "floating" and "grounded" (comparison options) always take the numpy path."""
     if scheme not in SCHEMES:
         raise ValueError(f"scan scheme '{scheme}' (allowed: {', '.join(SCHEMES)})")
     R = np.asarray(R, np.float64)
@@ -69,6 +72,10 @@ def scan_apparent(R: np.ndarray, elements_x: int, elements_y: int, scheme: str, 
     shape = R.shape
     Rf = R.reshape(-1, shape[-2], 3)
     upper, lower, U, L = wire_map(elements_x, elements_y)
+    if backend == "warp" and scheme == "feedback":
+        from sensors.ntype.kernels import scan_feedback_warp
+
+        return scan_feedback_warp(Rf, upper, lower, U, L, switch_on_ohm, device).reshape(shape)
     N = U + L
     per = {"feedback": 1, "grounded": L, "floating": U * L}[scheme]
     step = max(1, MAX_SYSTEMS // per)
