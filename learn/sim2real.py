@@ -251,7 +251,7 @@ def _report(out: Path, m: dict[str, Any], other: str | None) -> None:
 S2R_BUDGET = {  # the default budget of `piezotwin sim2real` (2 CPU cores, <= 15 min on the Lupasic logs)
     "fit_rate_hz": 20.0, "n_boot": 16, "n_episodes": 96, "episode_s": 60.0, "pretrain_epochs": 40,
     "pretrain_patience": 12, "finetune_epochs": 120, "finetune_patience": 20, "lr": 3e-4, "policy": "none",
-    "finetune_norm": "checkpoint", "rehearsal": 1.0,
+    "finetune_norm": "checkpoint", "rehearsal": [0.0, 1.0],
 }
 FINETUNE_KEYS = ("finetune_epochs", "finetune_patience", "lr", "policy", "finetune_norm", "rehearsal")
 
@@ -418,7 +418,7 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
         base = load_checkpoint(ck)
         # 4. fine-tune, baselines, learning curve
         task = bar.add_task("4/4 fine-tuning + baselines", total=1)
-        sim = FT.apply_map(FT.load_recording(gen_f, ["sensor"], ["force"]), "log") if float(B["rehearsal"]) > 0 else []
+        sim = FT.apply_map(FT.load_recording(gen_f, ["sensor"], ["force"]), "log") if max(_rehearsals(B)) > 0 else []
         m = _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target, rate,
                            lambda k, n: bar.update(task, completed=k, total=n), log, sim=sim)
     m["steps"] = state["done"]
@@ -438,6 +438,11 @@ def _chain_prior(family: str, runs) -> "Any":
     if adc:  # an ADC divider (TAMS-like): a series floor and a cover threshold show
         p.r_series_ohm, p.threshold_force_n, p.exponent = 100.0, 0.05, 1.5  # estimate: starting point of the fit
     return p
+
+
+def _rehearsals(B: dict) -> list[float]:
+    r = B["rehearsal"]
+    return [float(x) for x in r] if isinstance(r, (list, tuple)) else [float(r)]
 
 
 def rehearsal_set(sim: Seq[Sequence], n_samples: int, seed: int) -> list[Sequence]:
@@ -477,13 +482,18 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
     lc = []
     for i, k in enumerate(sizes):
         tr = [s for s in sp.train if s.key in sp.order[:k]]
-        reh = rehearsal_set(sim, int(float(B["rehearsal"]) * sum(len(s) for s in tr)), seed) if sim else []
-        ft, info = FT.finetune(base, tr, sp.valid, rehearsal=reh, **kw)
+        # the share of simulated episodes mixed in: chosen per budget on the real valid runs (never the test runs)
+        ft, info, reh_ratio = None, None, None
+        for r in _rehearsals(B):
+            reh = rehearsal_set(sim, int(r * sum(len(s) for s in tr)), seed) if sim and r > 0 else []
+            c, ci = FT.finetune(base, tr, sp.valid, rehearsal=reh, **kw)
+            if info is None or ci["best_loss"] < info["best_loss"]:
+                ft, info, reh_ratio = c, ci, r
         sc = FT.train_from_scratch(base.kind, base.hparams, tr, sp.valid, seed=seed, max_epochs=int(B["finetune_epochs"]),
                                    patience=int(B["finetune_patience"]))
         st = StaticCurve(tr + list(sp.valid))  # the curve sees every labelled real run the others see
         row = {"n_runs": k, "runs": [s.key for s in tr], "finetuned": score(ft), "scratch": score(sc), "static_curve": score(st),
-               "finetune_epochs": info["epochs"], "finetune_best_epoch": info["best_epoch"]}
+               "finetune_epochs": info["epochs"], "finetune_best_epoch": info["best_epoch"], "rehearsal": reh_ratio}
         lc.append(row)
         log(f"  {k} real run(s): fine-tuned {row['finetuned']['rmse']:.3f} N, scratch {row['scratch']['rmse']:.3f} N, "
             f"static curve {row['static_curve']['rmse']:.3f} N")
@@ -495,7 +505,7 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
         res[k]["rmse_pct_full_scale"] = 100 * res[k]["rmse"] / full
     res["zero_shot"]["two_point_gain"]["rmse_pct_full_scale"] = 100 * res["zero_shot"]["two_point_gain"]["rmse"] / full
     curve = [{"n_runs": r["n_runs"], "runs": r["runs"], **{f"{k}_rmse": r[k]["rmse"] for k in ("finetuned", "scratch", "static_curve")},
-              "finetune_epochs": r["finetune_epochs"]} for r in lc]
+              "finetune_epochs": r["finetune_epochs"], "rehearsal": r["rehearsal"]} for r in lc]
     tg = {
         "finetuned_beats_scratch_and_static_every_budget": all(r["finetuned_rmse"] < min(r["scratch_rmse"], r["static_curve_rmse"]) for r in curve),
         "one_run_within_1.3x_all_runs": curve[0]["finetuned_rmse"] <= 1.3 * curve[-1]["finetuned_rmse"],
