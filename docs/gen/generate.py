@@ -272,7 +272,8 @@ def sim2real_results() -> str:
         r = m["results"]
         z = r["zero_shot"]["two_point_gain"]
         tg = m.get("targets", {})
-        rows.append([name, ", ".join(m["split"]["test"]), f"{m['full_scale_n']:.1f}",
+        t = m["split"]["test"]
+        rows.append([name, f"{len(t)} ({t[0]}{', ...' if len(t) > 1 else ''})", f"{m['full_scale_n']:.1f}",
                      *(f"{num(r[k]['rmse'])} ({r[k]['rmse_pct_full_scale']:.1f} %)" for k in ("finetuned", "scratch", "static_curve")),
                      f"{num(z['rmse'])} ({z['rmse_pct_full_scale']:.1f} %)",
                      f"{sum(bool(v) for v in tg.values())}/{len(tg)}"])
