@@ -210,14 +210,26 @@ def _torch_only(comp: Compensator) -> None:
 
 def finetune(comp: Compensator, train: Seq[Sequence], valid: Seq[Sequence], *, policy: str = "head",
              lr: float = 3e-4, max_epochs: int = 300, patience: int = 30, batch_size: int | None = None,
-             seed: int = 0, progress: bool = False) -> tuple[Compensator, dict[str, Any]]:
-    """Fine-tune a copy of ``comp`` on mapped real runs; returns (compensator, info). See the module docstring."""
+             seed: int = 0, progress: bool = False, norm: str = "real",
+             rehearsal: Seq[Sequence] = ()) -> tuple[Compensator, dict[str, Any]]:
+    """Fine-tune a copy of ``comp`` on mapped real runs; returns (compensator, info). See the module docstring.
+
+    ``norm``: ``real`` re-estimates the input z-score on the real training runs (step 3 of the input map);
+    ``checkpoint`` keeps the pre-trained one (right when the simulated input is already in the real
+    readout's units, as after `piezotwin fit`: then the pre-trained z-score is a fixed physical map and
+    re-estimating it on one or two runs, whose force range sets their statistics, moves it by a
+    subset-dependent amount); the learnable input affine absorbs a gain/offset either way.
+    ``rehearsal``: simulated episodes (same input map) added to the training examples (the pre-training
+    distribution kept in view while adapting: limits forgetting when the real runs are few); early
+    stopping still on the real valid runs only."""
+    if norm not in ("real", "checkpoint"):
+        raise ValueError(f"norm must be 'real' or 'checkpoint'; got {norm!r}")
     from learn.train import TrainConfig, train_model
 
     if policy not in FREEZE_POLICIES:
         raise ValueError(f"freeze policy must be one of {', '.join(FREEZE_POLICIES)}; got {policy!r}")
     _torch_only(comp)
-    c = restandardise(comp, train)
+    c = restandardise(comp, train) if norm == "real" else copy.deepcopy(comp)
     head = set(head_parameter_names(c))
     frozen = []
     for n, p in c.net.named_parameters():
@@ -226,8 +238,8 @@ def finetune(comp: Compensator, train: Seq[Sequence], valid: Seq[Sequence], *, p
         if not train_it:
             frozen.append(n)
     wrapped = _InputAffine(c.net, c.n_in)
-    zx = [c.x_norm.apply(s.x) for s in train]
-    zy = [c.y_norm.apply(s.y) for s in train]
+    zx = [c.x_norm.apply(s.x) for s in [*train, *rehearsal]]
+    zy = [c.y_norm.apply(s.y) for s in [*train, *rehearsal]]
     vx = [c.x_norm.apply(s.x) for s in valid]
     vy = [c.y_norm.apply(s.y) for s in valid]
     tr = c._examples(zx, zy, True)
@@ -248,7 +260,7 @@ def finetune(comp: Compensator, train: Seq[Sequence], valid: Seq[Sequence], *, p
     n_trainable = sum(p.numel() for n, p in c.net.named_parameters() if n not in frozen) + 2 * c.n_in
     info = {"policy": policy, "frozen": frozen, "trained": sorted(set(n for n, _ in c.net.named_parameters()) - set(frozen)) + ["input affine a, b"],
             "n_trainable": int(n_trainable), "n_parameters": int(sum(p.numel() for p in c.net.parameters())),
-            "lr": lr, "valid_mse_z_before": before, "input_affine": {"a": a.tolist(), "b": b.tolist()},
+            "lr": lr, "norm": norm, "n_rehearsal_episodes": len(rehearsal), "valid_mse_z_before": before, "input_affine": {"a": a.tolist(), "b": b.tolist()},
             "n_train_runs": len(train), "n_valid_runs": len(valid), **hist.to_json()}
     c.history = {k: v for k, v in info.items() if k not in ("train_loss", "valid_loss")}
     return c, info

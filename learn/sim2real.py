@@ -251,7 +251,9 @@ def _report(out: Path, m: dict[str, Any], other: str | None) -> None:
 S2R_BUDGET = {  # the default budget of `piezotwin sim2real` (2 CPU cores, <= 15 min on the Lupasic logs)
     "fit_rate_hz": 20.0, "n_boot": 16, "n_episodes": 96, "episode_s": 60.0, "pretrain_epochs": 40,
     "pretrain_patience": 12, "finetune_epochs": 120, "finetune_patience": 20, "lr": 3e-4, "policy": "none",
+    "finetune_norm": "checkpoint", "rehearsal": [0.0, 1.0],
 }
+FINETUNE_KEYS = ("finetune_epochs", "finetune_patience", "lr", "policy", "finetune_norm", "rehearsal")
 
 
 def isotonic_decreasing(x: np.ndarray, y: np.ndarray, n_knots: int = 200) -> tuple[np.ndarray, np.ndarray]:
@@ -339,8 +341,9 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
     out.mkdir(parents=True, exist_ok=True)
     state_f = out / "state.json"
     state = json.loads(state_f.read_text()) if state_f.is_file() else {}
-    key = {"family": family, "recording": str(Path(recording).resolve()), "test": test_glob, "budget": B, "seed": seed,
-           "model": model}
+    # the steps 1-3 key: the fine-tuning settings (step 4, always rerun) do not invalidate fit, data or pre-training
+    key = {"family": family, "recording": str(Path(recording).resolve()), "test": test_glob,
+           "budget": {k: v for k, v in B.items() if k not in FINETUNE_KEYS}, "seed": seed, "model": model}
     if state.get("key") != key:
         state = {"key": key, "done": {}}
     rate = float(B["fit_rate_hz"])
@@ -415,8 +418,9 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
         base = load_checkpoint(ck)
         # 4. fine-tune, baselines, learning curve
         task = bar.add_task("4/4 fine-tuning + baselines", total=1)
+        sim = FT.apply_map(FT.load_recording(gen_f, ["sensor"], ["force"]), "log") if max(_rehearsals(B)) > 0 else []
         m = _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target, rate,
-                           lambda k, n: bar.update(task, completed=k, total=n), log)
+                           lambda k, n: bar.update(task, completed=k, total=n), log, sim=sim)
     m["steps"] = state["done"]
     m["budget"] = B
     m["seconds_total_this_call"] = time.perf_counter() - t_all
@@ -436,7 +440,24 @@ def _chain_prior(family: str, runs) -> "Any":
     return p
 
 
-def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target, rate, tick, log) -> dict[str, Any]:
+def _rehearsals(B: dict) -> list[float]:
+    r = B["rehearsal"]
+    return [float(x) for x in r] if isinstance(r, (list, tuple)) else [float(r)]
+
+
+def rehearsal_set(sim: Seq[Sequence], n_samples: int, seed: int) -> list[Sequence]:
+    """Simulated episodes (a seeded random order) until they hold ``n_samples`` samples: the share of the
+    pre-training data kept in the fine-tuning set."""
+    out, n = [], 0
+    for i in np.random.default_rng([int(seed), 0x5E]).permutation(len(sim)):
+        if n >= n_samples:
+            break
+        out.append(sim[i])
+        n += len(sim[i])
+    return out
+
+
+def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target, rate, tick, log, sim=()) -> dict[str, Any]:
     seqs = FT.apply_map(FT.load_recording(recording, [input_channel], [target], rate_hz=rate), "log")
     sp = FT.split_runs(seqs, train_fraction=None, test_glob=test_glob, seed=seed)
 
@@ -448,7 +469,8 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
         r["per_run_rmse"] = {s.key: M.rmse(s.y[:, 0], comp.predict(s.x)[:, 0]) for s in test}
         return r
 
-    kw = dict(policy=B["policy"], lr=B["lr"], max_epochs=int(B["finetune_epochs"]), patience=int(B["finetune_patience"]), seed=seed)
+    kw = dict(policy=B["policy"], lr=B["lr"], max_epochs=int(B["finetune_epochs"]), patience=int(B["finetune_patience"]), seed=seed,
+              norm=B["finetune_norm"])
     sizes = sorted({k for k in (1, 2, 4) if k < len(sp.train)} | {len(sp.train)})
     n_steps = len(sizes) + 1
     res: dict[str, Any] = {}
@@ -460,12 +482,18 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
     lc = []
     for i, k in enumerate(sizes):
         tr = [s for s in sp.train if s.key in sp.order[:k]]
-        ft, info = FT.finetune(base, tr, sp.valid, **kw)
+        # the share of simulated episodes mixed in: chosen per budget on the real valid runs (never the test runs)
+        ft, info, reh_ratio = None, None, None
+        for r in _rehearsals(B):
+            reh = rehearsal_set(sim, int(r * sum(len(s) for s in tr)), seed) if sim and r > 0 else []
+            c, ci = FT.finetune(base, tr, sp.valid, rehearsal=reh, **kw)
+            if info is None or ci["best_loss"] < info["best_loss"]:
+                ft, info, reh_ratio = c, ci, r
         sc = FT.train_from_scratch(base.kind, base.hparams, tr, sp.valid, seed=seed, max_epochs=int(B["finetune_epochs"]),
                                    patience=int(B["finetune_patience"]))
         st = StaticCurve(tr + list(sp.valid))  # the curve sees every labelled real run the others see
         row = {"n_runs": k, "runs": [s.key for s in tr], "finetuned": score(ft), "scratch": score(sc), "static_curve": score(st),
-               "finetune_epochs": info["epochs"], "finetune_best_epoch": info["best_epoch"]}
+               "finetune_epochs": info["epochs"], "finetune_best_epoch": info["best_epoch"], "rehearsal": reh_ratio}
         lc.append(row)
         log(f"  {k} real run(s): fine-tuned {row['finetuned']['rmse']:.3f} N, scratch {row['scratch']['rmse']:.3f} N, "
             f"static curve {row['static_curve']['rmse']:.3f} N")
@@ -477,7 +505,7 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
         res[k]["rmse_pct_full_scale"] = 100 * res[k]["rmse"] / full
     res["zero_shot"]["two_point_gain"]["rmse_pct_full_scale"] = 100 * res["zero_shot"]["two_point_gain"]["rmse"] / full
     curve = [{"n_runs": r["n_runs"], "runs": r["runs"], **{f"{k}_rmse": r[k]["rmse"] for k in ("finetuned", "scratch", "static_curve")},
-              "finetune_epochs": r["finetune_epochs"]} for r in lc]
+              "finetune_epochs": r["finetune_epochs"], "rehearsal": r["rehearsal"]} for r in lc]
     tg = {
         "finetuned_beats_scratch_and_static_every_budget": all(r["finetuned_rmse"] < min(r["scratch_rmse"], r["static_curve_rmse"]) for r in curve),
         "one_run_within_1.3x_all_runs": curve[0]["finetuned_rmse"] <= 1.3 * curve[-1]["finetuned_rmse"],

@@ -17,6 +17,7 @@ from pydantic import Field, field_validator, model_validator
 from scenes.base import Between, Fraction, NonNeg, NonNegFloat, Pos, PositiveFloat, Strict  # noqa: F401  (re-exported)
 from scenes.fabric_config import FabricSensorConfig
 from scenes.ntype_config import NtypeSensorConfig
+from scenes.scene_randomize import RandomizeConfig
 from scenes.velostat_config import VelostatSensorConfig
 
 
@@ -301,6 +302,7 @@ class SceneConfig(Strict):
     sampling: SamplingConfig = Field(default_factory=SamplingConfig)
     sensor: SensorConfig = Field(default_factory=CntPdmsSensorConfig)
     generation: GenerationConfig = Field(default_factory=GenerationConfig)
+    randomize: Optional[RandomizeConfig] = None  # per-episode distributions (scenes/scene_randomize.py)
 
     @model_validator(mode="before")
     @classmethod
@@ -334,6 +336,10 @@ class SceneConfig(Strict):
                 f"protocol.amplitude_max: {self.protocol.amplitude_max} m is a displacement >= pad.thickness_m "
                 f"({self.pad.thickness_m} m); allowed: < pad thickness"
             )
+        if self.randomize is not None and not self.randomize.empty():
+            from scenes.scene_randomize import check
+
+            check(self)
         return self
 
     def episode_duration_s(self, frequency_hz: float) -> float:

@@ -188,4 +188,7 @@ def load_scene(source: str | Path, overrides: list[str] | None = None) -> SceneC
 
 def config_json(cfg: SceneConfig) -> str:
     """Canonical JSON of a resolved config (sorted keys), as embedded in recordings."""
-    return json.dumps(cfg.model_dump(mode="json"), sort_keys=True, separators=(",", ":"))
+    d = cfg.model_dump(mode="json")
+    if not (d.get("randomize") or {}).get("params"):  # no randomize section: the JSON (and sha) of before it existed
+        d.pop("randomize", None)
+    return json.dumps(d, sort_keys=True, separators=(",", ":"))

@@ -23,7 +23,8 @@ through the inverse divider), each press's level l_j profiled out (its mean log 
 the press levels, level_log_sd = their std (the press-to-press spread is a parameter of the model, drawn
 per press when generating, not subtracted), miss_prob = share of loaded presses that stay at the rest
 level. Ranges: bootstrap over presses (resample presses with replacement, refit), 5-95 % per parameter;
-the predictive 90 % band of a new press's level is mean +- 1.645 sqrt(sd^2 + var_boot(mean)).
+the predictive 90 % band of a new press's level is mean +- 1.645 sqrt(sd^2 + se^2), se^2 = between-run
+variance / runs + within-run variance / presses (at the point fit's shape; see fit_chain).
 Hysteresis: the creep bank is the chain's (rate-dependent) hysteresis; no rate-independent (play) bank is
 fitted (the velostat model has none).
 """
@@ -382,8 +383,15 @@ def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = 
             v = np.array([d[k] for d in boot])
             ranges[k] = [float(np.percentile(v, 5)), float(np.percentile(v, 50)), float(np.percentile(v, 95))]
     lev = np.asarray(fin["levels"])
-    var_mean = float(np.var([np.log(d["r0_ohm"]) for d in boot])) if boot else 0.0
-    half = 1.645 * float(np.sqrt(fin["p"].level_log_sd ** 2 + var_mean))
+    # predictive band of a new press's level under the point fit's shape (the held-out levels are profiled
+    # with it): N(mean, sd^2 (1 + 1/n_eff)), the mean's uncertainty from the run means (presses of one run
+    # share its mounting, so they are not independent draws of it). Not the bootstrap spread of ln r0: each
+    # replicate refits the shape, and ln r0 trades off against the exponent, so that spread is the shape's
+    # uncertainty, not the level's (it made the band 1.6x too wide: 100 % of held-out levels inside).
+    n_runs = len({data.presses[j].run for j in idx})
+    sd = fin["p"].level_log_sd
+    se2 = fin["level_between_run_sd"] ** 2 / n_runs + fin["level_within_run_sd"] ** 2 / len(idx)
+    half = 1.645 * float(np.sqrt(sd ** 2 + se2))
     err = within_press_error(fin["p"], data, idx)
     err["n_presses"] = int(len(idx))
     err["n_missed_presses"] = int(sum(data.missed))
@@ -395,20 +403,32 @@ def _finish(q: ChainParams, data: _Data, idx: np.ndarray, runs: Seq[RealRun]) ->
     _, lev = _profile(data, q, idx)
     p = replace(q, r0_ohm=float(np.exp(np.mean(lev))), level_log_sd=float(np.std(lev, ddof=1)) if len(lev) > 1 else 0.0)
     p.miss_prob = float(np.mean(data.missed)) if data.missed else 0.0
+    # the spread split by run: within-run (press to press, placement) and between-run (run means: mounting,
+    # board gain); run = data.presses[j].run; a run with one press adds to the between part only
+    run_of = np.array([data.presses[j].run for j in idx])
+    within, means = [], []
+    for r in np.unique(run_of):
+        lr = lev[run_of == r]
+        means.append(float(np.mean(lr)))
+        within.extend(lr - np.mean(lr))
+    dof = max(len(lev) - len(means), 1)
+    w_sd = float(np.sqrt(np.sum(np.square(within)) / dof)) if len(lev) > len(means) else 0.0
+    b_sd = float(np.std(means, ddof=1)) if len(means) > 1 else 0.0
     sig = [r.noise_sd for r in runs if r.noise_sd > 0]
     p.noise_sd = float(np.median(sig)) if sig else 0.0
     fs = np.array([r.fs for r in runs])
     if p.divider == "high" and len(fs) > 1 and not any("adc_full_scale" in r.attrs for r in runs):
         p.full_scale = float(np.exp(np.mean(np.log(fs))))
         p.full_scale_log_sd = float(np.std(np.log(fs), ddof=1))
-    return {"p": p, "levels": lev}
+    return {"p": p, "levels": lev, "level_within_run_sd": w_sd, "level_between_run_sd": b_sd}
 
 
 def _summary(f: dict[str, Any]) -> dict[str, float]:
     p = f["p"]
     return {"exponent": p.exponent, "r0_ohm": p.r0_ohm, "threshold_force_n": p.threshold_force_n, "creep_amplitude": p.creep_amplitude,
             "creep_force_n": p.creep_force_n, "tau_min_s": p.tau_min_s, "tau_max_s": p.tau_max_s,
-            "level_log_sd": p.level_log_sd, "r_series_ohm": p.r_series_ohm}
+            "level_log_sd": p.level_log_sd, "r_series_ohm": p.r_series_ohm,
+            "level_within_run_sd": f["level_within_run_sd"], "level_between_run_sd": f["level_between_run_sd"]}
 
 
 def within_press_error(p: ChainParams, data: _Data, idx: np.ndarray) -> dict[str, Any]:
@@ -521,9 +541,18 @@ def randomization_from_fit(fit: ChainFit, runs: Seq[RealRun]):
             press[k] = Dist(kind="loguniform", low=0.5 * min(v), high=1.2 * max(v))
         else:
             press[k] = Dist(kind="uniform", low=float(np.percentile(v, 5)), high=float(np.percentile(v, 95)))
-    boot = [{k: float(b[k]) for k in ("exponent", "creep_amplitude", "creep_force_n", "tau_min_s", "tau_max_s",
-                                        "level_log_sd", "r_series_ohm", "threshold_force_n") if k in b} for b in fit.boot]
-    sd_gain = float(np.std([np.log(b["r0_ohm"]) for b in fit.boot])) if fit.boot else 0.1
+    # joint replicates, r0 with them (it trades off against the exponent: drawing the exponent of one
+    # replicate with the point fit's r0 and an independent gain of the bootstrap's ln r0 spread gave simulated
+    # levels at equal force twice as spread as the real ones); per press the within-run spread, per episode
+    # (one run: mounting, board) the between-run spread of the run means
+    boot = []
+    for b in fit.boot:
+        d = {k: float(b[k]) for k in ("exponent", "creep_amplitude", "creep_force_n", "tau_min_s", "tau_max_s",
+                                      "r0_ohm", "r_series_ohm", "threshold_force_n") if k in b}
+        if "level_within_run_sd" in b:
+            d["level_log_sd"] = float(b["level_within_run_sd"])
+        boot.append(d)
+    sd_gain = float(np.median([b["level_between_run_sd"] for b in fit.boot])) if fit.boot and "level_between_run_sd" in fit.boot[0] else 0.1
     episode = {"gain_log": Dist(kind="normal", mean=0.0, sd=max(sd_gain, 0.05)),  # estimate: floor 5 %
                "noise_scale": Dist(kind="loguniform", low=0.5, high=2.0)}  # estimate
     if p.full_scale_log_sd > 0:

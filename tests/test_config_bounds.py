@@ -30,6 +30,9 @@ def _is_float(ann: typing.Any) -> bool:
 def _float_fields(model: type[BaseModel], prefix: str, family: str | None, out: list) -> list:
     """(preset, dotted path, is_list) of every float or list-of-float field below `model`."""
     for name, f in model.model_fields.items():
+        ann0 = typing.get_args(f.annotation)[0] if typing.get_origin(f.annotation) is typing.Annotated else f.annotation
+        if typing.get_origin(ann0) is dict:  # keyed by free names (randomize.params): swept in test_scene_randomize
+            continue
         members = _union_members(f.annotation)
         if members:
             for m in members:

@@ -160,3 +160,22 @@ def test_lupasic_import_and_tiny_finetune_end_to_end(ckpt, tmp_path):
     assert sorted(m["split"]["test"]) == ["exp_pike1_force_10_sensor1_exp2", "exp_pike1_sensor1_exp2"]
     for k in ("zero_shot", "zero_shot_restandardised", "finetuned", "scratch"):
         assert np.isfinite(m["results"][k]["rmse"])
+
+
+def test_checkpoint_norm_and_rehearsal(ckpt):
+    """norm='checkpoint' starts from the pre-trained input z-score (only the learned affine moves it);
+    rehearsal adds simulated examples to the training set, not to the valid runs."""
+    base = load_checkpoint(ckpt)
+    real = FT.apply_map(sim_seqs(3, REALP, rest=800.0), "log")
+    sim = FT.apply_map(sim_seqs(2), "log")
+    ft, info = FT.finetune(base, real[:1], real[1:], policy="head", lr=1e-3, max_epochs=1, patience=1, norm="checkpoint")
+    a, b = np.array(info["input_affine"]["a"]), np.array(info["input_affine"]["b"])
+    np.testing.assert_allclose(ft.x_norm.std, base.x_norm.std / a, rtol=1e-6)
+    np.testing.assert_allclose(ft.x_norm.mean, base.x_norm.mean - b * base.x_norm.std / a, rtol=1e-6)
+    ft_r, _ = FT.finetune(base, real[:1], real[1:], policy="head", lr=1e-3, max_epochs=1, patience=1, norm="real")
+    assert not np.allclose(ft_r.x_norm.mean, ft.x_norm.mean)  # the real runs' statistics differ from the simulator's
+    _, info2 = FT.finetune(base, real[:1], real[1:], policy="head", lr=1e-3, max_epochs=1, patience=1, norm="checkpoint",
+                           rehearsal=sim)
+    assert info2["n_rehearsal_episodes"] == 2 and info2["valid_mse_z_before"] == pytest.approx(info["valid_mse_z_before"])
+    with pytest.raises(ValueError, match="norm"):
+        FT.finetune(base, real[:1], real[1:], norm="sim")

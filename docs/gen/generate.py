@@ -265,6 +265,51 @@ def bench_checksum() -> str:
                      "read time", "file, plain (bytes)", "checksums (bytes)", "file size"], rows) + hashed)
 
 
+# ----------------------------------------------------------------------------------------------- sim2real
+def sim2real_results() -> str:
+    """Table of the `piezotwin sim2real` runs recorded as bench/results/experiments/sim2real-<family>-<split>.json."""
+    files = sorted(EXPERIMENTS.glob("sim2real-*.json")) if EXPERIMENTS.is_dir() else []
+    if not files:
+        return missing("A recorded sim2real run", "Run `piezotwin sim2real ...` and copy its metrics.json to "
+                       "bench/results/experiments/sim2real-<family>-<split>.json.")
+    rows, curve, cal = [], [], []
+    for f in files:
+        m = json.loads(f.read_text())
+        name = f.stem.removeprefix("sim2real-")
+        r = m["results"]
+        z = r["zero_shot"]["two_point_gain"]
+        tg = m.get("targets", {})
+        t = m["split"]["test"]
+        rows.append([name, f"{len(t)} ({t[0]}{', ...' if len(t) > 1 else ''})", f"{m['full_scale_n']:.1f}",
+                     *(f"{num(r[k]['rmse'])} ({r[k]['rmse_pct_full_scale']:.1f} %)" for k in ("finetuned", "scratch", "static_curve")),
+                     f"{num(z['rmse'])} ({z['rmse_pct_full_scale']:.1f} %)",
+                     f"{sum(bool(v) for v in tg.values())}/{len(tg)}"])
+        for c in m["learning_curve"]:
+            curve.append([name, c["n_runs"], num(c["finetuned_rmse"]), num(c["scratch_rmse"]), num(c["static_curve_rmse"]),
+                          "yes" if c["finetuned_rmse"] < min(c["scratch_rmse"], c["static_curve_rmse"]) else "no"])
+        held = (m.get("steps", {}).get("fit", {}) or {}).get("held_out", {})
+        if held:
+            pdrop = held.get("plateau_drop", {})
+            cal.append([name, num(held.get("rms_log_reading_within_press")), pct(held.get("level_in_band90")),
+                        num(held.get("level_sd_log")), num(pdrop.get("real_median")), num(pdrop.get("sim_median"))])
+        b = m.get("budget", {})
+    out = ("Recorded `piezotwin sim2real` runs (`bench/results/experiments/sim2real-*.json`, each the run's "
+           f"metrics.json; budget: {b.get('n_episodes')} simulated episodes of {b.get('episode_s')} s at "
+           f"{b.get('fit_rate_hz')} Hz, up to {b.get('pretrain_epochs')} pre-training epochs). Test force RMSE in N "
+           "(% of the test runs' full scale); targets met of: fine-tuned beats scratch and the static curve at every "
+           "budget, one run within 1.3x of all runs, pooled <= 12 % FS, zero-shot with two-point gain <= 25 %.\n\n"
+           + table(["split", "test runs", "full scale (N)", "fine-tuned", "scratch", "static curve",
+                    "zero-shot, two-point gain", "targets met"], rows)
+           + "\n\nLearning curve (test RMSE, N, vs real training runs):\n\n"
+           + table(["split", "real runs", "fine-tuned", "scratch", "static curve", "fine-tuned best"], curve))
+    if cal:
+        out += ("\n\nFit on the held-out runs (levels of each press removed for the within-press error; band: the "
+                "share of held-out press levels inside the fitted 90 % band, target 80-95 %):\n\n"
+                + table(["split", "within-press rms ln reading", "levels in 90 % band", "held-out level sd (ln)",
+                         "plateau drop, real", "plateau drop, sim"], cal))
+    return out + "\n"
+
+
 # ----------------------------------------------------------------------------------------------- characterization
 def characterization(preset: str) -> str:
     d = load(f"characterize-{preset}.json")
@@ -717,6 +762,7 @@ def outputs() -> dict[Path, Callable[[], str]]:
         GEN / "bench-checksum.md": bench_checksum,
         GEN / "channels-common.md": channels_common,
         GEN / "cli.md": cli,
+        GEN / "sim2real.md": sim2real_results,
     }
     for fam, presets in presets_by_family().items():
         outs[GEN / f"channels-{fam}.md"] = (lambda f=fam: channels(f))

@@ -90,13 +90,58 @@ def simulate_slices(
             done = physics[n] if physics is not None else None if padded is None else padded.pop(n)
             for sl, batch in iter_load_batches(cfg, [protos[i] for i in idx], threads, SENSOR_SLICE if gpu else None, on_device, done):
                 part = idx[sl]
-                out = sensor.run_load(batch if on_device else batch.on_host(), [seeds[i] for i in part])
+                out = run_sensor(cfg, sensor, batch if on_device else batch.on_host(), [seeds[i] for i in part],
+                                 [protos[i] for i in part])
                 batch = batch.on_host() if _records_fields(cfg) else batch
                 yield part, [protos[i] for i in part], channel_arrays(batch, out, cfg, sensor)
 
 
 def episode_protocols(cfg: SceneConfig, seeds: list[int], indices: list[int] | None = None) -> list[EpisodeProtocol]:
-    return [make_episode_protocol(cfg, s, None if indices is None else indices[i]) for i, s in enumerate(seeds)]
+    """The episodes' protocols; with a scene `randomize` section each episode's draws (from its seed) go into
+    its protocol (protocol.* paths, the placement) and into ``params['randomized']`` (recorded, and used by
+    `run_sensor` for the sensor.* paths)."""
+    from dataclasses import replace
+
+    from scenes.scene_randomize import PLACEMENT, draw, with_values
+
+    out = []
+    for i, s in enumerate(seeds):
+        vals = draw(cfg, s)
+        c = with_values(cfg, {k: v for k, v in vals.items() if k.startswith("protocol.")})
+        p = make_episode_protocol(c, s, None if indices is None else indices[i])
+        if vals:
+            off = np.array(p.offset_xy_m, dtype=float)
+            for ax, key in enumerate(PLACEMENT):
+                if key in vals:
+                    off[ax] = vals[key]
+            p = replace(p, offset_xy_m=off, params={**p.params, "randomized": vals})
+        out.append(p)
+    return out
+
+
+def _episode_slice(batch: LoadBatch, j: int) -> LoadBatch:
+    from dataclasses import replace
+
+    e = slice(j, j + 1)
+    return replace(batch, target=batch.target[e], indenter_pos_m=batch.indenter_pos_m[e], contact_force_n=batch.contact_force_n[e],
+                   contact_points=batch.contact_points[e], deformation_m=batch.deformation_m[e], pressure_pa=batch.pressure_pa[e],
+                   shear_pa=batch.shear_pa[e])
+
+
+def run_sensor(cfg: SceneConfig, sensor: SensorModel, batch: LoadBatch, seeds: list[int], protos: list[EpisodeProtocol]) -> dict[str, np.ndarray]:
+    """The sensor chain over a batch; episodes whose scene draws set sensor.* paths run one by one through a
+    sensor built from their own scene (the same seeds, so an episode's output does not depend on its batch)."""
+    from scenes.scene_randomize import with_values
+
+    own = [{k: v for k, v in p.params.get("randomized", {}).items() if k.startswith("sensor.")} for p in protos]
+    if not any(own):
+        return sensor.run_load(batch, seeds)
+    batch = batch.on_host()
+    parts = []
+    for j, vals in enumerate(own):
+        sj = make_sensor(with_values(cfg, vals), sensor.backend, sensor.device) if vals else sensor
+        parts.append(sj.run_load(_episode_slice(batch, j), [seeds[j]]))
+    return {k: np.concatenate([p[k] for p in parts], axis=0) for k in parts[0]}
 
 
 def length_groups(protos: list[EpisodeProtocol]) -> list[tuple[int, list[int]]]:
@@ -208,6 +253,7 @@ def episode_attrs(seed: int, protocol: EpisodeProtocol, k: int) -> dict:
         "n_samples": protocol.n_samples,
         "control": protocol.control,
         "kind": protocol.kind,
+        **{f"rand.{k}": float(v) for k, v in sorted(protocol.params.get("randomized", {}).items())},
     }
 
 
