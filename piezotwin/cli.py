@@ -6,6 +6,7 @@ naming the problem and exits with code 2, before anything is written.
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 from typing import Annotated, Optional
@@ -15,6 +16,22 @@ from rich.table import Table
 
 from piezotwin.common import SetOpt, _check_writable, _load, _print_summary, _quiet_warp, app, console, err, fail  # noqa: F401
 
+
+
+TIMINGS_ENV = "PIEZOTWIN_TIMINGS_JSON"
+
+
+def _dump_timings() -> None:
+    """Where $PIEZOTWIN_TIMINGS_JSON names a file (benches), write the last run's seconds per stage there."""
+    path = os.environ.get(TIMINGS_ENV)
+    if not path:
+        return
+    import json
+
+    from simulate.generation.executors import LAST_GENERATE_SECONDS
+    from simulate.generation.feed import LAST_RUN_SECONDS
+
+    Path(path).write_text(json.dumps({"generate": LAST_GENERATE_SECONDS, "feed": LAST_RUN_SECONDS}, indent=1))
 
 
 @app.command()
@@ -118,6 +135,7 @@ def generate(
         console.print(f"resumed: {len(skipped)} complete shard(s) kept")
     console.print(f"wrote {manifest}")
     console.print(chosen.line(), highlight=False, soft_wrap=True)
+    _dump_timings()
     from sensors.data.manifest import shard_path
 
     _print_summary(shard_path(out, 0))
