@@ -310,6 +310,16 @@ def raw_write(folder: Path, nbytes: int) -> float:
     return nbytes / dt / 1e6
 
 
+def run_samples(cfg, episodes: int) -> int:
+    """Sensor samples of a run: the sum of each episode's own length (mixed frequencies: mixed lengths)."""
+    from sensors.data.manifest import episode_seed
+    from simulate.protocols.indenter import make_episode_protocol
+
+    if len(set(cfg.protocol.frequencies_hz)) == 1:
+        return episodes * make_episode_protocol(cfg, 0).n_samples
+    return sum(make_episode_protocol(cfg, episode_seed(cfg.generation.root_seed, k)).n_samples for k in range(episodes))
+
+
 def end_to_end(device: str, per_shard: int, workers: int, shards_per_worker: int, extra: list[str] | None = None) -> dict:
     """`workers` processes share the GPU(s), each writing `shards_per_worker` shards of `per_shard` episodes."""
     from simulate.generation.executors import generate
@@ -327,7 +337,7 @@ def end_to_end(device: str, per_shard: int, workers: int, shards_per_worker: int
     nbytes = sum(p.stat().st_size for p in root.glob("*.h5"))
     from simulate.protocols.indenter import make_episode_protocol
 
-    samples = episodes * make_episode_protocol(cfg, 0).n_samples
+    samples = run_samples(cfg, episodes)
     shutil.rmtree(root, ignore_errors=True)  # the disk holds the dataset or the raw file, not both
     root.mkdir(parents=True)
     raw = raw_write(root, nbytes)

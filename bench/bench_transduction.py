@@ -84,7 +84,25 @@ def bench_warp(cfg, E, T, N, device, repeats=3):
         whole_chain()
         wp.synchronize_device(chain.device)
         best_full = min(best_full, time.perf_counter() - t0)
-    return {"kernel": E * T * N / best, "chain": E * T * N / best_full, "h2d_s": h2d, "device": chain.device}
+    # where the whole chain's time goes: each stage alone, synchronised between stages (best of `repeats`)
+    stage_s = {"taxel kernel": float("inf"), "channel sums": float("inf"), "readout + copies back": float("inf")}
+    for _ in range(repeats):
+        chain.reset()
+        wp.synchronize_device(chain.device)
+        t0 = time.perf_counter()
+        chain.run_device(drive, T, 0, outs)
+        wp.synchronize_device(chain.device)
+        t1 = time.perf_counter()
+        g, _ = el.sum_channels_warp(outs[2], outs[1], tc, 1, tp.taxel_area_m2, (E, T, N), chain.device)
+        wp.synchronize_device(chain.device)
+        t2 = time.perf_counter()
+        el.readout_warp(g, (E, T, 1), noise, ep, None, chain.device)
+        wp.synchronize_device(chain.device)
+        t3 = time.perf_counter()
+        for k, v in zip(stage_s, (t1 - t0, t2 - t1, t3 - t2)):
+            stage_s[k] = min(stage_s[k], v)
+    return {"kernel": E * T * N / best, "chain": E * T * N / best_full, "h2d_s": h2d, "device": chain.device,
+            "chain_seconds": best_full, "stage_seconds": stage_s}
 
 
 def bench_fabric(E: int, T: int, N: int, device: str = "cpu", repeats: int = 7) -> dict:
@@ -205,6 +223,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     ap.add_argument("--velostat", action="store_true", help="only the velostat film kernel: aging vs spectrum creep")
     ap.add_argument("--only", choices=["ntype"], help="run this family alone and merge it into the results file")
+    ap.add_argument("--tag", default="", help="result file name: transduction-<tag>.json (default gpu / cpu)")
     a = ap.parse_args()
     if a.velostat:
         from sensors.warp_setup import init_warp
@@ -244,9 +263,12 @@ def main() -> None:
         res["warp_cuda"] = {
             "episodes": a.gpu_episodes, "device_name": wp.get_device("cuda:0").name,
             "taxel_steps_per_s_kernel": g["kernel"], "taxel_steps_per_s_chain": g["chain"], "h2d_s": g["h2d_s"],
+            "chain_seconds": g["chain_seconds"], "stage_seconds": g["stage_seconds"],
         }
         print(f"warp cuda ({res['warp_cuda']['device_name']}): kernel {g['kernel']:.3g}, whole chain {g['chain']:.3g} "
               f"taxel-steps/s ({a.gpu_episodes} x {N} x {a.steps}); h2d of the drive {g['h2d_s']:.2f} s")
+        print("  stages alone: " + ", ".join(f"{k} {1e3 * v:.2f} ms" for k, v in g["stage_seconds"].items())
+              + f"; whole chain {1e3 * g['chain_seconds']:.2f} ms")
         print(f"  ratio cuda / warp-cpu: {g['chain'] / w['chain']:.0f}x; cuda / numpy: {g['chain'] / res['numpy_ref']['taxel_steps_per_s']:.0f}x")
     fe = min(a.episodes, 4)
     fb = bench_fabric(fe, a.steps, N, "cpu")
@@ -262,7 +284,7 @@ def main() -> None:
     res["ntype_cpu"] = bench_ntype()
     _print_ntype(res["ntype_cpu"])
     a.out.mkdir(parents=True, exist_ok=True)
-    tag = "gpu" if "warp_cuda" in res else "cpu"
+    tag = a.tag or ("gpu" if "warp_cuda" in res else "cpu")
     path = a.out / f"transduction-{tag}.json"
     path.write_text(json.dumps(res, indent=2))
     print(f"wrote {path}")

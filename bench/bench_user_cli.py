@@ -54,6 +54,7 @@ def main() -> None:
     ap.add_argument("--tag", default="local")
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     ap.add_argument("--scratch", type=Path, default=None, help="where the datasets go (default: a temp dir beside results)")
+    ap.add_argument("--timeout", type=float, default=None, help="seconds per CLI run (killed past it; recorded as an error)")
     a = ap.parse_args()
     fams, eps = a.families.split(","), [int(x) for x in a.episodes.split(",")]
     res = {"host": platform.node(), "cpus": os.cpu_count(), "gpu": gpu_name(), "runs": {}}
@@ -62,13 +63,22 @@ def main() -> None:
         with tempfile.TemporaryDirectory(dir=scratch) as tmp:
             out = Path(tmp) / "ds"
             cmd = [sys.executable, "-m", "piezotwin.cli", "generate", fam, "-o", str(out), "--episodes", str(n)] + a.extra.split()
+            timings = Path(tmp) / "timings.json"
+            env = {**os.environ, "PIEZOTWIN_TIMINGS_JSON": str(timings)}
             t0 = time.perf_counter()
-            p = subprocess.run(cmd, capture_output=True, text=True)
+            try:
+                p = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=a.timeout)
+            except subprocess.TimeoutExpired as exc:
+                res["runs"][fam] = {"episodes": n, "error": f"killed after {exc.timeout} s"}
+                print(f"{fam}: killed after {exc.timeout} s")
+                _save(res, a)
+                continue
             wall = time.perf_counter() - t0
             line = next((ln for ln in p.stdout.splitlines() if ln.startswith("engine:")), "")
             if p.returncode != 0:
                 res["runs"][fam] = {"episodes": n, "error": (p.stderr or p.stdout)[-2000:]}
                 print(f"{fam}: failed\n{p.stderr[-2000:]}")
+                _save(res, a)
                 continue
             m = json.loads((out / "manifest.json").read_text())
             nbytes = sum(f.stat().st_size for f in out.glob("*.h5"))
@@ -89,13 +99,23 @@ def main() -> None:
                  "raw_MB_per_s_same_bytes": raw, "of_raw": nbytes / wall / 1e6 / raw, "engine_line": line}
             if samples:
                 r.update(samples=samples, samples_per_s=samples / wall)
+            if timings.exists():  # seconds per stage, from the CLI process (start-up, first batch, drain, manifest)
+                r["timings"] = json.loads(timings.read_text())
             res["runs"][fam] = r
             print(f"{fam}: {n} episodes in {wall:.1f} s, {r.get('samples_per_s', 0):.3g} samples/s, {r['MB_per_s']:.0f} MB/s "
                   f"({r['of_raw']:.0%} of raw {raw:.0f} MB/s)\n  {line}")
+            if "timings" in r:
+                print("  " + "; ".join(f"{k} {v:.1f} s" for part in r["timings"].values() for k, v in part.items()))
+            _save(res, a)
+    print(f"wrote {_save(res, a)}")
+
+
+def _save(res: dict, a: argparse.Namespace) -> Path:
+    """The results so far (after each family, so a run stopped midway keeps what it measured)."""
     a.out.mkdir(parents=True, exist_ok=True)
     path = a.out / f"user-cli-{a.tag}.json"
     path.write_text(json.dumps(res, indent=2))
-    print(f"wrote {path}")
+    return path
 
 
 if __name__ == "__main__":

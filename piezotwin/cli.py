@@ -6,6 +6,7 @@ naming the problem and exits with code 2, before anything is written.
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 from typing import Annotated, Optional
@@ -18,6 +19,22 @@ from piezotwin.common import (  # noqa: F401
     err, fail,
 )
 
+
+
+TIMINGS_ENV = "PIEZOTWIN_TIMINGS_JSON"
+
+
+def _dump_timings() -> None:
+    """Where $PIEZOTWIN_TIMINGS_JSON names a file (benches), write the last run's seconds per stage there."""
+    path = os.environ.get(TIMINGS_ENV)
+    if not path:
+        return
+    import json
+
+    from simulate.generation.executors import LAST_GENERATE_SECONDS
+    from simulate.generation.feed import LAST_RUN_SECONDS
+
+    Path(path).write_text(json.dumps({"generate": LAST_GENERATE_SECONDS, "feed": LAST_RUN_SECONDS}, indent=1))
 
 
 @app.command()
@@ -121,6 +138,7 @@ def generate(
         console.print(f"resumed: {len(skipped)} complete shard(s) kept")
     console.print(f"wrote {manifest}")
     console.print(chosen.line(), highlight=False, soft_wrap=True)
+    _dump_timings()
     _print_dataset_summary(out)
 
 

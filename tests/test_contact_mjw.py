@@ -139,7 +139,8 @@ def test_gpu_generation_keeps_fields_on_device_and_slices_the_sensor_stage(gpu_d
     """The GPU path (taxel fields left on the device for cnt_pdms, sensor stage in slices after one physics
     batch) records the same channels as the same worlds with the fields copied to the host in one pass."""
     from sensors.registry import make_sensor
-    from simulate import contact, run
+    from simulate.contact import load_field as contact  # where iter_load_batches looks simulate_sensors up
+    from simulate.generation import run
 
     dev = "cpu" if gpu_device == "cpu" else "cuda"
     rec = "generation.record=[target,position,contact_force,force_taxel,adc]"

@@ -173,7 +173,8 @@ def test_feed_packs_each_gpu_slice_before_the_next_overwrites_its_staging(gpu_de
     packed into shared blocks of a BlockPool slice by slice (3-episode slices, 2-episode shards), equal to the
     same physics run through the plain path (a fresh host array per copy)."""
     from sensors.data.manifest import episode_seed
-    from simulate import contact, feed
+    from simulate.contact import load_field as contact  # where iter_load_batches looks simulate_sensors up
+    from simulate.generation import feed
     from simulate.contact.load_field import physics_engine
 
     dev = "cpu" if gpu_device == "cpu" else "cuda"
