@@ -57,7 +57,7 @@ def main() -> None:
     ap.add_argument("--timeout", type=float, default=None, help="seconds per CLI run (killed past it; recorded as an error)")
     a = ap.parse_args()
     fams, eps = a.families.split(","), [int(x) for x in a.episodes.split(",")]
-    res = {"host": platform.node(), "cpus": os.cpu_count(), "gpu": gpu_name(), "runs": {}}
+    res = {"host": platform.node(), "cpus": os.cpu_count(), "gpu": gpu_name(), "extra": a.extra, "runs": {}}
     scratch = a.scratch or a.out.parent
     for fam, n in zip(fams, eps):
         with tempfile.TemporaryDirectory(dir=scratch) as tmp:
