@@ -335,8 +335,6 @@ def end_to_end(device: str, per_shard: int, workers: int, shards_per_worker: int
     dt = time.perf_counter() - t0
     t_sync = time.perf_counter() - t_sync
     nbytes = sum(p.stat().st_size for p in root.glob("*.h5"))
-    from simulate.protocols.indenter import make_episode_protocol
-
     samples = run_samples(cfg, episodes)
     shutil.rmtree(root, ignore_errors=True)  # the disk holds the dataset or the raw file, not both
     root.mkdir(parents=True)

@@ -14,7 +14,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
-from scenes.base import Between, NonNeg, Pos, Strict
+from scenes.base import NonNeg, Pos, Strict
 
 
 class FabricStackConfig(Strict):

@@ -196,8 +196,6 @@ def test_load_batches_in_slices_equal_one_batch(disp):
 
 def test_sensor_chain_on_device_fields_equals_host_fields():
     """cnt_pdms takes taxel fields left on the Warp device (GPU path) and gives the same outputs as from numpy."""
-    import dataclasses as dc
-
     from sensors.cnt_pdms.model import CntPdmsSensor
     from sensors.warp_setup import init_warp
     from simulate.contact.load_field_kernels import load_field_warp

@@ -172,7 +172,6 @@ def bench_user_cli() -> str:
         if not d:
             continue
         for fam, r in d["runs"].items():
-            extra = " ".join(d.get("extra", "").split()) or "defaults"
             if "error" in r:
                 rows.append([fam, r["episodes"], f"`{name}`", r["error"].splitlines()[-1][:80], "–", "–", "–", "–"])
                 continue

@@ -12,11 +12,16 @@ we average 32 for the expectation) is 24.2 %; the presets hold both. `piezotwin 
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from dataclasses import dataclass, replace
 
 from pathlib import Path
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from sensors.calibration import CalibrationResult
 
 KOHM = 1e3  # the paper's resistance unit (not printed in the paper)  # estimate
 

@@ -15,6 +15,8 @@ The MuJoCo load fields do not depend on the sensor's material parameters, so `lo
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -25,6 +27,9 @@ from sensors.registry import make_sensor
 from simulate.characterize.report import Report, fmt
 from simulate.contact.load_field import run_episodes
 from simulate.protocols.indenter import EpisodeProtocol
+
+if TYPE_CHECKING:
+    from sensors.calibration import CalibrationResult
 
 # cnt_pdms sect. 3.1: max hysteresis error of the uncompensated sensor, % FSO (reported without a frequency;
 # the LSTM results of Table 3 are quoted at 0.5 Hz, so we compare at 0.5 Hz).
