@@ -207,3 +207,52 @@ def test_tcn_log_inputs_stream_checkpoint_and_errors(tmp_path):
         make_model("tcn", **hp).fit([s.x - 100.0 for s in tr], [s.y for s in tr])
     with pytest.raises(ValueError, match="outside"):
         make_model("tcn", **{**hp, "log_inputs": [1]}).fit([s.x for s in tr], [s.y for s in tr])
+
+
+def test_play_gaps_hand_computed_and_wiping_out():
+    """Play (backlash) operator of width r: the state follows u only once u leaves [p - r, p + r]; the gap
+    (p - u) / r is +-1 on a monotone branch, and a minor loop inside a major one leaves the state where the major
+    branch put it (return-point memory)."""
+    from learn.models.tcn import play_gaps
+
+    u = np.array([0.0, 1.0, 2.0, 1.5, 1.0, 0.5, 1.0])
+    g, p = play_gaps(u, np.array([0.5]))
+    # states: 0, 0.5, 1.5, 1.5, 1.5, 1.0, 1.0
+    np.testing.assert_allclose(g[:, 0], (np.array([0.0, 0.5, 1.5, 1.5, 1.5, 1.0, 1.0]) - u) / 0.5)
+    assert p[0] == pytest.approx(1.0)
+    # monotone rise: every gap reaches -1; stepping through the series in pieces gives the same gaps
+    ur = np.linspace(0, 3, 31)
+    r = np.array([0.1, 0.4, 1.0])
+    gr, _ = play_gaps(ur, r)
+    assert np.allclose(gr[-1], -1.0)
+    g1, p1 = play_gaps(ur[:10], r)
+    g2, _ = play_gaps(ur[10:], r, p1)
+    np.testing.assert_allclose(np.concatenate([g1, g2]), gr)
+    # wiping out: a minor loop smaller than the widest operator's width does not move that operator's state
+    um = np.concatenate([ur, [2.8, 2.6, 2.8, 3.0]])
+    _, pm = play_gaps(um, r)
+    assert pm[2] == pytest.approx(2.0)
+
+
+def test_tcn_play_bank_stream_checkpoint_and_errors(tmp_path):
+    """play_widths: a play bank on ln R joins the inputs; widths scale with the training span, streaming equals
+    batch, the checkpoint round-trips, and it refuses a bank without log_inputs or a width outside (0, 1]."""
+    sp = stratified_split(synth(), "frequency_hz", 0, (0.6, 0.1, 0.3))
+    tr, va, te = sp["train"], sp["valid"], sp["test"]
+    hp = {**TINY["tcn"], "log_inputs": [0], "play_widths": [0.05, 0.3]}
+    m = make_model("tcn", **hp).fit([s.x for s in tr], [s.y for s in tr], valid=([s.x for s in va], [s.y for s in va]),
+                                   seed=3, inputs=["r"], targets=["f"], units={"r": "ohm", "f": "N"})
+    mean = make_model("mean").fit([s.x for s in tr], [s.y for s in tr])
+    assert _rmse(m, te) < 0.5 * _rmse(mean, te)
+    lr = np.log(np.concatenate([s.x[:, 0] for s in tr]))
+    span = (lr.max() - lr.min()) / lr.std()
+    np.testing.assert_allclose(m.net.play_r.numpy(), [0.05 * span, 0.3 * span], rtol=1e-4)
+    x = te[0].x
+    np.testing.assert_allclose(m.stream().run(x), m.predict(x), rtol=1e-4, atol=1e-4)
+    save_checkpoint(m, tmp_path / "ck")
+    m2 = load_checkpoint(tmp_path / "ck")
+    np.testing.assert_array_equal(m2.predict(x), m.predict(x))
+    with pytest.raises(ValueError, match="log_inputs"):
+        make_model("tcn", **{**hp, "log_inputs": None}).fit([s.x for s in tr], [s.y for s in tr])
+    with pytest.raises(ValueError, match="play_widths"):
+        make_model("tcn", **{**hp, "play_widths": [0.0, 0.3]}).fit([s.x for s in tr], [s.y for s in tr])

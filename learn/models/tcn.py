@@ -15,6 +15,16 @@ each layer keeps a ring buffer of its last (k-1) d + 1 inputs, so no window is r
 with the training statistics, kept as buffers of the net, so checkpoints and stream() need nothing else).
 For a resistance that spans a decade or more (the fabric stacks) the log is the natural scale of the
 contact law (R_c ~ F^-1/3 .. F^-1/2) and a z-scored R alone crowds the high-force end.
+
+``play_widths`` (fractions, default none; needs ``log_inputs``): a Prandtl-Ishlinskii bank of play
+(backlash) operators on u = the z-scored ln x of the first log channel, the classic inverse-hysteresis
+compensator's memory (Kuhnen 2003, "Modeling, identification and compensation of complex hysteretic
+nonlinearities"; Brokate & Sprekels 1996, ch. 2). Width j is r_j = play_widths[j] * (max u - min u over the
+training inputs); the operator p_j(t) = min(u + r_j, max(u - r_j, p_j(t-1))), p_j(0) = u(0), and the net reads
+the normalised gap g_j = (p_j - u) / r_j in [-1, 1]: the branch direction (small widths) and where the last
+turning points lie (large widths), with the wiping-out (return-point) memory a receptive field of finite
+length does not have. Computed on whole sequences before the convolutions (it is recursive) and stepped in
+stream(); the widths live in the checkpoint as the buffer ``play_r``.
 """
 
 from __future__ import annotations
@@ -26,7 +36,20 @@ from torch import nn
 from learn.models.base import Streamer, register
 from learn.models.neural import TRAIN_DEFAULTS, TorchCompensator, _f32
 
-__all__ = ["CausalTCN", "TCNCompensator"]
+__all__ = ["CausalTCN", "TCNCompensator", "play_gaps"]
+
+
+def play_gaps(u: np.ndarray, r: np.ndarray, p0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Play operators of widths r [m] (> 0) on the series u [T]: the gaps (p - u) / r [T, m] and the last
+    state p [m]. p starts at p0 (default u[0]: the input has rested at its first value)."""
+    u = np.asarray(u, np.float64).reshape(-1)
+    r = np.asarray(r, np.float64).reshape(-1)
+    p = np.full(len(r), u[0]) if p0 is None else np.array(p0, np.float64)
+    out = np.empty((len(u), len(r)))
+    for t, ut in enumerate(u):
+        p = np.minimum(ut + r, np.maximum(ut - r, p))
+        out[t] = p
+    return (out - u[:, None]) / r, p
 
 
 class LogFeatures(nn.Module):
@@ -68,13 +91,18 @@ class CausalTCN(nn.Module):
     first appends the z-scored ln of those raw input channels (LogFeatures)."""
 
     def __init__(self, n_in: int, n_out: int, channels: int, kernel: int, dilations: list[int],
-                 log_inputs: list[int] | None = None):
+                 log_inputs: list[int] | None = None, n_play: int = 0):
         super().__init__()
         if log_inputs:
             self.feat = LogFeatures(n_in, list(log_inputs))
             n_in = n_in + len(self.feat.idx)
         else:
             self.feat = None
+        # play gaps arrive appended to the normalised inputs (computed outside: the operator is recursive)
+        self.n_play = int(n_play)
+        if self.n_play:  # only then: checkpoints of a TCN without play load as before
+            self.register_buffer("play_r", torch.ones(self.n_play, dtype=torch.float32))
+        n_in = n_in + self.n_play
         self.kernel, self.dilations = int(kernel), [int(d) for d in dilations]
         self.rf = 1 + (self.kernel - 1) * sum(self.dilations)
         self.inp = nn.Conv1d(n_in, channels, 1)
@@ -84,7 +112,11 @@ class CausalTCN(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         if self.feat is not None:
-            x = self.feat(x)
+            if self.n_play:
+                g = x[..., x.shape[-1] - self.n_play :]
+                x = torch.cat([self.feat(x[..., : x.shape[-1] - self.n_play]), g], dim=-1)
+            else:
+                x = self.feat(x)
         x = x.transpose(1, 2)
         h = self.inp(x)
         for conv, d in zip(self.convs, self.dilations):
@@ -99,7 +131,7 @@ class TCNCompensator(TorchCompensator):
     early-stopping loop as the paper's models."""
 
     DEFAULTS = {**TRAIN_DEFAULTS, "channels": 32, "kernel": 3, "dilations": [1, 2, 4, 8, 16, 32],
-                "chunk": 64, "batch_size": 16, "lr": 2e-3, "log_inputs": None}
+                "chunk": 64, "batch_size": 16, "lr": 2e-3, "log_inputs": None, "play_widths": None}
     temporal = True
 
     @property
@@ -110,11 +142,26 @@ class TCNCompensator(TorchCompensator):
     def _build(self):
         h = self.hparams
         return CausalTCN(self.n_in, self.n_out, int(h["channels"]), int(h["kernel"]), list(h["dilations"]),
-                         list(h["log_inputs"] or []))
+                         list(h["log_inputs"] or []), len(h["play_widths"] or []))
+
+    def _play_u(self, z: np.ndarray) -> np.ndarray:
+        """u: the z-scored ln of the first log channel (LogFeatures' statistics) of normalised inputs z [T, n_in]."""
+        f = self.net.feat
+        g = lambda t: t.detach().double().numpy()  # noqa: E731
+        return (f.raw_log(np.asarray(z, np.float64)[:, :1 + max(f.idx)])[:, 0] - g(f.l_mean)[0]) / g(f.l_std)[0]
+
+    def _augment(self, z: np.ndarray) -> np.ndarray:
+        """Normalised inputs [T, n_in] -> [T, n_in + n_play] (the play gaps appended); unchanged without play."""
+        if not self.net.n_play:
+            return z
+        gaps, _ = play_gaps(self._play_u(z), self.net.play_r.detach().double().numpy())
+        return np.concatenate([z, gaps], axis=1)
 
     def _prepare(self, zx):
         idx = list(self.hparams["log_inputs"] or [])
         if not idx:
+            if self.hparams["play_widths"]:
+                raise ValueError("tcn: play_widths needs log_inputs (the play bank runs on the first log channel)")
             return
         bad = [i for i in idx if not 0 <= int(i) < self.n_in]
         if bad:
@@ -123,7 +170,13 @@ class TCNCompensator(TorchCompensator):
         if lo <= 0:
             raise ValueError(f"tcn: log_inputs need positive inputs (minimum {lo:g})")
         self.net.feat.set_stats(self.x_norm.mean, self.x_norm.std, zx)
-
+        w = [float(v) for v in (self.hparams["play_widths"] or [])]
+        if w:
+            if not all(np.isfinite(v) and 0 < v <= 1 for v in w):
+                raise ValueError(f"tcn: play_widths must lie in (0, 1] (fractions of the training span), got {w}")
+            u = np.concatenate([self._play_u(z) for z in zx])
+            span = max(float(u.max() - u.min()), 1e-6)
+            self.net.play_r.copy_(torch.as_tensor(np.asarray(w) * span, dtype=torch.float32))
     def _pad(self, z: np.ndarray) -> np.ndarray:
         return np.concatenate([np.repeat(z[:1], self.context - 1, axis=0), z], axis=0)
 
@@ -132,7 +185,7 @@ class TCNCompensator(TorchCompensator):
         rf = self.context
         X, Y = [], []
         for x, y in zip(zx, zy):
-            xp = self._pad(x)
+            xp = self._pad(self._augment(x))
             starts = sorted(set(range(0, len(x) - L + 1, max(1, L // 2))) | {len(x) - L})
             for s in starts:
                 X.append(xp[s : s + L + rf - 1])
@@ -140,7 +193,7 @@ class TCNCompensator(TorchCompensator):
         return _f32(np.stack(X)), _f32(np.stack(Y))
 
     def _forward_seq(self, z):
-        return self.net(_f32(self._pad(z))[None])[0].double().numpy()
+        return self.net(_f32(self._pad(self._augment(z)))[None])[0].double().numpy()
 
     def _streamer(self) -> Streamer:
         return TCNStreamer(self)
@@ -154,6 +207,8 @@ class TCNStreamer(Streamer):
         g = lambda t: t.detach().double().numpy()  # noqa: E731
         self.xm, self.xs = comp.x_norm.mean, comp.x_norm.std
         self.feat = net.feat
+        self.comp = comp
+        self.play_r = g(net.play_r) if net.n_play else None
         self.ym, self.ys = comp.y_norm.mean, comp.y_norm.std
         self.w_in, self.b_in = g(net.inp.weight)[:, :, 0], g(net.inp.bias)
         self.k = net.kernel
@@ -169,11 +224,17 @@ class TCNStreamer(Streamer):
     def reset(self) -> None:
         self.bufs: list[np.ndarray] | None = None
         self.t = 0
+        self.play_p: np.ndarray | None = None
 
     def step(self, x: np.ndarray) -> np.ndarray:
         z = (np.asarray(x, np.float64).reshape(-1) - self.xm) / self.xs
+        gaps = None
+        if self.play_r is not None:
+            gaps, self.play_p = play_gaps(self.comp._play_u(z[None]), self.play_r, self.play_p)
         if self.feat is not None:
             z = self.feat.numpy(z)
+        if gaps is not None:
+            z = np.concatenate([z, gaps[0]])
         h = self.w_in @ z + self.b_in
         first = self.bufs is None
         if first:
