@@ -70,3 +70,20 @@ def test_experiment_cnt_pdms_quick(tmp_path):
     assert f["tcn_beats_best_paper_model"]["rmse"]
     # the paper's GRU > LSTM error order (the LSTM's quick budget: lr 3e-3, 40 epochs)
     assert f["pairwise_rmse_decreasing"]["gru>lstm"]
+
+
+def test_cnt_pdms_frequency_test_scenes():
+    """The test-only frequency datasets: one frequency each, the mode's episode count, root seeds apart from the
+    training data's (seed + 1000 + index); tiny has none. The GRU and the LSTM share one quick budget (Table 2)."""
+    from learn.experiments import cnt_pdms as C
+
+    q = C.MODES["quick"]
+    fs = C.freq_scenes(q, [], 3)
+    assert sorted(fs) == [0.1, 0.5, 1.0, 2.0]
+    for i, (f, c) in enumerate(sorted(fs.items())):
+        assert list(c.protocol.frequencies_hz) == [f]
+        assert c.generation.episodes == q.freq_test_episodes >= 3
+        assert c.generation.root_seed == 3 + 1000 + i
+    assert C.freq_scenes(C.MODES["tiny"], [], 0) == {}
+    shared = ("lr", "max_epochs", "patience", "max_batches_per_epoch", "batch_size")
+    assert {k: q.models["gru"].get(k) for k in shared} == {k: q.models["lstm"].get(k) for k in shared}
