@@ -238,3 +238,14 @@ def test_experiment_fabric_quick(tmp_path):
     assert set(m["findings"]["tcn_beats_bp_lm"]) == {"1", "3", "6", "12"}
     for n, d in m["findings"]["tcn_beats_bp_lm"].items():
         assert all(d.values()), (n, d)
+
+
+def test_fabric_run_layers_subset_refuses_unknown_counts(tmp_path):
+    """run(layers=...) reruns a subset of the mode's layer counts; a count the mode lacks is an error before
+    anything is written; the full mode trains on the same number of episodes for every layer count."""
+    from learn.experiments import fabric as F
+
+    with pytest.raises(ValueError, match="layers"):
+        F.run(tmp_path / "x", mode="tiny", layers=(6,))
+    assert not (tmp_path / "x").exists()
+    assert len(set(F.MODES["full"].train_episodes.values())) == 1
