@@ -18,10 +18,7 @@ Chain (one taxel or one film pressed by one tip; all SI):
             reading falls with force); FS = full scale (ADC counts x samples summed, or the board's rest
             level); noise: white, noise_sd in reading units; ADC step adc_step (0: none).
 Fit (scipy least_squares, trust-region reflective, bounded) of ln R on loaded samples (R from the reading
-through the inverse divider), each press's level l_j profiled out (its mean log residual) under the constraint
-that the levels carry no linear trend in ln(peak force) (placement does not depend on how hard one presses;
-free levels let a too-flat law hide in force-dependent levels: Lupasic pike1 run means +0.5 at 1 N to -0.2 at
-40 N, and a degenerate creep bank 20x the force): theta =
+through the inverse divider), each press's level l_j profiled out (its mean log residual): theta =
 [n, ln a, ln F_c, ln tau_min, ln tau_max] (+ ln r_series when the readout saturates). Then ln r0 = mean of
 the press levels, level_log_sd = their std (the press-to-press spread is a parameter of the model, drawn
 per press when generating, not subtracted), miss_prob = share of loaded presses that stay at the rest
@@ -251,7 +248,6 @@ class _Data:
         self.runs = runs
         self.presses: list[Press] = []
         self.lnr: list[np.ndarray] = []
-        self.lnf: list[float] = []  # ln peak force (N) of each press
         self.missed: list[bool] = []
         for i, r in enumerate(runs):
             thr = max(min_force_frac * r.force.max(), min_force_n)
@@ -274,7 +270,6 @@ class _Data:
                     continue
                 self.presses.append(Press(i, seg))
                 self.lnr.append(lr)
-                self.lnf.append(float(np.log(fpk)))
 
     def residuals(self, p: ChainParams) -> tuple[list[np.ndarray], np.ndarray]:
         """Per press ln R_sim(level 0) - ln R_real, and each press's mean (its level)."""
@@ -296,20 +291,10 @@ def _fit_shape(data: _Data, p0: ChainParams, idx: np.ndarray, fit_series: bool, 
 
     n = 7 if fit_series else 5
 
-    lnf = np.asarray(data.lnf)[idx]
-    dlnf = lnf - lnf.mean()
-    vlnf = float(np.sum(dlnf ** 2))
-
     def fun(th):
         q = _with(p0, np.concatenate([th, _theta(p0)[n:]]), fit_series)
         # series resistance enters inside the log: refit the level per press through ln(R_film e^l + r_s)
-        out, lev = _profile(data, q, idx)
-        # placement is independent of the press force: the levels may not carry a trend in ln(peak force),
-        # else a too-flat force law (a degenerate creep bank) is absorbed into force-dependent "levels";
-        # the levels' least-squares slope on ln F goes back into the samples' residuals (exact for r_series 0)
-        if vlnf > 0:
-            b = float(np.sum((lev - lev.mean()) * dlnf) / vlnf)
-            out = [o - b * d for o, d in zip(out, dlnf)]
+        out, _ = _profile(data, q, idx)
         return np.concatenate(out)
 
     th0 = np.clip(_theta(p0)[:n], LB[:n] + 1e-6, UB[:n] - 1e-6)
