@@ -384,6 +384,41 @@ def sim2real_results() -> str:
                 "share of held-out press levels inside the fitted 90 % band, target 80-95 %):\n\n"
                 + table(["split", "within-press rms ln reading", "levels in 90 % band", "held-out level sd (ln)",
                          "plateau drop, real", "plateau drop, sim"], cal))
+    diag = sorted(RESULTS.glob("s2r-diagnosis-*.json"))
+    if diag:
+        drows, irows = [], []
+        for f in diag:
+            d = json.loads(f.read_text())
+            name = f.stem.removeprefix("s2r-diagnosis-")
+            zr, zc = d["zero_shot_real_test"], d["zero_shot_chain_reading_test"]
+            lv, sens, spr = d["real_level_vs_chain_test"], d["plateau_sensitivity"], d["sim_spread_at_real_forces_sd_ln"]
+            drows.append([name, num(zr["median_ratio_loaded"]), num(zc["median_ratio_loaded"]),
+                          f"{num(lv['mean_ln'], 2)} / {num(lv['sd_ln'], 2)}", num(spr["replicate_gain_press_level"], 2),
+                          f"{num(sens['real'], 2)} / {num(sens['chain'], 2)}", num(sens["run_level_trend_per_ln_force"], 2),
+                          num(d["implied_by_sim_spread"]["mean_over_median"], 2)])
+            for mode, v in d.get("identification_check", {}).items():
+                irows.append([name, mode.replace("_", " "), num(v["lupasic_within_press_fit"]), num(v["lupasic_held_out_within_press"]),
+                              pct(v["lupasic_held_out_level_in_band90"]), num(v["lupasic_params"]["creep_amplitude"]),
+                              num(v["synthetic_exponent_true_1.2"]), num(v["synthetic_plateau_error_sd_ln"])])
+            for k, v in (d.get("lr_check_test_rmse_n") or {}).items():
+                irows.append([name, f"lr check, {k} runs: fine-tuned test RMSE (N, seeds 0-2) "
+                              + "; ".join(f"lr {lr}: {', '.join(num(x) for x in xs)}" for lr, xs in v.items()), "", "", "", "", "", ""])
+        out += ("\n\nWhy zero-shot misses (`bench/bench_s2r_diagnose.py` on the run folders; "
+                "`bench/results/s2r-diagnosis-*.json`). Zero-shot prediction / load-cell force, median over loaded test "
+                "samples, on the real reading and on the identified chain's own noise-free reading of the same force "
+                "histories (equal: the gap is in what the net learned, not a real-vs-chain or level mismatch); the test "
+                "presses' levels against the chain (mean / sd, ln); the simulated spread of the plateau reading at the "
+                "training runs' force histories (sd, ln); the plateau sensitivity -d ln reading / d ln F, real / chain; "
+                "the trend of the training runs' mean level with ln F (what free press levels absorb); and the force "
+                "ambiguity that spread implies for an MSE-trained net, posterior mean / median = exp(sd^2/2), "
+                "sd = spread / chain sensitivity:\n\n"
+                + table(["split", "zero-shot / F, real", "zero-shot / F, chain's reading", "test levels vs chain",
+                         "sim spread", "sensitivity real / chain", "run-level trend", "implied mean / median"], drows)
+                + "\n\nIdentification check (not adopted): the chain fit with free press levels (as shipped) and with "
+                "levels forced to carry no trend in ln force, on the Lupasic training runs and on a synthetic chain of "
+                "known parameters (exponent 1.2; plateau error of the fitted chain on new synthetic runs):\n\n"
+                + table(["split", "fit", "within-press (fit runs)", "within-press (held out)", "levels in 90 % band",
+                         "creep amplitude", "synthetic exponent", "synthetic plateau error sd (ln)"], irows))
     if tim:
         out += ("\n\nTime (wall seconds per step as recorded, total wall and CPU; torch threads; the machine's "
                 "load average at the end: the developers' machine is shared, 2 cores):\n\n"
