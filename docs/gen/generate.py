@@ -620,6 +620,16 @@ def headline_rows() -> list[list[str]]:
         rows.append([f"velostat {row[0]}, ours vs paper", f"{row[1]} vs {row[2]}", link("characterize-velostat.json")])
     for fam in FAMILIES:
         rows += _exp_headline(fam)
+    for f in sorted(EXPERIMENTS.glob("sim2real-*.json")) if EXPERIMENTS.is_dir() else []:
+        m = json.loads(f.read_text())
+        r, tg = m["results"], m.get("targets", {})
+        split = f.stem.removeprefix("sim2real-")
+        rows.append([f"sim2real {split} (real -> sim -> real, held-out runs): test RMSE % of full scale, fine-tuned / "
+                     "scratch / static curve / zero-shot with two-point calibration; issue-15 targets met",
+                     " / ".join(f"{r[k]['rmse_pct_full_scale']:.1f}" for k in ("finetuned", "scratch", "static_curve"))
+                     + f" / {r['zero_shot']['two_point_gain']['rmse_pct_full_scale']:.1f} %; "
+                     f"{sum(bool(v) for v in tg.values())} of {len(tg)}",
+                     f"[`{f.name}`](bench/results/experiments/{f.name})"])
     return rows
 
 
