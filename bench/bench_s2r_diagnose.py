@@ -155,9 +155,13 @@ def main() -> None:
                      "ln_reading_chain": float(np.median([v for _, v in pc])), "level_mean_ln": float(np.mean([u[1] - v[1] for u, v in zip(pr, pc)]))})
     R["runs"] = rows
     lf = np.log([r["plateau_force_n"] for r in rows])
-    R["plateau_sensitivity"] = {"real": float(-np.polyfit(lf, [r["ln_reading_real"] for r in rows], 1)[0]),
-                                "chain": float(-np.polyfit(lf, [r["ln_reading_chain"] for r in rows], 1)[0]),
-                                "run_level_trend_per_ln_force": float(np.polyfit(lf, [r["level_mean_ln"] for r in rows], 1)[0])}
+    if len(rows) >= 3 and np.ptp(lf) >= np.log(2.0):
+        R["plateau_sensitivity"] = {"real": float(-np.polyfit(lf, [r["ln_reading_real"] for r in rows], 1)[0]),
+                                    "chain": float(-np.polyfit(lf, [r["ln_reading_chain"] for r in rows], 1)[0]),
+                                    "run_level_trend_per_ln_force": float(np.polyfit(lf, [r["level_mean_ln"] for r in rows], 1)[0])}
+    else:  # the training runs do not span a force range (pike2: one run, presses of about 21 N)
+        R["plateau_sensitivity"] = {"real": None, "chain": None, "run_level_trend_per_ln_force": None,
+                                    "note": f"{len(rows)} training run(s) spanning a factor {float(np.exp(np.ptp(lf))):.2f} in force"}
     comp: dict[str, list[float]] = {"replicate": [], "replicate_gain": [], "replicate_gain_press_level": []}
     for k in range(24):
         vals, rng = draw(rand, 1000 + k)
@@ -177,8 +181,9 @@ def main() -> None:
                 x = np.log(C.simulate_reading(f, 1 / RATE, qq, level=lv + gg))
                 comp[name] += [b[1] - a0[1] for a0, b in zip(_plateaus(f, x0, C), _plateaus(f, x, C))]
     R["sim_spread_at_real_forces_sd_ln"] = {k: float(np.std(v)) for k, v in comp.items()}
-    sig = R["sim_spread_at_real_forces_sd_ln"]["replicate_gain_press_level"] / R["plateau_sensitivity"]["chain"]
-    R["implied_by_sim_spread"] = {"ln_force_posterior_sd": sig, "mean_over_median": float(np.exp(sig ** 2 / 2))}
+    sens = R["plateau_sensitivity"]["chain"]
+    sig = R["sim_spread_at_real_forces_sd_ln"]["replicate_gain_press_level"] / sens if sens else None
+    R["implied_by_sim_spread"] = {"ln_force_posterior_sd": sig, "mean_over_median": float(np.exp(sig ** 2 / 2)) if sig else None}
     R["identification_check"] = identification_check(a.recording, a.test_episodes, C)
     if a.lr_check:
         kw = dict(policy="none", max_epochs=120, patience=20, norm="checkpoint")

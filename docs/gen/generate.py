@@ -394,7 +394,8 @@ def sim2real_results() -> str:
             lv, sens, spr = d["real_level_vs_chain_test"], d["plateau_sensitivity"], d["sim_spread_at_real_forces_sd_ln"]
             drows.append([name, num(zr["median_ratio_loaded"]), num(zc["median_ratio_loaded"]),
                           f"{num(lv['mean_ln'], 2)} / {num(lv['sd_ln'], 2)}", num(spr["replicate_gain_press_level"], 2),
-                          f"{num(sens['real'], 2)} / {num(sens['chain'], 2)}", num(sens["run_level_trend_per_ln_force"], 2),
+                          f"{num(sens['real'], 2)} / {num(sens['chain'], 2)}" if sens.get("real") is not None else "– (" + sens.get("note", "") + ")",
+                          num(sens["run_level_trend_per_ln_force"], 2),
                           num(d["implied_by_sim_spread"]["mean_over_median"], 2)])
             for mode, v in d.get("identification_check", {}).items():
                 irows.append([name, mode.replace("_", " "), num(v["lupasic_within_press_fit"]), num(v["lupasic_held_out_within_press"]),
