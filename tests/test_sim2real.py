@@ -44,6 +44,16 @@ def test_two_point_calibration_maps_a_new_sensor_onto_the_chain():
     assert abs(info2["level_ln"] + 0.3) < 0.02 and abs(info2["unloaded_reading"] - 900.0) < 1.0
 
 
+def test_two_point_keeps_a_known_adc_full_scale():
+    """An ADC divider with a leak (TAMS-like) rests below its full scale: the unloaded point is not a gain."""
+    p = CF.ChainParams(exponent=1.5, r0_ohm=2000.0, creep_amplitude=0.3, creep_force_n=1.0, tau_min_s=0.2, tau_max_s=5.0,
+                       n_creep=3, r_series_ohm=200.0, r_leak_ohm=4e5, r_ref_ohm=1e4, full_scale=5115.0)
+    f, y = _press_run(p, fs=5115.0, level=0.3)
+    cal, info = two_point_calibration(p, Sequence(np.log(y)[:, None], f[:, None], ["sensor"], ["force"], {}, {"key": "t"}, {}), RATE)
+    assert info["full_scale_used"] == 5115.0 and info["unloaded_reading"] < 5115.0 * 0.99
+    assert abs(info["level_ln"] - 0.3) < 0.05
+
+
 def test_seed_mean_and_spread():
     runs = [{"rmse": 2.0, "mae": 1.0, "per_run_rmse": {"a": 1.0}}, {"rmse": 4.0, "mae": 3.0, "per_run_rmse": {"a": 3.0}}]
     m = _mean_metrics(runs)
