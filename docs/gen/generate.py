@@ -420,6 +420,17 @@ def sim2real_results() -> str:
                 "known parameters (exponent 1.2; plateau error of the fitted chain on new synthetic runs):\n\n"
                 + table(["split", "fit", "within-press (fit runs)", "within-press (held out)", "levels in 90 % band",
                          "creep amplitude", "synthetic exponent", "synthetic plateau error sd (ln)"], irows))
+    abl = sorted(RESULTS.glob("s2r-ablation-*.json"))
+    if abl:
+        arows = []
+        for f in abl:
+            m = json.loads(f.read_text())
+            for c in m["learning_curve"]:
+                arows.append([f.stem.removeprefix("s2r-ablation-"), f"{m['budget']['lr']:g}", c["n_runs"], pm(c, "finetuned"),
+                              pm(c, "scratch")])
+        out += ("\n\nAblation: the same split with fine-tuning at Adam 3e-4 (scratch at its 2e-3), the budget before "
+                "the rates were made equal (`bench/results/s2r-ablation-*.json`; test RMSE, N, ± sd over the same seeds):\n\n"
+                + table(["run", "fine-tuning lr", "real runs", "fine-tuned", "scratch"], arows))
     if tim:
         out += ("\n\nTime (wall seconds per step as recorded, total wall and CPU; torch threads; the machine's "
                 "load average at the end: the developers' machine is shared, 2 cores):\n\n"
