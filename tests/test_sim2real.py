@@ -1,0 +1,61 @@
+"""The sim2real loop's pieces (learn/sim2real.py): the two-point calibration of a new sensor, seed averaging."""
+
+from dataclasses import replace
+
+import numpy as np
+
+from learn.data import Sequence
+from learn.sim2real import _mean_metrics, two_point_calibration
+from sensors import chain_fit as CF
+
+RATE = 20.0
+
+
+def _press_run(p, fs, level, seed=0):
+    rng = np.random.default_rng(seed)
+    f = np.zeros(40)
+    for pk in rng.uniform(2.0, 30.0, 8):
+        f = np.concatenate([f, np.linspace(0, pk, 10), np.full(30, pk), np.linspace(pk, 0, 4), np.zeros(40)])
+    y = CF.simulate_reading(f, 1 / RATE, p, level=np.where(f > 0, level, 0.0), fs=fs)
+    return f, y
+
+
+def test_two_point_calibration_maps_a_new_sensor_onto_the_chain():
+    """A sensor whose board reads 1.3x the chain's rest level and whose film sits 0.5 (ln) more resistive:
+    after the calibration on its first press, its later presses read as the identified chain's (level 0)."""
+    p = CF.ChainParams(exponent=1.1, r0_ohm=7e4, creep_amplitude=2.0, creep_force_n=4.0, tau_min_s=0.1, tau_max_s=3.0,
+                       n_creep=3, r_ref_ohm=1e4, full_scale=900.0)
+    f, y = _press_run(p, fs=1.3 * 900.0, level=0.5)
+    seq = Sequence(np.log(y)[:, None], f[:, None], ["sensor"], ["force"], {}, {"key": "new"}, {})
+    cal, info = two_point_calibration(p, seq, RATE)
+    assert abs(info["unloaded_reading"] - 1.3 * 900.0) < 1.0
+    assert abs(info["level_ln"] - 0.5) < 0.02
+    on = f > 1.0
+    ref = np.log(CF.simulate_reading(f, 1 / RATE, p))
+    err = cal.apply(seq.x)[:, 0] - ref
+    assert np.sqrt(np.mean(err[on] ** 2)) < 0.02
+    # uncalibrated, the same presses are off by about the level and the gain
+    assert np.sqrt(np.mean((seq.x[:, 0] - ref)[on] ** 2)) > 0.3
+    # the calibration press is left out of the score: it ends where the first press ends
+    assert info["calibration_end_sample"] == 40 + 43  # linspace(pk, 0, 4) ends at 0 N
+    # a different film level only: the gain point leaves the rest level alone
+    f2, y2 = _press_run(replace(p), fs=900.0, level=-0.3, seed=1)
+    cal2, info2 = two_point_calibration(p, Sequence(np.log(y2)[:, None], f2[:, None], ["sensor"], ["force"], {}, {"key": "b"}, {}), RATE)
+    assert abs(info2["level_ln"] + 0.3) < 0.02 and abs(info2["unloaded_reading"] - 900.0) < 1.0
+
+
+def test_two_point_keeps_a_known_adc_full_scale():
+    """An ADC divider with a leak (TAMS-like) rests below its full scale: the unloaded point is not a gain."""
+    p = CF.ChainParams(exponent=1.5, r0_ohm=2000.0, creep_amplitude=0.3, creep_force_n=1.0, tau_min_s=0.2, tau_max_s=5.0,
+                       n_creep=3, r_series_ohm=200.0, r_leak_ohm=4e5, r_ref_ohm=1e4, full_scale=5115.0)
+    f, y = _press_run(p, fs=5115.0, level=0.3)
+    cal, info = two_point_calibration(p, Sequence(np.log(y)[:, None], f[:, None], ["sensor"], ["force"], {}, {"key": "t"}, {}), RATE)
+    assert info["full_scale_used"] == 5115.0 and info["unloaded_reading"] < 5115.0 * 0.99
+    assert abs(info["level_ln"] - 0.3) < 0.05
+
+
+def test_seed_mean_and_spread():
+    runs = [{"rmse": 2.0, "mae": 1.0, "per_run_rmse": {"a": 1.0}}, {"rmse": 4.0, "mae": 3.0, "per_run_rmse": {"a": 3.0}}]
+    m = _mean_metrics(runs)
+    assert m["rmse"] == 3.0 and m["mae"] == 2.0 and m["per_run_rmse"]["a"] == 2.0
+    assert m["rmse_seeds"] == [2.0, 4.0] and abs(m["rmse_sd"] - np.sqrt(2.0)) < 1e-12
