@@ -167,6 +167,29 @@ def test_gpu_feed_equals_serial_and_retries_a_killed_writer(tmp_path, monkeypatc
     assert mb["shards"] == [describe_shard(shard_path(out, i)) for i in range(4)]
 
 
+def test_gpu_feed_resubmits_when_the_writer_pool_refuses_a_shard(cfg, serial, tmp_path, monkeypatch):
+    """A writer that dies between two collects breaks the pool before the next shard is handed over: the feed's
+    submit then settles the pool's writes, starts a new pool and hands the shard over again -> the same files
+    (the race behind a once-in-a-while BrokenProcessPool from `pool.submit`)."""
+    import concurrent.futures
+    from concurrent.futures.process import BrokenProcessPool
+
+    refused = []
+
+    class RefusingOnce(concurrent.futures.ProcessPoolExecutor):
+        def submit(self, fn, *args, **kwargs):
+            if not refused and args and getattr(args[2], "shard", None) == 2:
+                refused.append(self)
+                raise BrokenProcessPool("a writer died (simulated)")
+            return super().submit(fn, *args, **kwargs)
+
+    monkeypatch.setattr(concurrent.futures, "ProcessPoolExecutor", RefusingOnce)  # feed imports it when it runs
+    out = tmp_path / "feed"
+    executors.generate(cfg, out, workers=2, feed=True)
+    assert len(refused) == 1
+    _assert_same_dataset(serial, out, 4)
+
+
 @pytest.mark.gpu
 def test_feed_packs_each_gpu_slice_before_the_next_overwrites_its_staging(gpu_device, monkeypatch):
     """The feed's producer on CUDA: outputs copied back into reused page-locked buffers (one per call site),

@@ -437,8 +437,20 @@ def generate_feed(
             shared.put(name)
 
     def submit(p: PackedShard) -> None:
+        nonlocal pool
         attempts[p.shard] = attempts.get(p.shard, 0) + 1
-        pending[pool.submit(write_packed_shard, cfg, str(out), p, sensor_attrs, mjcf)] = p
+        while True:
+            try:
+                pending[pool.submit(write_packed_shard, cfg, str(out), p, sensor_attrs, mjcf)] = p
+                return
+            except BrokenProcessPool:
+                # a writer died after the last collect, so the pool refuses new work: settle the writes it held
+                # (collect starts a new pool and resubmits the lost ones), start one here if collect did not
+                bad = pool
+                collect(None)
+                if pool is bad:
+                    pool.shutdown(wait=False, cancel_futures=True)
+                    pool = ProcessPoolExecutor(writers, mp_context=ctx)
 
     def collect(room_for: int | None) -> None:
         """Handle finished writes; wait until `room_for` more shards fit under PENDING_PER_WRITER per writer
