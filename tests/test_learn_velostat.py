@@ -204,7 +204,7 @@ def test_experiment_velostat_tiny(tmp_path):
     assert sb["bp"] == "paper_cluster" and sb["raw"]["n_holds"] == sb["compensated"]["n_holds"] > 0
     assert F["creep_drift_removed_frac"] == pytest.approx(sb["drift_removed_frac"])
     # ours: both input sets trained, the one with the lower validation RMSE kept
-    assert set(T["valid_rmse_by_inputs"]) == {"raw", "compensated"}
+    assert set(T["valid_rmse_by_inputs"]) == {"raw", "calibrated"}
     assert T["inputs"] == min(T["valid_rmse_by_inputs"], key=T["valid_rmse_by_inputs"].get)
     text = (out / "report.md").read_text()
     assert "0.931" in text and "Where we differ" in text
