@@ -285,13 +285,17 @@ def hold_errors(seqs: list[Sequence], preds: list[np.ndarray], rate: float) -> d
             e = p[h] - s.y[h, 0]
             n = int(rate)
             mx.append(float(np.max(np.abs(e))))
-            drift.append(float(abs(p[h][-n:].mean() - p[h][:n].mean())))
+            drift.append(float(p[h][-n:].mean() - p[h][:n].mean()))
             lv.append(float(s.extra["target"][h].mean()))
-    mx, drift = np.asarray(mx), np.asarray(drift)
+    mx, signed = np.asarray(mx), np.asarray(drift)
+    drift = np.abs(signed)
+    # drift_signed_mean: the mean of the signed drift, the systematic part (residual creep raises the estimate of
+    # a rising-conductance film; noise-following and settling after the step average out)
     return {"n_holds": len(mx), "max_err_mean": float(mx.mean()) if len(mx) else float("nan"),
             "max_err_max": float(mx.max()) if len(mx) else float("nan"),
             "drift_mean": float(drift.mean()) if len(mx) else float("nan"),
-            "drift_max": float(drift.max()) if len(mx) else float("nan"), "levels": lv, "max_err": mx.tolist()}
+            "drift_max": float(drift.max()) if len(mx) else float("nan"),
+            "drift_signed_mean": float(signed.mean()) if len(mx) else float("nan"), "levels": lv, "max_err": mx.tolist()}
 
 
 FORCE_BANDS_N = ((0.0, 3.0), (3.0, 8.0), (8.0, 16.0))  # low / middle / high force of the 1-15 N range
@@ -749,14 +753,16 @@ def report(m: dict[str, Any]) -> str:
             continue
         t, h, a = R[k]["test"], R[k]["holds"], R[k]["ae"]
         rows.append([LABELS[k], fmt(t["mae"]), fmt(t["rmse"]), fmt(t["r2"]), fmt(h["max_err_mean"], 2),
-                     fmt(h["max_err_max"], 2), fmt(h["drift_mean"], 2), fmt(a.get("max_abs_n"), 2),
+                     fmt(h["max_err_max"], 2), fmt(h["drift_mean"], 2),
+                     fmt(h["drift_signed_mean"], 2) if "drift_signed_mean" in h else "–", fmt(a.get("max_abs_n"), 2),
                      fmt(100 * a["frac_below_1n"], 0) if "frac_below_1n" in a else "–"])
     L.append(md_table(["model", "MAE (N)", "RMSE (N)", "R^2", "hold max err, mean (N)", "hold max err, worst (N)",
-                       "hold drift (N)", "A-E max err (N)", "A-E < 1 N (%)"], rows))
+                       "hold drift (N)", "hold drift, signed mean (N)", "A-E max err (N)", "A-E < 1 N (%)"], rows))
     L += ["", f"Paper: uncompensated creep error up to {P['creep_error_uncompensated_n']} N (7 N, Fig. 22a); after "
           f"calibration at A-E over 1-15 N max error < {P['ae_max_error_n']} N, most < 1 N (Fig. 23); BP RMSE < 1 N "
           "train, < 2 N test (sect. 4.2). 'hold max err' = largest |error| within each hold of >= 2 s (mix test + A-E), "
-          "'hold drift' = |mean of the last second - mean of the first second| of the estimate in each hold, "
+          "'hold drift' = |mean of the last second - mean of the first second| of the estimate in each hold "
+          "(its signed mean: the systematic part, not compared), "
           "'A-E' = reading over the last second of each 1-15 N step at A-E.", ""]
     L += ["## Units: AGNES / Ward (sect. 4.1)", ""]
     L.append(f"{len(K['units_with_data'])} of 36 units have calibration curves in the training split; elbow at "
@@ -854,6 +860,11 @@ DIFFERENCES = """
   the readout noise and the ADC step (the readout row) are several % of R, far above the 0.6 % under which eq. 9
   calls a sample creep, so holds flip back to loading on noise. Both come from the sensor (log-time aging creep;
   a 12-bit channel on a 50 uA source, estimates) against the paper's fixed band; neither is tuned away.
+- **Ours' hold drift** is mostly not creep: its signed mean (the systematic part, table) is a fraction of its
+  unsigned mean, which collects the estimate following readout noise at the one-second scale and settling in
+  the first second after a step (at high force it starts low and converges). The compensated chains freeze
+  their output in the creep stage (small unsigned drift) but keep a one-signed residual creep. The compared
+  column stays the unsigned one.
 - **Membership band** (eqs. 8-9): we fit the paper's K-means on our delta and report its band (midpoints between
   the creep/transitional and transitional/loading centres); the compensation runs on the paper's published band
   (0.00612 / 0.02374), as the paper's chain does. `Mode.tracker["bounds"]` = None switches to ours.
