@@ -17,6 +17,7 @@ from piezotwin.common import app, console, fail  # noqa: E402
 CALIBRATIONS: dict[str, str] = {
     "fabric": "sensors.fabric.calibrate:run",
     "cnt_pdms": "simulate.characterize.cnt_pdms:calibrate",
+    "velostat": "simulate.characterize.velostat:calibrate",
 }
 
 

@@ -453,6 +453,26 @@ def characterization(preset: str) -> str:
     return "\n".join(lines)
 
 
+def calibration_record(family: str) -> str:
+    """bench/results/calibrate-<family>.json (docs/gen/calibrate.py): targets beside the fitted model's results."""
+    d = load(f"calibrate-{family}.json")
+    if not d:
+        return missing(f"The calibration of `{family}`",
+                       f"Run `python docs/gen/calibrate.py {family}` and commit `bench/results/calibrate-{family}.json`.")
+    m = d.get("machine", {})
+    rows = [[r["name"], r["target"], num(r["result"]), r["unit"], {None: "", True: "yes", False: "no"}[r["met"]]]
+            for r in d["rows"]]
+    fields = "; ".join(f"`{k}` = {v:.6g}" if isinstance(v, float) else f"`{k}` = {v}"
+                       for f in d.get("preset_fields", {}).values() for k, v in f.items())
+    lines = [f"`{d['command']}` (`bench/results/calibrate-{family}.json`, commit `{m.get('git_commit', '?')}`, "
+             f"{m.get('date_utc', '?')}, {num(d.get('seconds'))} s on {m.get('cpus', '?')} CPUs)\n",
+             table(["target", "wanted", "fitted model", "unit", "met"], rows)]
+    lines += [f"- {n}" for n in d.get("notes", [])]
+    if fields:
+        lines.append(f"\nFitted preset fields: {fields}.")
+    return "\n".join(lines) + "\n"
+
+
 # ----------------------------------------------------------------------------------------------- experiments
 def experiment_files(family: str) -> list[Path]:
     return sorted(EXPERIMENTS.glob(f"{family}-*.json")) if EXPERIMENTS.is_dir() else []
@@ -941,6 +961,8 @@ def outputs() -> dict[Path, Callable[[], str]]:
     for fam, presets in presets_by_family().items():
         outs[GEN / f"channels-{fam}.md"] = (lambda f=fam: channels(f))
         outs[GEN / f"experiment-{fam}.md"] = (lambda f=fam: experiment(f))
+        if (RESULTS / f"calibrate-{fam}.json").exists():
+            outs[GEN / f"calibrate-{fam}.md"] = (lambda f=fam: calibration_record(f))
         for p in presets:
             outs[GEN / f"params-{p}.md"] = (lambda p=p: parameters(p))
             outs[GEN / f"characterize-{p}.md"] = (lambda p=p: characterization(p))
