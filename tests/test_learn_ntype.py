@@ -155,7 +155,9 @@ def test_experiment_ntype_tiny(tmp_path):
     assert res.exit_code == 0, res.output
     m = json.loads((out / "metrics.json").read_text())
     assert {"experiment", "mode", "dataset", "protocol", "models", "paper", "findings", "timing_s"} <= set(m)
-    assert set(m["models"]) == {"mean", "rbf_col", "rbf_win", "elem_mlp", "map_cnn"}
+    assert set(m["models"]) == {"mean", "rbf_col", "rbf_win", "elem_mlp", "map_cnn", "rbf_col_kernels"}
+    # Table 1 also under MATLAB's reading of the spread, same spreads; the headline is eq. 9 as printed
+    assert m["protocol"]["kernel"] == "eq9" and set(m["models"]["rbf_col_kernels"]["matlab"]) == {"1.0", "4.0", "7.0", "10.0"}
     assert set(m["models"]["rbf_col"]) == {"1.0", "4.0", "7.0", "10.0"}
     assert set(m["models"]["rbf_win"]) == {"1", "5"}
     for k in ("E_Fx", "E_Fy", "E_Fz", "MAE_Fx", "n_Fz"):
