@@ -268,6 +268,26 @@ def test_ntype_sensor_cuda_equals_cpu_and_is_deterministic(gpu_device):
     assert_identical(b, c, f"ntype sensor on {gpu_device}")
 
 
+@pytest.mark.parametrize("nx,ny,r_on", [(6, 6, 100.0), (6, 6, 0.0), (5, 3, 5e3)])
+def test_ntype_scan_kernel_cuda_equals_numpy(gpu_device, nx, ny, r_on):
+    """The scanned readout's Warp kernel (feedback scheme: one thread per frame, float64 Gaussian elimination with
+    partial pivoting) on the device under test reads what the numpy batched Schur solve reads (sensors/ntype/scan.py),
+    over more frames than one launch chunk, and twice bit-identically. float64 on both sides: the only differences
+    are FMA contraction and pivot-order round-off, ~1e-15 relative on these well-conditioned 12 x 12 systems."""
+    from sensors.ntype.kernels import SCAN_CHUNK
+    from sensors.ntype.scan import scan_apparent
+
+    rng = np.random.default_rng(33)
+    R = rng.uniform(5e3, 80e3, (SCAN_CHUNK + 257, nx * ny, 3))  # two launches, the second partial
+    R[:3] = rng.uniform(16e3, 50e3, 3)  # frames where every column reads alike (symmetric networks)
+    ref = scan_apparent(R, nx, ny, "feedback", 5.0, r_on, 1e3)  # numpy
+    b, c = (scan_apparent(R, nx, ny, "feedback", 5.0, r_on, 1e3, backend="warp", device=d) for d in devices(gpu_device)[1:])
+    np.testing.assert_allclose(b, ref, rtol=1e-9, err_msg=f"ntype scan on {gpu_device}")
+    assert_identical({"apparent": b}, {"apparent": c}, f"ntype scan on {gpu_device}")
+    if r_on > 0:  # the scan acted: the switch residue moves every reading, by more than the tolerance
+        assert np.abs(b / R - 1).max() > 1e-3
+
+
 # ----------------------------------------------------------------------------------------- device plumbing
 
 

@@ -155,7 +155,9 @@ def test_experiment_ntype_tiny(tmp_path):
     assert res.exit_code == 0, res.output
     m = json.loads((out / "metrics.json").read_text())
     assert {"experiment", "mode", "dataset", "protocol", "models", "paper", "findings", "timing_s"} <= set(m)
-    assert set(m["models"]) == {"mean", "rbf_col", "rbf_win", "elem_mlp", "map_cnn"}
+    assert set(m["models"]) == {"mean", "rbf_col", "rbf_win", "elem_mlp", "map_cnn", "rbf_col_kernels"}
+    # Table 1 also under MATLAB's reading of the spread, same spreads; the headline is eq. 9 as printed
+    assert m["protocol"]["kernel"] == "eq9" and set(m["models"]["rbf_col_kernels"]["matlab"]) == {"1.0", "4.0", "7.0", "10.0"}
     assert set(m["models"]["rbf_col"]) == {"1.0", "4.0", "7.0", "10.0"}
     assert set(m["models"]["rbf_win"]) == {"1", "5"}
     for k in ("E_Fx", "E_Fy", "E_Fz", "MAE_Fx", "n_Fz"):
@@ -205,7 +207,7 @@ def test_experiment_ntype_models_subset(tmp_path):
     res = CliRunner().invoke(app, ["experiment", "ntype", "--mode", "tiny", "--models", "rbf_col", "-o", str(out)])
     assert res.exit_code == 0, res.output
     m = json.loads((out / "metrics.json").read_text())
-    assert set(m["models"]) == {"mean", "rbf_col"}
+    assert set(m["models"]) == {"mean", "rbf_col", "rbf_col_kernels"}  # Table 1 under the other spread readings too
     assert (out / "report.md").read_text()
 
 
@@ -219,3 +221,22 @@ def test_symmetric_frames_transpose_and_mirror_y():
     np.testing.assert_array_equal(symmetric_frames(Et, Ft, "transpose")[1], E)
     Ey, Fy = symmetric_frames(E, E, "mirror_y")
     np.testing.assert_array_equal(Fy[1, 0], E[1, 30] * [1, -1, 1])  # element (0, 0) <- (5, 0), F_y -> -F_y
+
+
+@pytest.mark.parametrize("kernel", ["eq9", "matlab", "sigma"])
+def test_rbf_kernel_readings_of_eq9(kernel):
+    """The three readings of the paper's eq. 9 spread: "eq9" as printed, exp(-||X - X_j|| / (2 spread^2)) (norm not
+    squared); "matlab" 0.5 at d = spread; "sigma" exp(-d^2 / (2 spread^2)); each unit is 0.5 at half_distance."""
+    from learn.models.rbf import half_distance, kernel_phi
+
+    s = 3.0
+    d = np.array([0.0, 1.0, 4.0, 25.0])
+    want = {"eq9": np.exp(-d / (2 * s * s)), "matlab": np.exp(-np.log(2) * (d / s) ** 2),
+            "sigma": np.exp(-(d**2) / (2 * s * s))}[kernel]
+    np.testing.assert_allclose(kernel_phi(kernel, s, d**2), want, rtol=1e-12)
+    h = half_distance(kernel, s)
+    assert h == pytest.approx({"eq9": 2 * np.log(2) * s * s, "matlab": s, "sigma": s * np.sqrt(2 * np.log(2))}[kernel])
+    np.testing.assert_allclose(kernel_phi(kernel, s, np.array([h * h])), 0.5, rtol=1e-12)
+    net = RBFNetwork(2, s, kernel, bias=False)
+    net.centres_ = np.array([[0.0, 0.0], [3.0, 4.0]])
+    np.testing.assert_allclose(net.hidden(np.array([[0.0, 0.0]])), kernel_phi(kernel, s, np.array([[0.0, 25.0]])), rtol=1e-12)

@@ -565,12 +565,17 @@ def _exp_headline(family: str) -> list[list[str]]:
                              f"TCN (ours) vs paper's BP net, {' / '.join(L)} layers ({unit})", ours, src])
             elif family == "ntype":
                 comps = ("Fx", "Fy", "Fz")
-                e = m["models"]["elem_mlp"]
+                e = m["models"].get("elem_mlp")
                 cands = [(f"RBF window {w}, spread {sp}", r) for w, d in m["models"].get("rbf_win", {}).items() if w != "1"
                          for sp, r in d.items()]  # window 1 (the element alone) is ours
                 cands += [(f"Table 1 RBF, spread {sp}", r) for sp, r in m["models"].get("rbf_col", {}).items()]
                 name, best = min(cands, key=lambda c: sum(c[1][f"E_{k}"] for k in comps)) if cands else ("–", {})
-                rows.append([f"ntype force estimation ({mode}): E_Fx / E_Fy / E_Fz (%), element MLP (ours) vs best paper model ({name})",
+                run = mode if not m.get("seed") else f"{mode}, seed {m['seed']}"
+                if e is None:  # a run of the paper's methods alone (--models rbf_col,rbf_win), e.g. another seed
+                    rows.append([f"ntype force estimation ({run}, paper's methods only): E_Fx / E_Fy / E_Fz (%), best paper model ({name})",
+                                 " / ".join(num(best.get(f"E_{c}")) for c in comps), src])
+                    continue
+                rows.append([f"ntype force estimation ({run}): E_Fx / E_Fy / E_Fz (%), element MLP (ours) vs best paper model ({name})",
                              " / ".join(num(e[f"E_{c}"]) for c in comps) + " vs " + " / ".join(num(best.get(f"E_{c}")) for c in comps), src])
             elif family == "velostat":
                 R = m["models"]

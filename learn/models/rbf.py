@@ -10,10 +10,16 @@ Scikit-learn-style estimators, numpy only:
   RBFNetwork(n_centres, spread)   fit = k-means centres + RLS from scratch; partial_fit = more RLS updates
                                   (centres fixed after the first call); predict
 
-Spread convention (MATLAB newrb/newrbe, which the paper's wording on "spread" follows): a hidden unit's
-output is phi(d) = exp(-ln2 (d / spread)^2), i.e. 0.5 at distance d = spread from its centre (a Gaussian of
-sigma = spread / sqrt(2 ln 2)). The paper's eq. 9 prints exp(-||X - X_j|| / 2 sigma^2) (no square on the
-norm, presumably a typesetting slip); ``kernel="sigma"`` gives exp(-d^2 / (2 spread^2)) instead.
+Spread conventions (``kernel``), d = ||X - X_j|| in input units:
+  "eq9"     the paper's eq. 9 as printed, phi = exp(-||X - X_j|| / (2 sigma_j^2)) with sigma_j "the spread
+            width of the Gaussian function" (sect. 3.1): the norm is not squared, so a unit is 0.5 at
+            d = 2 ln2 spread^2 (1.4 at spread 1, 68 at spread 7, 139 at spread 10 input units). The paper's
+            own definition, so the ntype experiment's headline (learn/experiments/ntype.py).
+  "matlab"  MATLAB newrb/newrbe (whose word "spread" the paper uses): phi = exp(-ln2 (d / spread)^2), 0.5 at
+            d = spread (reads eq. 9's unsquared norm as a typesetting slip).
+  "sigma"   the textbook Gaussian with the square restored, exp(-d^2 / (2 spread^2)) (0.5 at d = 1.18 spread).
+Which one the paper ran it does not say beyond eq. 9 (it calls the unit "Gaussian" but prints an unsquared
+norm); the experiment reports the sweep under all three.
 
 The spread is a distance in input units, so it only means something for a stated input scale: the ntype
 experiment min-max maps resistances onto the paper's kOhm ranges (eq. 13: R_z -> [16, 25], R_x, R_y ->
@@ -30,13 +36,35 @@ import numpy as np
 
 from learn.models.base import Compensator, FnStreamer, Streamer, register
 
-__all__ = ["KMeans", "RecursiveLeastSquares", "RBFNetwork", "RBFCompensator", "sq_dist"]
+__all__ = ["KERNELS", "kernel_phi", "half_distance", "KMeans", "RecursiveLeastSquares", "RBFNetwork", "RBFCompensator", "sq_dist"]
 
 
 def sq_dist(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """[N, F], [K, F] -> [N, K] squared Euclidean distances (clipped at 0)."""
     d = (a * a).sum(1)[:, None] - 2.0 * a @ b.T + (b * b).sum(1)[None, :]
     return np.maximum(d, 0.0)
+
+
+KERNELS = ("eq9", "matlab", "sigma")
+
+
+def kernel_gamma(kernel: str, spread: float) -> float:
+    """The unit's rate: phi = exp(-gamma d) for "eq9" (gamma = 1 / 2 spread^2, eq. 9), exp(-gamma d^2) otherwise."""
+    if kernel == "eq9":
+        return 0.5 / spread**2
+    return math.log(2.0) / spread**2 if kernel == "matlab" else 0.5 / spread**2
+
+
+def kernel_phi(kernel: str, spread: float, d2: np.ndarray) -> np.ndarray:
+    """Hidden-unit outputs from squared distances d2 under `kernel` (see the module docstring)."""
+    g = kernel_gamma(kernel, spread)
+    return np.exp(-g * np.sqrt(d2)) if kernel == "eq9" else np.exp(-g * d2)
+
+
+def half_distance(kernel: str, spread: float) -> float:
+    """Distance (input units) at which a unit's output is 0.5."""
+    g = kernel_gamma(kernel, spread)
+    return math.log(2.0) / g if kernel == "eq9" else math.sqrt(math.log(2.0) / g)
 
 
 class KMeans:
@@ -180,8 +208,9 @@ class RBFNetwork:
     def __init__(self, n_centres: int = 100, spread: float = 7.0, kernel: str = "matlab", bias: bool = True,
                  delta: float = 1e-3, lam: float = 1.0, block: int = 256, kmeans_iter: int = 100,
                  kmeans_max_points: int | None = 20000, seed: int = 0):
-        if kernel not in ("matlab", "sigma"):
-            raise ValueError("kernel must be 'matlab' (phi = 0.5 at d = spread) or 'sigma' (exp(-d^2 / 2 spread^2))")
+        if kernel not in KERNELS:
+            raise ValueError("kernel must be 'eq9' (exp(-d / 2 spread^2), the paper's eq. 9 as printed), 'matlab' "
+                             "(exp(-ln2 (d / spread)^2)) or 'sigma' (exp(-d^2 / 2 spread^2))")
         if spread <= 0:
             raise ValueError("spread must be > 0")
         self.n_centres, self.spread, self.kernel, self.bias = int(n_centres), float(spread), kernel, bool(bias)
@@ -196,13 +225,13 @@ class RBFNetwork:
 
     @property
     def gamma(self) -> float:
-        """phi(d) = exp(-gamma d^2)."""
-        return math.log(2.0) / self.spread**2 if self.kernel == "matlab" else 0.5 / self.spread**2
+        """phi(d) = exp(-gamma d^2) ("matlab", "sigma") or exp(-gamma d) ("eq9")."""
+        return kernel_gamma(self.kernel, self.spread)
 
     def hidden(self, X: np.ndarray) -> np.ndarray:
         """[N, F] -> [N, K (+1)] hidden-layer outputs."""
         X = np.asarray(X, np.float64).reshape(len(X), -1)
-        H = np.exp(-self.gamma * sq_dist(X, self.centres_))
+        H = kernel_phi(self.kernel, self.spread, sq_dist(X, self.centres_))
         return np.concatenate([H, np.ones((len(X), 1))], 1) if self.bias else H
 
     def place_centres(self, X: np.ndarray) -> np.ndarray:
