@@ -105,6 +105,80 @@ def bench_warp(cfg, E, T, N, device, repeats=3):
             "chain_seconds": best_full, "stage_seconds": stage_s}
 
 
+def _best(fn, sync, repeats):
+    fn()  # warm-up / compile
+    sync()
+    best = float("inf")
+    for _ in range(repeats):
+        sync()
+        t0 = time.perf_counter()
+        fn()
+        sync()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def bench_cuda_chain(cfg, E, T, N, device="cuda:0", repeats=5, blocks=(32, 64, 128, 256)):
+    """The whole cnt_pdms chain on CUDA as CntPdmsSensor.run does it on a whole-pad readout (issue 16):
+    taxel kernel with the channel sum fused in (strain and stress per taxel written, as recorded by default;
+    the conductance not) + time-parallel readout with the noise drawn in the kernel + the readout's outputs
+    copied to page-locked host buffers (as the GPU feed does, int16 codes), against the chain before (taxel
+    kernel writing all three fields, tiled channel sum, serial readout) on the same inputs in the same run.
+    Stages alone are synchronised one by one (best of `repeats`)."""
+    import warp as wp
+
+    from sensors import electronics as el
+    from sensors.cnt_pdms.kernels import TaxelChainWarp
+    from sensors.cnt_pdms.params import electronics_params, taxel_params
+    from sensors.warp_setup import host_staging
+
+    tp, ep = taxel_params(cfg), electronics_params(cfg)
+    e = cfg.sensor.electronics
+    noise = el.NoiseSeeds(list(range(E)), e.white_noise_v, e.pink_noise_v)
+    drive = wp.array(_drive(E, T, N).reshape(-1), dtype=wp.float32, device=device)
+    outs3 = [wp.empty(E * T * N, dtype=wp.float32, device=device) for _ in range(3)]
+    outs2 = [outs3[0], outs3[1], wp.empty(0, dtype=wp.float32, device=device)]
+    chain = TaxelChainWarp(tp, E, N, device)
+    tc = np.zeros(N, np.int32)
+    sync = lambda: wp.synchronize_device(device)  # noqa: E731
+    area = tp.taxel_area_m2
+    keep = {"resistance", "bridge_v", "adc", "filtered_v", "resistance_measured"}
+    box = {}
+
+    def before_kernels():
+        chain.reset()
+        chain.run_device(drive, T, 0, outs3)
+        box["g"], _ = el.sum_channels_warp(outs3[2], outs3[1], tc, 1, area, (E, T, N), device)
+
+    def before_readout():
+        el.readout_warp(box["g"], (E, T, 1), noise, ep, None, device, keep=keep, adc_dtype=np.int16, parallel=False)
+
+    def after_kernel(block=None):
+        chain.reset()
+        _, box["g"], _ = chain.run_device_pad(drive, T, 0, area, outs=outs2, block=block)
+
+    def after_readout(keep=keep):
+        el.readout_warp(box["g"], (E, T, 1), noise, ep, None, device, keep=keep, adc_dtype=np.int16)
+
+    res = {"episodes": E, "taxels": N, "steps": T, "device_name": wp.get_device(device).name}
+    with host_staging():
+        t_bk = _best(before_kernels, sync, repeats)
+        t_br = _best(before_readout, sync, repeats)
+        t_b = _best(lambda: (before_kernels(), before_readout()), sync, repeats)
+        t_ak = _best(after_kernel, sync, repeats)
+        t_ar0 = _best(lambda: after_readout(keep=set()), sync, repeats)
+        t_ar = _best(after_readout, sync, repeats)
+        t_a = _best(lambda: (after_kernel(), after_readout()), sync, repeats)
+        res["pad_block_seconds"] = {str(b): _best(lambda b=b: after_kernel(b), sync, repeats) for b in blocks}
+    n = E * T * N
+    res["before"] = {"taxel_steps_per_s_chain": n / t_b, "chain_seconds": t_b,
+                     "stage_seconds": {"taxel kernel + channel sums": t_bk, "serial readout + copies back": t_br}}
+    res["after"] = {"taxel_steps_per_s_chain": n / t_a, "chain_seconds": t_a,
+                    "stage_seconds": {"fused taxel kernel + pad sums": t_ak, "parallel readout (no copies)": t_ar0,
+                                      "parallel readout + copies back": t_ar}}
+    return res
+
+
 def bench_fabric(E: int, T: int, N: int, device: str = "cpu", repeats: int = 7) -> dict:
     """fabric_1 kernel with the per-press area and knit set (issue 13) and without (the chain before), same run."""
     from dataclasses import replace
@@ -224,6 +298,7 @@ def main() -> None:
     ap.add_argument("--velostat", action="store_true", help="only the velostat film kernel: aging vs spectrum creep")
     ap.add_argument("--only", choices=["ntype"], help="run this family alone and merge it into the results file")
     ap.add_argument("--tag", default="", help="result file name: transduction-<tag>.json (default gpu / cpu)")
+    ap.add_argument("--cuda-only", action="store_true", help="stop after the cnt_pdms CUDA figures (no fabric / ntype)")
     a = ap.parse_args()
     if a.velostat:
         from sensors.warp_setup import init_warp
@@ -270,6 +345,15 @@ def main() -> None:
         print("  stages alone: " + ", ".join(f"{k} {1e3 * v:.2f} ms" for k, v in g["stage_seconds"].items())
               + f"; whole chain {1e3 * g['chain_seconds']:.2f} ms")
         print(f"  ratio cuda / warp-cpu: {g['chain'] / w['chain']:.0f}x; cuda / numpy: {g['chain'] / res['numpy_ref']['taxel_steps_per_s']:.0f}x")
+        c = bench_cuda_chain(cfg, a.gpu_episodes, a.steps, N)
+        res["warp_cuda_chain"] = c
+        for k in ("before", "after"):
+            print(f"  chain {k}: {c[k]['taxel_steps_per_s_chain']:.3g} taxel-steps/s ({1e3 * c[k]['chain_seconds']:.2f} ms); "
+                  + ", ".join(f"{s} {1e3 * v:.2f} ms" for s, v in c[k]["stage_seconds"].items()))
+        print("  fused kernel by block size: " + ", ".join(f"{b}: {1e3 * v:.2f} ms" for b, v in c["pad_block_seconds"].items()))
+        if a.cuda_only:
+            _write(res, a)
+            return
     fe = min(a.episodes, 4)
     fb = bench_fabric(fe, a.steps, N, "cpu")
     res["fabric_warp_cpu"] = {"episodes": fe, "taxel_steps_per_s_before": fb["before"], "taxel_steps_per_s_after": fb["after"],
@@ -283,6 +367,10 @@ def main() -> None:
         print(f"fabric warp cuda: cost of the press state {fg['cost_after_over_before']:.2f}x")
     res["ntype_cpu"] = bench_ntype()
     _print_ntype(res["ntype_cpu"])
+    _write(res, a)
+
+
+def _write(res: dict, a) -> None:
     a.out.mkdir(parents=True, exist_ok=True)
     tag = a.tag or ("gpu" if "warp_cuda" in res else "cpu")
     path = a.out / f"transduction-{tag}.json"

@@ -122,7 +122,101 @@ def taxel_kernels(n_prony: int, n_play: int):
 
     chain.__name__ = chain.__qualname__ = f"taxel_chain_p{n_prony}_k{n_play}"
     k_chain = wp.kernel(chain, module="unique", enable_backward=False)
-    return {"chain": k_chain, "Params": Params, "vec_p": vec_p, "vec_k": vec_k}
+
+    def chain_pad(
+        drive: wp.array(dtype=wp.float32),  # [E*T*N]
+        n_steps: int,
+        n_taxels: int,
+        n_parts: int,  # blocks per episode: ceil(N / block_dim)
+        mode: int,
+        p: Params,
+        st_strain: wp.array(dtype=wp.float32),  # [E*N] in/out
+        st_phi: wp.array(dtype=wp.float32),
+        st_prony: wp.array(dtype=vec_p),
+        st_gap: wp.array(dtype=wp.float32),
+        st_play: wp.array(dtype=vec_k),
+        st_damage: wp.array(dtype=wp.float32),
+        write_strain: int,
+        write_stress: int,
+        write_cond: int,
+        out_strain: wp.array(dtype=wp.float32),  # [E*T*N] (written where write_* != 0)
+        out_stress: wp.array(dtype=wp.float32),
+        out_cond: wp.array(dtype=wp.float32),
+        part_g: wp.array(dtype=wp.float64),  # [E*T*n_parts] block sums of the conductance
+        part_s: wp.array(dtype=wp.float64),  # [E*T*n_parts] block sums of the stress
+    ):
+        # the taxel chain with the whole-pad channel sum fused in: each block holds taxels of one episode and
+        # sums them per step (fixed-order tile reduction); pad_sums_kernel adds the n_parts block sums in order
+        blk, lane = wp.tid()
+        ep = blk // n_parts
+        n = (blk - ep * n_parts) * wp.block_dim() + lane
+        active = n < n_taxels
+        tid = ep * n_taxels + n
+        e = float(0.0)
+        phi = float(0.0)
+        h = vec_p()
+        s = float(0.0)
+        z = vec_k()
+        dmg = float(0.0)
+        if active:
+            e = st_strain[tid]
+            phi = st_phi[tid]
+            h = st_prony[tid]
+            s = st_gap[tid]
+            z = st_play[tid]
+            dmg = st_damage[tid]
+        base = ep * n_steps * n_taxels + n
+        for k in range(n_steps):
+            idx = base + k * n_taxels
+            sig = float(0.0)
+            g = float(0.0)
+            if active:
+                e, phi, h, s, z, dmg, sig, g = step_f(p, mode, drive[idx], e, phi, h, s, z, dmg)
+                if write_strain != 0:
+                    out_strain[idx] = e
+                if write_stress != 0:
+                    out_stress[idx] = sig
+                if write_cond != 0:
+                    out_cond[idx] = g
+            gt = wp.tile_sum(wp.tile(wp.float64(g)))
+            st = wp.tile_sum(wp.tile(wp.float64(sig)))
+            if lane == 0:
+                o = (ep * n_steps + k) * n_parts + (blk - ep * n_parts)
+                part_g[o] = wp.tile_extract(gt, 0)
+                part_s[o] = wp.tile_extract(st, 0)
+        if active:
+            st_strain[tid] = e
+            st_phi[tid] = phi
+            st_prony[tid] = h
+            st_gap[tid] = s
+            st_play[tid] = z
+            st_damage[tid] = dmg
+
+    chain_pad.__name__ = chain_pad.__qualname__ = f"taxel_chain_pad_p{n_prony}_k{n_play}"
+    k_pad = wp.kernel(chain_pad, module="unique", enable_backward=False)
+    return {"chain": k_chain, "chain_pad": k_pad, "Params": Params, "vec_p": vec_p, "vec_k": vec_k}
+
+
+@wp.kernel
+def pad_sums_kernel(
+    part_g: wp.array(dtype=wp.float64),  # [E*T*n_parts]
+    part_s: wp.array(dtype=wp.float64),
+    n_parts: int,
+    area: float,
+    g_out: wp.array(dtype=wp.float64),  # [E*T] (one channel: the whole pad)
+    force_out: wp.array(dtype=wp.float64),  # [E*T]
+):
+    et = wp.tid()
+    g = wp.float64(0.0)
+    f = wp.float64(0.0)
+    for j in range(n_parts):
+        g += part_g[et * n_parts + j]
+        f += part_s[et * n_parts + j]
+    g_out[et] = g
+    force_out[et] = f * wp.float64(area)
+
+
+PAD_BLOCK = 64  # taxels per block of the fused pad-sum kernel on CUDA (bench_transduction.py --pad-blocks times others)
 
 
 class TaxelChainWarp:
@@ -184,6 +278,31 @@ class TaxelChainWarp:
             device=self.device,
         )
         return out
+
+    def run_device_pad(self, drive: wp.array, n_steps: int, mode: int, area_m2: float, write=(True, True, False),
+                       block: int | None = None, outs: list | None = None):
+        """The taxel chain with the whole-pad channel sum (sensor.readout = pad) fused in, on a flat device array
+        [E*T*N]: -> ([strain, stress, conductance] device arrays, written where `write` says, else empty),
+        channel conductance [E*T] (float64) and total force [E*T] (N, float64). Same values as run_device +
+        electronics.sum_channels_warp up to the float64 summation order (block sums, then the blocks in
+        order); with block=1 (the default on the CPU) the order is the taxel order, bit for bit the same."""
+        E, N, d = self.E, self.N, self.device
+        B = int(block or (PAD_BLOCK if wp.get_device(d).is_cuda else 1))
+        n_parts = -(-N // B)
+        size = E * n_steps * N
+        out = outs or [wp.empty(size if w else 0, dtype=wp.float32, device=d) for w in write]
+        part_g = wp.empty(E * n_steps * n_parts, dtype=wp.float64, device=d)
+        part_s = wp.empty(E * n_steps * n_parts, dtype=wp.float64, device=d)
+        wp.launch_tiled(
+            self.k["chain_pad"], dim=[E * n_parts],
+            inputs=[drive, n_steps, N, n_parts, int(mode), self.params, *self._state_args(), *(int(w) for w in write),
+                    out[0], out[1], out[2], part_g, part_s],
+            block_dim=B, device=d,
+        )
+        g = wp.empty(E * n_steps, dtype=wp.float64, device=d)
+        force = wp.empty(E * n_steps, dtype=wp.float64, device=d)
+        wp.launch(pad_sums_kernel, dim=E * n_steps, inputs=[part_g, part_s, n_parts, float(area_m2), g, force], device=d)
+        return out, g, force
 
     def run(self, drive: np.ndarray, mode: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """drive [E, T, N] -> strain, stress_pa, conductance_s, each [E, T, N] numpy float32."""
