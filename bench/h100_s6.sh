@@ -1,0 +1,19 @@
+#!/usr/bin/env bash
+# The device calls of session 6 (issue 16), run from the worktree copy on the H100 machine with the packages
+# unpacked in /root/site: `bash bench/h100_s6.sh A|B`. Logs and result files go to $OUT.
+export PYTHONPATH=/root/site:. PYTHONUNBUFFERED=1 OMP_NUM_THREADS=4
+set -o pipefail
+nvidia-smi --query-gpu=name,driver_version,clocks.sm,clocks.mem --format=csv,noheader
+case "$1" in
+A)  # gpu tests on the final kernels, the transduction chain before/after, fabric workers 1 vs 8
+    python3 bench/bench_transduction.py --cuda-only --gpu-episodes 256 --tag h100-s6 2>&1 | tee $OUT/transduction-h100-s6.log
+    cp bench/results/transduction-h100-s6.json $OUT/
+    timeout 300 python3 -m pytest -q -m gpu -p no:cacheprovider 2>&1 | tee $OUT/pytest-gpu-h100-s6.log | tail -25
+    echo "pytest rc $?"
+    python3 bench/bench_user_cli.py --families fabric_1 --episodes 64 --extra "--workers 8" --tag h100-s6-fabric-w8 \
+        --timeout 120 2>&1 | tail -4
+    cp bench/results/user-cli-h100-s6-fabric-w8.json $OUT/ ;;
+B)  # the plain CLI per family with the defaults
+    python3 bench/bench_user_cli.py --tag h100-s6 --timeout 200 "${@:2}" 2>&1 | tee $OUT/user-cli-h100-s6.log | tail -12
+    cp bench/results/user-cli-h100-s6.json $OUT/ ;;
+esac
