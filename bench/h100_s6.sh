@@ -16,4 +16,11 @@ A)  # gpu tests on the final kernels, the transduction chain before/after, fabri
 B)  # the plain CLI per family with the defaults
     python3 bench/bench_user_cli.py --tag h100-s6 --timeout 200 "${@:2}" 2>&1 | tee $OUT/user-cli-h100-s6.log | tail -12
     cp bench/results/user-cli-h100-s6.json $OUT/ ;;
+C)  # the final round in one call: transduction chain, the plain CLI per family, then pytest -m gpu
+    python3 bench/bench_transduction.py --cuda-only --gpu-episodes 256 --tag h100-s6 2>&1 | tee $OUT/transduction-h100-s6.log
+    cp bench/results/transduction-h100-s6.json $OUT/
+    python3 bench/bench_user_cli.py --tag h100-s6 --timeout 200 2>&1 | tee $OUT/user-cli-h100-s6.log | tail -12
+    cp bench/results/user-cli-h100-s6.json $OUT/
+    timeout 240 python3 -m pytest -q -m gpu -p no:cacheprovider 2>&1 | tee $OUT/pytest-gpu-h100-s6.log | tail -15
+    echo "pytest rc $?" | tee -a $OUT/pytest-gpu-h100-s6.log ;;
 esac

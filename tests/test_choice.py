@@ -83,3 +83,17 @@ def _contents(path) -> dict:
         visit("/", f)
         f.visititems(visit)
     return out
+
+
+def test_cpu_physics_with_gpu_sensors_takes_worker_processes(monkeypatch):
+    """C MuJoCo with the sensor kernels on a GPU (auto): shards in all cores but 4 (at most 12) worker processes;
+    the same scene on a machine without CUDA keeps one process (the CPU path as before)."""
+    import simulate.generation.choice as ch
+
+    monkeypatch.setattr(ch.os, "cpu_count", lambda: 16)
+    c = choose(load_scene("fabric_1"), cuda=H100, mjw=True)
+    assert (c.physics, c.device, c.workers) == ("mujoco", "cuda:0", 12)
+    assert "12 worker process(es)" in c.line()
+    monkeypatch.setattr(ch.os, "cpu_count", lambda: 2)
+    assert choose(load_scene("fabric_1"), cuda=H100, mjw=True).workers == 1
+    assert choose(load_scene("fabric_1"), cuda=(0, ""), mjw=True).workers == 1

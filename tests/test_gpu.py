@@ -45,10 +45,10 @@ def test_full_chain_cuda_equals_cpu(gpu_device):
         np.testing.assert_array_equal(c1[k], c2[k])
 
 
-@pytest.mark.parametrize("N,block", [(225, None), (4096, None), (225, 32), (300, 128)])
-def test_fused_pad_kernel_cuda_equals_cpu(gpu_device, N, block):
-    """The taxel kernel with the whole-pad channel sum fused in (CUDA blocks of `block` taxels, the last one
-    partly idle where N is not a multiple) against the cpu taxel kernel + separate channel sum."""
+@pytest.mark.parametrize("N,per_thread", [(225, None), (4096, None), (225, 4), (300, 16)])
+def test_fused_pad_kernel_cuda_equals_cpu(gpu_device, N, per_thread):
+    """The taxel chain with the whole-pad channel sum fused in (`per_thread` taxels per thread, some threads
+    with fewer where N is not a multiple) against the cpu taxel kernel + separate channel sum."""
     import warp as wp
 
     from sensors import electronics as el
@@ -65,7 +65,7 @@ def test_fused_pad_kernel_cuda_equals_cpu(gpu_device, N, block):
         b = TaxelChainWarp(tp, E, N, gpu_device)
         dg = wp.array(drive.reshape(-1), dtype=wp.float32, device=gpu_device)
         outs, g2, f2 = b.run_device_pad(dg, T, MODE_DISPLACEMENT, tp.taxel_area_m2, write=(True, True, True),
-                                           block=None if gpu_device == "cpu" else block)  # cpu: one taxel per block
+                                           per_thread=per_thread)
         res.append([o.numpy() for o in (*outs, g2, f2)])
     for x, y, k in zip((s.numpy(), st.numpy(), c.numpy(), g.numpy(), f.numpy()), res[0], ("strain", "stress", "cond", "g", "force")):
         np.testing.assert_allclose(y, x, rtol=1e-5, atol=1e-7 * float(np.abs(x).max()), err_msg=k)

@@ -123,78 +123,103 @@ def taxel_kernels(n_prony: int, n_play: int):
     chain.__name__ = chain.__qualname__ = f"taxel_chain_p{n_prony}_k{n_play}"
     k_chain = wp.kernel(chain, module="unique", enable_backward=False)
 
-    def chain_pad(
-        drive: wp.array(dtype=wp.float32),  # [E*T*N]
-        n_steps: int,
-        n_taxels: int,
-        n_parts: int,  # blocks per episode: ceil(N / block_dim)
-        mode: int,
-        p: Params,
-        st_strain: wp.array(dtype=wp.float32),  # [E*N] in/out
-        st_phi: wp.array(dtype=wp.float32),
-        st_prony: wp.array(dtype=vec_p),
-        st_gap: wp.array(dtype=wp.float32),
-        st_play: wp.array(dtype=vec_k),
-        st_damage: wp.array(dtype=wp.float32),
-        write_strain: int,
-        write_stress: int,
-        write_cond: int,
-        out_strain: wp.array(dtype=wp.float32),  # [E*T*N] (written where write_* != 0)
-        out_stress: wp.array(dtype=wp.float32),
-        out_cond: wp.array(dtype=wp.float32),
-        part_g: wp.array(dtype=wp.float64),  # [E*T*n_parts] block sums of the conductance
-        part_s: wp.array(dtype=wp.float64),  # [E*T*n_parts] block sums of the stress
-    ):
-        # the taxel chain with the whole-pad channel sum fused in: each block holds taxels of one episode and
-        # sums them per step (fixed-order tile reduction); pad_sums_kernel adds the n_parts block sums in order
-        blk, lane = wp.tid()
-        ep = blk // n_parts
-        n = (blk - ep * n_parts) * wp.block_dim() + lane
-        active = n < n_taxels
-        tid = ep * n_taxels + n
-        e = float(0.0)
-        phi = float(0.0)
-        h = vec_p()
-        s = float(0.0)
-        z = vec_k()
-        dmg = float(0.0)
-        if active:
-            e = st_strain[tid]
-            phi = st_phi[tid]
-            h = st_prony[tid]
-            s = st_gap[tid]
-            z = st_play[tid]
-            dmg = st_damage[tid]
-        base = ep * n_steps * n_taxels + n
-        for k in range(n_steps):
-            idx = base + k * n_taxels
-            sig = float(0.0)
-            g = float(0.0)
-            if active:
-                e, phi, h, s, z, dmg, sig, g = step_f(p, mode, drive[idx], e, phi, h, s, z, dmg)
-                if write_strain != 0:
-                    out_strain[idx] = e
-                if write_stress != 0:
-                    out_stress[idx] = sig
-                if write_cond != 0:
-                    out_cond[idx] = g
-            gt = wp.tile_sum(wp.tile(wp.float64(g)))
-            st = wp.tile_sum(wp.tile(wp.float64(sig)))
-            if lane == 0:
-                o = (ep * n_steps + k) * n_parts + (blk - ep * n_parts)
-                part_g[o] = wp.tile_extract(gt, 0)
-                part_s[o] = wp.tile_extract(st, 0)
-        if active:
-            st_strain[tid] = e
-            st_phi[tid] = phi
-            st_prony[tid] = h
-            st_gap[tid] = s
-            st_play[tid] = z
-            st_damage[tid] = dmg
+    k_chain_pad = {}
 
-    chain_pad.__name__ = chain_pad.__qualname__ = f"taxel_chain_pad_p{n_prony}_k{n_play}"
-    k_pad = wp.kernel(chain_pad, module="unique", enable_backward=False)
-    return {"chain": k_chain, "chain_pad": k_pad, "Params": Params, "vec_p": vec_p, "vec_k": vec_k}
+    def pad_kernel(m_per: int):
+        """The taxel chain with the whole-pad channel sum fused in: each thread runs m_per taxels of one episode
+        (taxels j, j + S, j + 2S, ... with S = ceil(N / m_per) threads per episode, so loads coalesce across
+        threads), its state in registers (the taxel loop unrolls), and writes per step the float64 sums of its
+        taxels' conductance and stress; pad_sums_kernel adds the S partial sums in order. No block sync, no
+        atomics. With m_per = 1 the sums run in taxel order (bit for bit the separate channel sum)."""
+        if m_per in k_chain_pad:
+            return k_chain_pad[m_per]
+        vec_m = wp.types.vector(length=m_per, dtype=wp.float32)
+        mat_mp = wp.types.matrix(shape=(m_per, n_prony), dtype=wp.float32)
+        mat_mk = wp.types.matrix(shape=(m_per, n_play), dtype=wp.float32)
+
+        def chain_pad(
+            drive: wp.array(dtype=wp.float32),  # [E*T*N]
+            n_steps: int,
+            n_taxels: int,
+            n_parts: int,  # threads per episode: ceil(N / m_per)
+            mode: int,
+            p: Params,
+            st_strain: wp.array(dtype=wp.float32),  # [E*N] in/out
+            st_phi: wp.array(dtype=wp.float32),
+            st_prony: wp.array(dtype=vec_p),
+            st_gap: wp.array(dtype=wp.float32),
+            st_play: wp.array(dtype=vec_k),
+            st_damage: wp.array(dtype=wp.float32),
+            write_strain: int,
+            write_stress: int,
+            write_cond: int,
+            out_strain: wp.array(dtype=wp.float32),  # [E*T*N] (written where write_* != 0)
+            out_stress: wp.array(dtype=wp.float32),
+            out_cond: wp.array(dtype=wp.float32),
+            part_g: wp.array(dtype=wp.float64),  # [E*T*n_parts] partial sums of the conductance
+            part_s: wp.array(dtype=wp.float64),  # [E*T*n_parts] partial sums of the stress
+        ):
+            tid = wp.tid()
+            ep = tid // n_parts
+            j = tid - ep * n_parts
+            es = vec_m()
+            phis = vec_m()
+            hs = mat_mp()
+            ss = vec_m()
+            zs = mat_mk()
+            ds = vec_m()
+            for m in range(m_per):
+                n = j + m * n_parts
+                if n < n_taxels:
+                    t = ep * n_taxels + n
+                    es[m] = st_strain[t]
+                    phis[m] = st_phi[t]
+                    hs[m] = st_prony[t]
+                    ss[m] = st_gap[t]
+                    zs[m] = st_play[t]
+                    ds[m] = st_damage[t]
+            for k in range(n_steps):
+                row = (ep * n_steps + k) * n_taxels
+                gsum = wp.float64(0.0)
+                ssum = wp.float64(0.0)
+                for m in range(m_per):
+                    n = j + m * n_parts
+                    if n < n_taxels:
+                        idx = row + n
+                        e, phi, h, s, z, dmg, sig, g = step_f(p, mode, drive[idx], es[m], phis[m], hs[m], ss[m], zs[m], ds[m])
+                        es[m] = e
+                        phis[m] = phi
+                        hs[m] = h
+                        ss[m] = s
+                        zs[m] = z
+                        ds[m] = dmg
+                        if write_strain != 0:
+                            out_strain[idx] = e
+                        if write_stress != 0:
+                            out_stress[idx] = sig
+                        if write_cond != 0:
+                            out_cond[idx] = g
+                        gsum += wp.float64(g)
+                        ssum += wp.float64(sig)
+                o = (ep * n_steps + k) * n_parts + j
+                part_g[o] = gsum
+                part_s[o] = ssum
+            for m in range(m_per):
+                n = j + m * n_parts
+                if n < n_taxels:
+                    t = ep * n_taxels + n
+                    st_strain[t] = es[m]
+                    st_phi[t] = phis[m]
+                    st_prony[t] = hs[m]
+                    st_gap[t] = ss[m]
+                    st_play[t] = zs[m]
+                    st_damage[t] = ds[m]
+
+        chain_pad.__name__ = chain_pad.__qualname__ = f"taxel_chain_pad_p{n_prony}_k{n_play}_m{m_per}"
+        k_chain_pad[m_per] = wp.kernel(chain_pad, module="unique", enable_backward=False)
+        return k_chain_pad[m_per]
+
+    return {"chain": k_chain, "pad_kernel": pad_kernel, "Params": Params, "vec_p": vec_p, "vec_k": vec_k}
 
 
 @wp.kernel
@@ -216,7 +241,7 @@ def pad_sums_kernel(
     force_out[et] = f * wp.float64(area)
 
 
-PAD_BLOCK = 64  # taxels per block of the fused pad-sum kernel on CUDA (bench_transduction.py --pad-blocks times others)
+PAD_TAXELS_PER_THREAD = 8  # taxels per thread of the fused pad-sum kernel on CUDA (bench_transduction.py times others)
 
 
 class TaxelChainWarp:
@@ -280,24 +305,24 @@ class TaxelChainWarp:
         return out
 
     def run_device_pad(self, drive: wp.array, n_steps: int, mode: int, area_m2: float, write=(True, True, False),
-                       block: int | None = None, outs: list | None = None):
+                       per_thread: int | None = None, outs: list | None = None):
         """The taxel chain with the whole-pad channel sum (sensor.readout = pad) fused in, on a flat device array
         [E*T*N]: -> ([strain, stress, conductance] device arrays, written where `write` says, else empty),
         channel conductance [E*T] (float64) and total force [E*T] (N, float64). Same values as run_device +
-        electronics.sum_channels_warp up to the float64 summation order (block sums, then the blocks in
-        order); with block=1 (the default on the CPU) the order is the taxel order, bit for bit the same."""
+        electronics.sum_channels_warp up to the float64 summation order (per thread, then the threads in
+        order); with per_thread=1 (the default on the CPU) the order is the taxel order, bit for bit the same."""
         E, N, d = self.E, self.N, self.device
-        B = int(block or (PAD_BLOCK if wp.get_device(d).is_cuda else 1))
-        n_parts = -(-N // B)
+        M = int(per_thread or (PAD_TAXELS_PER_THREAD if wp.get_device(d).is_cuda else 1))
+        n_parts = -(-N // M)
         size = E * n_steps * N
         out = outs or [wp.empty(size if w else 0, dtype=wp.float32, device=d) for w in write]
         part_g = wp.empty(E * n_steps * n_parts, dtype=wp.float64, device=d)
         part_s = wp.empty(E * n_steps * n_parts, dtype=wp.float64, device=d)
-        wp.launch_tiled(
-            self.k["chain_pad"], dim=[E * n_parts],
+        wp.launch(
+            self.k["pad_kernel"](M), dim=E * n_parts,
             inputs=[drive, n_steps, N, n_parts, int(mode), self.params, *self._state_args(), *(int(w) for w in write),
                     out[0], out[1], out[2], part_g, part_s],
-            block_dim=B, device=d,
+            device=d,
         )
         g = wp.empty(E * n_steps, dtype=wp.float64, device=d)
         force = wp.empty(E * n_steps, dtype=wp.float64, device=d)
