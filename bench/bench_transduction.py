@@ -121,13 +121,13 @@ def _best(fn, sync, repeats, setup=None):
     return best
 
 
-def bench_cuda_chain(cfg, E, T, N, device="cuda:0", repeats=5, per_thread=(1, 4, 8, 16)):
-    """The whole cnt_pdms chain on CUDA as CntPdmsSensor.run does it on a whole-pad readout (issue 16):
-    taxel kernel with the channel sum fused in (strain and stress per taxel written, as recorded by default;
-    the conductance not) + time-parallel readout with the noise drawn in the kernel + the readout's outputs
-    copied to page-locked host buffers (as the GPU feed does, int16 codes), against the chain before (taxel
-    kernel writing all three fields, tiled channel sum, serial readout) on the same inputs in the same run.
-    Stages alone are synchronised one by one (best of `repeats`)."""
+def bench_cuda_chain(cfg, E, T, N, device="cuda:0", repeats=5):
+    """The whole cnt_pdms chain on CUDA as CntPdmsSensor.run does it on a whole-pad readout (issue 16): taxel
+    kernel, tiled channel sum, readout with the noise drawn in the kernel, the readout's outputs copied to
+    page-locked host buffers (as the GPU feed does, int16 codes); "before" with the serial readout (one thread
+    per episode and channel), "after" with the time-parallel one (sensors/electronics.py), same inputs, same
+    run. Stages alone are synchronised one by one; the taxel state is reset (an upload) outside the timed
+    region; best of `repeats`."""
     import warp as wp
 
     from sensors import electronics as el
@@ -140,43 +140,33 @@ def bench_cuda_chain(cfg, E, T, N, device="cuda:0", repeats=5, per_thread=(1, 4,
     noise = el.NoiseSeeds(list(range(E)), e.white_noise_v, e.pink_noise_v)
     drive = wp.array(_drive(E, T, N).reshape(-1), dtype=wp.float32, device=device)
     outs3 = [wp.empty(E * T * N, dtype=wp.float32, device=device) for _ in range(3)]
-    outs2 = [outs3[0], outs3[1], wp.empty(0, dtype=wp.float32, device=device)]
     chain = TaxelChainWarp(tp, E, N, device)
     tc = np.zeros(N, np.int32)
     sync = lambda: wp.synchronize_device(device)  # noqa: E731
-    area = tp.taxel_area_m2
     keep = {"resistance", "bridge_v", "adc", "filtered_v", "resistance_measured"}
     box = {}
 
-    def before_kernels():
+    def kernels():
         chain.run_device(drive, T, 0, outs3)
-        box["g"], _ = el.sum_channels_warp(outs3[2], outs3[1], tc, 1, area, (E, T, N), device)
+        box["g"], _ = el.sum_channels_warp(outs3[2], outs3[1], tc, 1, tp.taxel_area_m2, (E, T, N), device)
 
-    def before_readout():
-        el.readout_warp(box["g"], (E, T, 1), noise, ep, None, device, keep=keep, adc_dtype=np.int16, parallel=False)
-
-    def after_kernel(m=None):
-        _, box["g"], _ = chain.run_device_pad(drive, T, 0, area, outs=outs2, per_thread=m)
-
-    def after_readout(keep=keep):
-        el.readout_warp(box["g"], (E, T, 1), noise, ep, None, device, keep=keep, adc_dtype=np.int16)
+    def readout(parallel, keep=keep):
+        el.readout_warp(box["g"], (E, T, 1), noise, ep, None, device, keep=keep, adc_dtype=np.int16, parallel=parallel)
 
     res = {"episodes": E, "taxels": N, "steps": T, "device_name": wp.get_device(device).name}
     with host_staging():
-        rs = chain.reset  # the taxel state back at rest before each timed run (an upload, untimed)
-        t_bk = _best(before_kernels, sync, repeats, rs)
-        t_br = _best(before_readout, sync, repeats, rs)
-        t_b = _best(lambda: (before_kernels(), before_readout()), sync, repeats, rs)
-        t_ak = _best(after_kernel, sync, repeats, rs)
-        t_ar0 = _best(lambda: after_readout(keep=set()), sync, repeats, rs)
-        t_ar = _best(after_readout, sync, repeats, rs)
-        t_a = _best(lambda: (after_kernel(), after_readout()), sync, repeats, rs)
-        res["pad_per_thread_seconds"] = {str(m): _best(lambda m=m: after_kernel(m), sync, repeats, rs) for m in per_thread}
+        rs = chain.reset
+        t_k = _best(kernels, sync, repeats, rs)
+        t_br = _best(lambda: readout(False), sync, repeats, rs)
+        t_b = _best(lambda: (kernels(), readout(False)), sync, repeats, rs)
+        t_ar0 = _best(lambda: readout(True, keep=set()), sync, repeats, rs)
+        t_ar = _best(lambda: readout(True), sync, repeats, rs)
+        t_a = _best(lambda: (kernels(), readout(True)), sync, repeats, rs)
     n = E * T * N
     res["before"] = {"taxel_steps_per_s_chain": n / t_b, "chain_seconds": t_b,
-                     "stage_seconds": {"taxel kernel + channel sums": t_bk, "serial readout + copies back": t_br}}
+                     "stage_seconds": {"taxel kernel + channel sums": t_k, "serial readout + copies back": t_br}}
     res["after"] = {"taxel_steps_per_s_chain": n / t_a, "chain_seconds": t_a,
-                    "stage_seconds": {"fused taxel kernel + pad sums": t_ak, "parallel readout (no copies)": t_ar0,
+                    "stage_seconds": {"taxel kernel + channel sums": t_k, "parallel readout (no copies)": t_ar0,
                                       "parallel readout + copies back": t_ar}}
     return res
 
@@ -352,7 +342,6 @@ def main() -> None:
         for k in ("before", "after"):
             print(f"  chain {k}: {c[k]['taxel_steps_per_s_chain']:.3g} taxel-steps/s ({1e3 * c[k]['chain_seconds']:.2f} ms); "
                   + ", ".join(f"{s} {1e3 * v:.2f} ms" for s, v in c[k]["stage_seconds"].items()))
-        print("  fused kernel by taxels per thread: " + ", ".join(f"{b}: {1e3 * v:.2f} ms" for b, v in c["pad_per_thread_seconds"].items()))
         if a.cuda_only:
             _write(res, a)
             return

@@ -16,6 +16,13 @@ A)  # gpu tests on the final kernels, the transduction chain before/after, fabri
 B)  # the plain CLI per family with the defaults
     python3 bench/bench_user_cli.py --tag h100-s6 --timeout 200 "${@:2}" 2>&1 | tee $OUT/user-cli-h100-s6.log | tail -12
     cp bench/results/user-cli-h100-s6.json $OUT/ ;;
+D)  # cnt_pdms alone (the plain CLI, 4096 episodes) after the transduction chain, then pytest -m gpu
+    python3 bench/bench_transduction.py --cuda-only --gpu-episodes 256 --tag h100-s6 2>&1 | tee $OUT/transduction-h100-s6.log
+    cp bench/results/transduction-h100-s6.json $OUT/
+    python3 bench/bench_user_cli.py --families cnt_pdms --episodes 4096 --tag h100-s6-cnt --timeout 280 2>&1 | tee $OUT/user-cli-h100-s6-cnt.log | tail -6
+    cp bench/results/user-cli-h100-s6-cnt.json $OUT/
+    timeout 200 python3 -m pytest -q -m gpu -p no:cacheprovider 2>&1 | tee $OUT/pytest-gpu-h100-s6.log | tail -8
+    echo "pytest rc $?" | tee -a $OUT/pytest-gpu-h100-s6.log ;;
 C)  # the final round in one call: transduction chain, the plain CLI per family, then pytest -m gpu
     python3 bench/bench_transduction.py --cuda-only --gpu-episodes 256 --tag h100-s6 2>&1 | tee $OUT/transduction-h100-s6.log
     cp bench/results/transduction-h100-s6.json $OUT/

@@ -45,34 +45,6 @@ def test_full_chain_cuda_equals_cpu(gpu_device):
         np.testing.assert_array_equal(c1[k], c2[k])
 
 
-@pytest.mark.parametrize("N,per_thread", [(225, None), (4096, None), (225, 4), (300, 16)])
-def test_fused_pad_kernel_cuda_equals_cpu(gpu_device, N, per_thread):
-    """The taxel chain with the whole-pad channel sum fused in (`per_thread` taxels per thread, some threads
-    with fewer where N is not a multiple) against the cpu taxel kernel + separate channel sum."""
-    import warp as wp
-
-    from sensors import electronics as el
-
-    tp = taxel_params(load_scene("cnt_pdms"))
-    E, T = 3, 300
-    drive = np.random.default_rng(N).uniform(0, 0.04, (E, T, N)).astype(np.float32)
-    a = TaxelChainWarp(tp, E, N, "cpu")
-    dc = wp.array(drive.reshape(-1), dtype=wp.float32, device="cpu")
-    s, st, c = a.run_device(dc, T, MODE_DISPLACEMENT)
-    g, f = el.sum_channels_warp(c, st, np.zeros(N, np.int32), 1, tp.taxel_area_m2, (E, T, N), "cpu")
-    res = []
-    for _ in range(2):
-        b = TaxelChainWarp(tp, E, N, gpu_device)
-        dg = wp.array(drive.reshape(-1), dtype=wp.float32, device=gpu_device)
-        outs, g2, f2 = b.run_device_pad(dg, T, MODE_DISPLACEMENT, tp.taxel_area_m2, write=(True, True, True),
-                                           per_thread=per_thread)
-        res.append([o.numpy() for o in (*outs, g2, f2)])
-    for x, y, k in zip((s.numpy(), st.numpy(), c.numpy(), g.numpy(), f.numpy()), res[0], ("strain", "stress", "cond", "g", "force")):
-        np.testing.assert_allclose(y, x, rtol=1e-5, atol=1e-7 * float(np.abs(x).max()), err_msg=k)
-    for x, y in zip(*res):
-        np.testing.assert_array_equal(x, y)  # deterministic: fixed-order block sums, no atomics
-
-
 def test_parallel_readout_cuda_equals_serial_cpu(gpu_device):
     """The time-parallel readout on the device (its default there) against the serial kernel on the cpu."""
     import warp as wp

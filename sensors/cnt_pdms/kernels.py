@@ -8,7 +8,10 @@ neighbouring threads read neighbouring taxels, so loads coalesce on CUDA.
 The kernel writes strain, stress and conductance per taxel; the channel sums run afterwards as a tiled,
 coalesced reduction (sensors/electronics.py). A variant that reduced over each thread block at every
 step inside this kernel was measured slower on an H100 (3.6e10 vs 5.0e10 taxel-steps/s for the whole
-chain): the per-step block synchronisation costs more than re-reading the arrays once.
+chain): the per-step block synchronisation costs more than re-reading the arrays once. Two more fused variants
+were measured slower on the H100 in session 6 (256 x 4096 x 1000, bench/results/logs/transduction-h100-s6-*):
+tile sums per step in blocks of 32-256 taxels (33-36 ms against 13.0 ms for this kernel + the tiled sum), and
+4-16 taxels per thread with per-thread partial sums, no sync (36-40 ms): both lose the memory parallelism.
 """
 
 # no `from __future__ import annotations`: Warp must see the closure types as real objects
@@ -122,126 +125,7 @@ def taxel_kernels(n_prony: int, n_play: int):
 
     chain.__name__ = chain.__qualname__ = f"taxel_chain_p{n_prony}_k{n_play}"
     k_chain = wp.kernel(chain, module="unique", enable_backward=False)
-
-    k_chain_pad = {}
-
-    def pad_kernel(m_per: int):
-        """The taxel chain with the whole-pad channel sum fused in: each thread runs m_per taxels of one episode
-        (taxels j, j + S, j + 2S, ... with S = ceil(N / m_per) threads per episode, so loads coalesce across
-        threads), its state in registers (the taxel loop unrolls), and writes per step the float64 sums of its
-        taxels' conductance and stress; pad_sums_kernel adds the S partial sums in order. No block sync, no
-        atomics. With m_per = 1 the sums run in taxel order (bit for bit the separate channel sum)."""
-        if m_per in k_chain_pad:
-            return k_chain_pad[m_per]
-        vec_m = wp.types.vector(length=m_per, dtype=wp.float32)
-        mat_mp = wp.types.matrix(shape=(m_per, n_prony), dtype=wp.float32)
-        mat_mk = wp.types.matrix(shape=(m_per, n_play), dtype=wp.float32)
-
-        def chain_pad(
-            drive: wp.array(dtype=wp.float32),  # [E*T*N]
-            n_steps: int,
-            n_taxels: int,
-            n_parts: int,  # threads per episode: ceil(N / m_per)
-            mode: int,
-            p: Params,
-            st_strain: wp.array(dtype=wp.float32),  # [E*N] in/out
-            st_phi: wp.array(dtype=wp.float32),
-            st_prony: wp.array(dtype=vec_p),
-            st_gap: wp.array(dtype=wp.float32),
-            st_play: wp.array(dtype=vec_k),
-            st_damage: wp.array(dtype=wp.float32),
-            write_strain: int,
-            write_stress: int,
-            write_cond: int,
-            out_strain: wp.array(dtype=wp.float32),  # [E*T*N] (written where write_* != 0)
-            out_stress: wp.array(dtype=wp.float32),
-            out_cond: wp.array(dtype=wp.float32),
-            part_g: wp.array(dtype=wp.float64),  # [E*T*n_parts] partial sums of the conductance
-            part_s: wp.array(dtype=wp.float64),  # [E*T*n_parts] partial sums of the stress
-        ):
-            tid = wp.tid()
-            ep = tid // n_parts
-            j = tid - ep * n_parts
-            es = vec_m()
-            phis = vec_m()
-            hs = mat_mp()
-            ss = vec_m()
-            zs = mat_mk()
-            ds = vec_m()
-            for m in range(m_per):
-                n = j + m * n_parts
-                if n < n_taxels:
-                    t = ep * n_taxels + n
-                    es[m] = st_strain[t]
-                    phis[m] = st_phi[t]
-                    hs[m] = st_prony[t]
-                    ss[m] = st_gap[t]
-                    zs[m] = st_play[t]
-                    ds[m] = st_damage[t]
-            for k in range(n_steps):
-                row = (ep * n_steps + k) * n_taxels
-                gsum = wp.float64(0.0)
-                ssum = wp.float64(0.0)
-                for m in range(m_per):
-                    n = j + m * n_parts
-                    if n < n_taxels:
-                        idx = row + n
-                        e, phi, h, s, z, dmg, sig, g = step_f(p, mode, drive[idx], es[m], phis[m], hs[m], ss[m], zs[m], ds[m])
-                        es[m] = e
-                        phis[m] = phi
-                        hs[m] = h
-                        ss[m] = s
-                        zs[m] = z
-                        ds[m] = dmg
-                        if write_strain != 0:
-                            out_strain[idx] = e
-                        if write_stress != 0:
-                            out_stress[idx] = sig
-                        if write_cond != 0:
-                            out_cond[idx] = g
-                        gsum += wp.float64(g)
-                        ssum += wp.float64(sig)
-                o = (ep * n_steps + k) * n_parts + j
-                part_g[o] = gsum
-                part_s[o] = ssum
-            for m in range(m_per):
-                n = j + m * n_parts
-                if n < n_taxels:
-                    t = ep * n_taxels + n
-                    st_strain[t] = es[m]
-                    st_phi[t] = phis[m]
-                    st_prony[t] = hs[m]
-                    st_gap[t] = ss[m]
-                    st_play[t] = zs[m]
-                    st_damage[t] = ds[m]
-
-        chain_pad.__name__ = chain_pad.__qualname__ = f"taxel_chain_pad_p{n_prony}_k{n_play}_m{m_per}"
-        k_chain_pad[m_per] = wp.kernel(chain_pad, module="unique", enable_backward=False)
-        return k_chain_pad[m_per]
-
-    return {"chain": k_chain, "pad_kernel": pad_kernel, "Params": Params, "vec_p": vec_p, "vec_k": vec_k}
-
-
-@wp.kernel
-def pad_sums_kernel(
-    part_g: wp.array(dtype=wp.float64),  # [E*T*n_parts]
-    part_s: wp.array(dtype=wp.float64),
-    n_parts: int,
-    area: float,
-    g_out: wp.array(dtype=wp.float64),  # [E*T] (one channel: the whole pad)
-    force_out: wp.array(dtype=wp.float64),  # [E*T]
-):
-    et = wp.tid()
-    g = wp.float64(0.0)
-    f = wp.float64(0.0)
-    for j in range(n_parts):
-        g += part_g[et * n_parts + j]
-        f += part_s[et * n_parts + j]
-    g_out[et] = g
-    force_out[et] = f * wp.float64(area)
-
-
-PAD_TAXELS_PER_THREAD = 8  # taxels per thread of the fused pad-sum kernel on CUDA (bench_transduction.py times others)
+    return {"chain": k_chain, "Params": Params, "vec_p": vec_p, "vec_k": vec_k}
 
 
 class TaxelChainWarp:
@@ -303,31 +187,6 @@ class TaxelChainWarp:
             device=self.device,
         )
         return out
-
-    def run_device_pad(self, drive: wp.array, n_steps: int, mode: int, area_m2: float, write=(True, True, False),
-                       per_thread: int | None = None, outs: list | None = None):
-        """The taxel chain with the whole-pad channel sum (sensor.readout = pad) fused in, on a flat device array
-        [E*T*N]: -> ([strain, stress, conductance] device arrays, written where `write` says, else empty),
-        channel conductance [E*T] (float64) and total force [E*T] (N, float64). Same values as run_device +
-        electronics.sum_channels_warp up to the float64 summation order (per thread, then the threads in
-        order); with per_thread=1 (the default on the CPU) the order is the taxel order, bit for bit the same."""
-        E, N, d = self.E, self.N, self.device
-        M = int(per_thread or (PAD_TAXELS_PER_THREAD if wp.get_device(d).is_cuda else 1))
-        n_parts = -(-N // M)
-        size = E * n_steps * N
-        out = outs or [wp.empty(size if w else 0, dtype=wp.float32, device=d) for w in write]
-        part_g = wp.empty(E * n_steps * n_parts, dtype=wp.float64, device=d)
-        part_s = wp.empty(E * n_steps * n_parts, dtype=wp.float64, device=d)
-        wp.launch(
-            self.k["pad_kernel"](M), dim=E * n_parts,
-            inputs=[drive, n_steps, N, n_parts, int(mode), self.params, *self._state_args(), *(int(w) for w in write),
-                    out[0], out[1], out[2], part_g, part_s],
-            device=d,
-        )
-        g = wp.empty(E * n_steps, dtype=wp.float64, device=d)
-        force = wp.empty(E * n_steps, dtype=wp.float64, device=d)
-        wp.launch(pad_sums_kernel, dim=E * n_steps, inputs=[part_g, part_s, n_parts, float(area_m2), g, force], device=d)
-        return out, g, force
 
     def run(self, drive: np.ndarray, mode: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """drive [E, T, N] -> strain, stress_pa, conductance_s, each [E, T, N] numpy float32."""
