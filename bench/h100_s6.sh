@@ -23,7 +23,7 @@ D)  # cnt_pdms alone (the plain CLI, 4096 episodes) after the transduction chain
     cp bench/results/user-cli-h100-s6-cnt.json $OUT/
     timeout 200 python3 -m pytest -q -m gpu -p no:cacheprovider 2>&1 | tee $OUT/pytest-gpu-h100-s6.log | tail -8
     echo "pytest rc $?" | tee -a $OUT/pytest-gpu-h100-s6.log ;;
-E)  # cnt_pdms with the kernel cache warm: a 64-episode run first (compiles MuJoCo Warp's kernels), then 4096
+E)  # cnt_pdms with the kernel cache warm (as run: the 4096 run alone, right after D on the same machine)
     python3 bench/bench_user_cli.py --families cnt_pdms --episodes 64 --tag h100-s6-cnt-first64 --timeout 250 2>&1 | tail -4
     cp bench/results/user-cli-h100-s6-cnt-first64.json $OUT/
     python3 bench/bench_user_cli.py --families cnt_pdms --episodes 4096 --tag h100-s6-cnt --timeout 250 2>&1 | tee $OUT/user-cli-h100-s6-cnt.log | tail -6
