@@ -35,4 +35,12 @@ C)  # the final round in one call: transduction chain, the plain CLI per family,
     cp bench/results/user-cli-h100-s6.json $OUT/
     timeout 240 python3 -m pytest -q -m gpu -p no:cacheprovider 2>&1 | tee $OUT/pytest-gpu-h100-s6.log | tail -15
     echo "pytest rc $?" | tee -a $OUT/pytest-gpu-h100-s6.log ;;
+F)  # shards handed on as packed (SLICES_PER_LENGTH): cnt_pdms warm-up (compiles the kernels), the 4096 run warm,
+    # then the compact 6 x 6 mixed-frequency e2e bench as in session 5 (-s5-mix)
+    python3 bench/bench_user_cli.py --families cnt_pdms --episodes 64 --tag h100-s6-cnt-first64-handon --timeout 200 2>&1 | tail -3
+    python3 bench/bench_user_cli.py --families cnt_pdms --episodes 4096 --tag h100-s6-cnt-handon --timeout 160 2>&1 | tee $OUT/user-cli-h100-s6-cnt-handon.log | tail -4
+    cp bench/results/user-cli-h100-s6-cnt-handon.json $OUT/
+    timeout 230 python3 bench/bench_gpu_pipeline.py --parts e2e --workers 8 --shards-per-worker 2 \
+        --override "protocol.frequencies_hz=[0.1,0.5,1.0,2.0]" --tag h100-s6-mix 2>&1 | tee $OUT/gpu-pipeline-h100-s6-mix.log | tail -4
+    cp bench/results/gpu-pipeline-h100-s6-mix.json $OUT/ ;;
 esac
