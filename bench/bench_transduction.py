@@ -105,6 +105,72 @@ def bench_warp(cfg, E, T, N, device, repeats=3):
             "chain_seconds": best_full, "stage_seconds": stage_s}
 
 
+def _best(fn, sync, repeats, setup=None):
+    """Best wall time of fn() over `repeats`, synchronised, after one warm-up; setup() runs before each, untimed."""
+    (setup or (lambda: None))()
+    fn()  # warm-up / compile
+    sync()
+    best = float("inf")
+    for _ in range(repeats):
+        (setup or (lambda: None))()
+        sync()
+        t0 = time.perf_counter()
+        fn()
+        sync()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def bench_cuda_chain(cfg, E, T, N, device="cuda:0", repeats=5):
+    """The whole cnt_pdms chain on CUDA as CntPdmsSensor.run does it on a whole-pad readout (issue 16): taxel
+    kernel, tiled channel sum, readout with the noise drawn in the kernel, the readout's outputs copied to
+    page-locked host buffers (as the GPU feed does, int16 codes); "before" with the serial readout (one thread
+    per episode and channel), "after" with the time-parallel one (sensors/electronics.py), same inputs, same
+    run. Stages alone are synchronised one by one; the taxel state is reset (an upload) outside the timed
+    region; best of `repeats`."""
+    import warp as wp
+
+    from sensors import electronics as el
+    from sensors.cnt_pdms.kernels import TaxelChainWarp
+    from sensors.cnt_pdms.params import electronics_params, taxel_params
+    from sensors.warp_setup import host_staging
+
+    tp, ep = taxel_params(cfg), electronics_params(cfg)
+    e = cfg.sensor.electronics
+    noise = el.NoiseSeeds(list(range(E)), e.white_noise_v, e.pink_noise_v)
+    drive = wp.array(_drive(E, T, N).reshape(-1), dtype=wp.float32, device=device)
+    outs3 = [wp.empty(E * T * N, dtype=wp.float32, device=device) for _ in range(3)]
+    chain = TaxelChainWarp(tp, E, N, device)
+    tc = np.zeros(N, np.int32)
+    sync = lambda: wp.synchronize_device(device)  # noqa: E731
+    keep = {"resistance", "bridge_v", "adc", "filtered_v", "resistance_measured"}
+    box = {}
+
+    def kernels():
+        chain.run_device(drive, T, 0, outs3)
+        box["g"], _ = el.sum_channels_warp(outs3[2], outs3[1], tc, 1, tp.taxel_area_m2, (E, T, N), device)
+
+    def readout(parallel, keep=keep):
+        el.readout_warp(box["g"], (E, T, 1), noise, ep, None, device, keep=keep, adc_dtype=np.int16, parallel=parallel)
+
+    res = {"episodes": E, "taxels": N, "steps": T, "device_name": wp.get_device(device).name}
+    with host_staging():
+        rs = chain.reset
+        t_k = _best(kernels, sync, repeats, rs)
+        t_br = _best(lambda: readout(False), sync, repeats, rs)
+        t_b = _best(lambda: (kernels(), readout(False)), sync, repeats, rs)
+        t_ar0 = _best(lambda: readout(True, keep=set()), sync, repeats, rs)
+        t_ar = _best(lambda: readout(True), sync, repeats, rs)
+        t_a = _best(lambda: (kernels(), readout(True)), sync, repeats, rs)
+    n = E * T * N
+    res["before"] = {"taxel_steps_per_s_chain": n / t_b, "chain_seconds": t_b,
+                     "stage_seconds": {"taxel kernel + channel sums": t_k, "serial readout + copies back": t_br}}
+    res["after"] = {"taxel_steps_per_s_chain": n / t_a, "chain_seconds": t_a,
+                    "stage_seconds": {"taxel kernel + channel sums": t_k, "parallel readout (no copies)": t_ar0,
+                                      "parallel readout + copies back": t_ar}}
+    return res
+
+
 def bench_fabric(E: int, T: int, N: int, device: str = "cpu", repeats: int = 7) -> dict:
     """fabric_1 kernel with the per-press area and knit set (issue 13) and without (the chain before), same run."""
     from dataclasses import replace
@@ -224,6 +290,7 @@ def main() -> None:
     ap.add_argument("--velostat", action="store_true", help="only the velostat film kernel: aging vs spectrum creep")
     ap.add_argument("--only", choices=["ntype"], help="run this family alone and merge it into the results file")
     ap.add_argument("--tag", default="", help="result file name: transduction-<tag>.json (default gpu / cpu)")
+    ap.add_argument("--cuda-only", action="store_true", help="stop after the cnt_pdms CUDA figures (no fabric / ntype)")
     a = ap.parse_args()
     if a.velostat:
         from sensors.warp_setup import init_warp
@@ -270,6 +337,14 @@ def main() -> None:
         print("  stages alone: " + ", ".join(f"{k} {1e3 * v:.2f} ms" for k, v in g["stage_seconds"].items())
               + f"; whole chain {1e3 * g['chain_seconds']:.2f} ms")
         print(f"  ratio cuda / warp-cpu: {g['chain'] / w['chain']:.0f}x; cuda / numpy: {g['chain'] / res['numpy_ref']['taxel_steps_per_s']:.0f}x")
+        c = bench_cuda_chain(cfg, a.gpu_episodes, a.steps, N)
+        res["warp_cuda_chain"] = c
+        for k in ("before", "after"):
+            print(f"  chain {k}: {c[k]['taxel_steps_per_s_chain']:.3g} taxel-steps/s ({1e3 * c[k]['chain_seconds']:.2f} ms); "
+                  + ", ".join(f"{s} {1e3 * v:.2f} ms" for s, v in c[k]["stage_seconds"].items()))
+        if a.cuda_only:
+            _write(res, a)
+            return
     fe = min(a.episodes, 4)
     fb = bench_fabric(fe, a.steps, N, "cpu")
     res["fabric_warp_cpu"] = {"episodes": fe, "taxel_steps_per_s_before": fb["before"], "taxel_steps_per_s_after": fb["after"],
@@ -283,6 +358,10 @@ def main() -> None:
         print(f"fabric warp cuda: cost of the press state {fg['cost_after_over_before']:.2f}x")
     res["ntype_cpu"] = bench_ntype()
     _print_ntype(res["ntype_cpu"])
+    _write(res, a)
+
+
+def _write(res: dict, a) -> None:
     a.out.mkdir(parents=True, exist_ok=True)
     tag = a.tag or ("gpu" if "warp_cuda" in res else "cpu")
     path = a.out / f"transduction-{tag}.json"

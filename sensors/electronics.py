@@ -386,6 +386,218 @@ def readout_kernel(
     st_pink[tid] = b
 
 
+# ------------------------------------------------------------------- readout in parallel over time (CUDA)
+#
+# The serial readout_kernel above runs one thread per (episode, channel) through all T samples: with one
+# channel per episode that is a few hundred threads on a GPU of ~10^5. The same readout split over time
+# chunks of L samples, one thread per (episode, channel, chunk): the only recursions are the pink filter
+# (six first-order sections, diagonal) and the Butterworth cascade. The pink filter's chunk start states come
+# from a scan: pass 1 runs each chunk from a zero state, pass 2 carries b_start[j+1] = A^L b_start[j] + b_zero[j]
+# per (episode, channel), pass 3 reruns each chunk from its start state and computes everything per sample.
+# A pass-through filter (filter_mode zero_phase or off: sos = identity) needs nothing more; a causal
+# Butterworth runs afterwards in one thread per (episode, channel) over the ADC voltages (readout_filter_kernel).
+# Values equal the serial kernel's up to float64 rounding of the pink state (a code within rounding of an LSB
+# boundary may land one count off, as between devices).
+
+READOUT_THREADS = 65536  # (episode, channel, chunk) threads to aim for; chunks at least MIN_CHUNK samples
+MIN_CHUNK = 8
+
+
+@wp.kernel
+def pink_chunk_kernel(
+    seeds: wp.array(dtype=wp.uint64), t0: int, n_steps: int, n_channels: int, n_chunks: int, chunk: int,
+    pink_a: vec_pink_ar, pink_c: vec_pink_ar, pink_d: wp.float64,
+    b_zero: wp.array(dtype=vec_pink),  # [E*C*n_chunks] out: chunk-end state from a zero start (b_6 = D w_last)
+):
+    tid = wp.tid()
+    row = tid // n_chunks
+    j = tid - row * n_chunks
+    ep = row // n_channels
+    c = row - ep * n_channels
+    key_pink = _stream_key_wp(seeds[ep], c, STREAM_PINK)
+    b = vec_pink()
+    k1 = wp.min(n_steps, (j + 1) * chunk)
+    for k in range(j * chunk, k1):
+        w = _normal_wp(key_pink, t0 + k)
+        for i in range(6):
+            b[i] = pink_a[i] * b[i] + w * pink_c[i]
+        b[6] = w * pink_d
+    b_zero[tid] = b
+
+
+@wp.kernel
+def pink_carry_kernel(
+    seeds: wp.array(dtype=wp.uint64), n_channels: int, n_chunks: int, chunk: int, n_steps: int,
+    pink_a: vec_pink_ar, pink_chol: mat_pink,
+    b_zero: wp.array(dtype=vec_pink),
+    st_primed: wp.array(dtype=wp.int32), st_pink: wp.array(dtype=vec_pink),
+    b_start: wp.array(dtype=vec_pink),  # [E*C*n_chunks] out
+):
+    row = wp.tid()
+    ep = row // n_channels
+    c = row - ep * n_channels
+    b = st_pink[row]
+    if st_primed[row] == 0:  # episode start: the pink filter's state from its stationary distribution
+        key_init = _stream_key_wp(seeds[ep], c, STREAM_INIT)
+        n = vec_pink()
+        for j in range(PINK_STATES):
+            n[j] = _normal_wp(key_init, j)
+        b = pink_chol * n
+    for j in range(n_chunks):
+        b_start[row * n_chunks + j] = b
+        steps = wp.min(n_steps, (j + 1) * chunk) - j * chunk
+        bz = b_zero[row * n_chunks + j]
+        for i in range(6):
+            a_l = wp.float64(1.0)
+            for m in range(steps):
+                a_l = a_l * pink_a[i]
+            b[i] = a_l * b[i] + bz[i]
+        b[6] = bz[6]
+    st_pink[row] = b
+
+
+@wp.kernel
+def readout_chunk_kernel(
+    g: wp.array(dtype=wp.float64),  # [E*T*C]
+    noise: wp.array(dtype=wp.float64),  # [E*T*C] explicit noise (V), read when seeded == 0
+    seeded: int,
+    seeds: wp.array(dtype=wp.uint64),
+    t0: int,
+    white_v: wp.float64,
+    pink_scale: wp.float64,
+    pink_a: vec_pink_ar,
+    pink_c: vec_pink_ar,
+    pink_d: wp.float64,
+    pink_e: wp.float64,
+    b_start: wp.array(dtype=vec_pink),  # [E*C*n_chunks]
+    n_steps: int,
+    n_channels: int,
+    n_chunks: int,
+    chunk: int,
+    filtered: int,  # 0: pass-through filter, the ADC voltage is the output; 1: readout_filter_kernel follows
+    v_ex: wp.float64,
+    r_b: wp.float64,
+    gain: wp.float64,
+    offset: wp.float64,
+    lsb: wp.float64,
+    code_min: wp.float64,
+    code_max: wp.float64,
+    out_r: wp.array(dtype=wp.float64),
+    out_vb: wp.array(dtype=wp.float64),
+    out_code: wp.array(dtype=wp.int32),
+    out_vf: wp.array(dtype=wp.float64),  # the ADC voltage (filtered later where filtered != 0)
+    out_rm: wp.array(dtype=wp.float64),
+):
+    tid = wp.tid()  # (episode, channel, chunk)
+    row = tid // n_chunks
+    j = tid - row * n_chunks
+    ep = row // n_channels
+    c = row - ep * n_channels
+    half = wp.float64(0.5)
+    one = wp.float64(1.0)
+    key_white = wp.uint64(0)
+    key_pink = wp.uint64(0)
+    b = vec_pink()
+    if seeded != 0:
+        key_white = _stream_key_wp(seeds[ep], c, STREAM_WHITE)
+        key_pink = _stream_key_wp(seeds[ep], c, STREAM_PINK)
+        b = b_start[tid]
+    k1 = wp.min(n_steps, (j + 1) * chunk)
+    for k in range(j * chunk, k1):
+        idx = (ep * n_steps + k) * n_channels + c
+        nv = wp.float64(0.0)
+        if seeded != 0:
+            w = _normal_wp(key_pink, t0 + k)
+            for i in range(6):
+                b[i] = pink_a[i] * b[i] + w * pink_c[i]
+            pink = b[0] + b[1] + b[2] + b[3] + b[4] + b[5] + b[6] + w * pink_e
+            b[6] = w * pink_d
+            nv = white_v * _normal_wp(key_white, t0 + k) + pink_scale * pink
+        else:
+            nv = noise[idx]
+        r_s = one / g[idx]
+        vb = v_ex * (r_s / (r_s + r_b) - half)
+        v = gain * vb + offset + nv
+        code = wp.min(wp.max(wp.round(v / lsb), code_min), code_max)
+        x = code * lsb
+        out_r[idx] = r_s
+        out_vb[idx] = vb
+        out_code[idx] = int(code)
+        out_vf[idx] = x
+        if filtered == 0:
+            ratio = (x - offset) / gain / v_ex + half
+            out_rm[idx] = r_b * ratio / (one - ratio)
+
+
+@wp.kernel
+def readout_filter_kernel(
+    n_steps: int, n_channels: int, n_sections: int, sos: vec_sos, zi_unit: vec_zi,
+    v_ex: wp.float64, r_b: wp.float64, gain: wp.float64, offset: wp.float64,
+    st_filt: wp.array(dtype=vec_zi), st_primed: wp.array(dtype=wp.int32),
+    out_vf: wp.array(dtype=wp.float64),  # in: ADC voltage; out: filtered
+    out_rm: wp.array(dtype=wp.float64),
+):
+    tid = wp.tid()  # (episode, channel): the Butterworth cascade of readout_kernel, over the ADC voltages
+    ep = tid // n_channels
+    c = tid - ep * n_channels
+    z = st_filt[tid]
+    primed = st_primed[tid]
+    half = wp.float64(0.5)
+    one = wp.float64(1.0)
+    for k in range(n_steps):
+        idx = (ep * n_steps + k) * n_channels + c
+        x = out_vf[idx]
+        if primed == 0:
+            for j in range(2 * MAX_SECTIONS):
+                z[j] = zi_unit[j] * x
+            primed = 1
+        for i in range(MAX_SECTIONS):
+            if i < n_sections:
+                y = sos[6 * i + 0] * x + z[2 * i + 0]
+                z[2 * i + 0] = sos[6 * i + 1] * x - sos[6 * i + 4] * y + z[2 * i + 1]
+                z[2 * i + 1] = sos[6 * i + 2] * x - sos[6 * i + 5] * y
+                x = y
+        ratio = (x - offset) / gain / v_ex + half
+        out_vf[idx] = x
+        out_rm[idx] = r_b * ratio / (one - ratio)
+    st_filt[tid] = z
+    st_primed[tid] = primed
+
+
+def _pass_through(sos: np.ndarray, zi: np.ndarray, ns: int) -> bool:
+    """The filter is the identity (one section b0 = a0 = 1, the rest 0, zero initial state): y = x exactly."""
+    return ns == 1 and np.array_equal(sos[:6], [1.0, 0.0, 0.0, 1.0, 0.0, 0.0]) and not np.any(zi)
+
+
+def _readout_chunked(g, E, T, C, noise_in, seeded, ep, sos, zi, ns, filt, primed, pink, outs, d, chunks=None):
+    """Launch the time-parallel readout (passes above) into `outs`; state arrays updated in place."""
+    f64 = wp.float64
+    rows = E * C
+    nc = chunks or max(1, min(-(-T // MIN_CHUNK), -(-READOUT_THREADS // max(rows, 1))))
+    L = -(-T // nc) if T else 1
+    nc = -(-T // L) if T else 1
+    pa, pc = vec_pink_ar(*PINK_A), vec_pink_ar(*PINK_C)
+    b_start = wp.empty(rows * nc if seeded else 0, dtype=vec_pink, device=d)
+    if seeded and T > 0:
+        b_zero = wp.empty(rows * nc, dtype=vec_pink, device=d)
+        wp.launch(pink_chunk_kernel, dim=rows * nc, inputs=[noise_in[2], noise_in[3], T, C, nc, L, pa, pc, f64(PINK_D), b_zero], device=d)
+        wp.launch(pink_carry_kernel, dim=rows, inputs=[noise_in[2], C, nc, L, T, pa, mat_pink(*PINK_CHOL.ravel()), b_zero,
+                                                       primed, pink, b_start], device=d)
+    filtered = 0 if _pass_through(sos, zi, ns) else 1
+    consts = [f64(ep.excitation_v), f64(ep.bridge_resistance_ohm), f64(ep.amp_gain), f64(ep.amp_offset_v)]
+    wp.launch(
+        readout_chunk_kernel, dim=rows * nc,
+        inputs=[g, *noise_in, pa, pc, f64(PINK_D), f64(PINK_E), b_start, T, C, nc, L, filtered, *consts,
+                f64(ep.lsb_v), f64(ep.code_min), f64(ep.code_max), *outs],
+        device=d,
+    )
+    if filtered:
+        wp.launch(readout_filter_kernel, dim=rows, inputs=[T, C, ns, vec_sos(*sos), vec_zi(*zi), *consts, filt, primed,
+                                                           outs[3], outs[4]], device=d)
+    elif T > 0:
+        primed.fill_(1)
+
+
 @wp.kernel
 def taxel_channels_kernel(
     cond: wp.array(dtype=wp.float32),  # [E*T*N]
@@ -435,14 +647,16 @@ def sum_channels_warp(
 
 def readout_warp(
     g: wp.array, shape: tuple[int, int, int], noise: np.ndarray | NoiseSeeds, ep: ElectronicsParams,
-    state: ElectronicsState | None, device: str, keep=None, t0: int = 0, adc_dtype=np.int32,
+    state: ElectronicsState | None, device: str, keep=None, t0: int = 0, adc_dtype=np.int32, parallel=None,
 ):
     """Channel conductance on the device (flat [E*T*C]) -> (dict of numpy [E,T,C] outputs, state).
     noise: [E,T,C] noise at the ADC input (V, uploaded), or NoiseSeeds: drawn in the kernel, no host work;
     t0: absolute step of the first sample (with NoiseSeeds, run in time chunks by passing the returned state
     and t0 = samples done: the same noise as one call). keep: names of the outputs to copy back to the host
     (default all: resistance, bridge_v, adc, filtered_v, resistance_measured); adc_dtype=int16 narrows the
-    codes on the device (an ADC of <= 16 bits), halving what crosses the bus."""
+    codes on the device (an ADC of <= 16 bits), halving what crosses the bus. parallel: None = the time-parallel
+    readout on CUDA and the serial kernel on the CPU (its bytes unchanged); True / False forces it; an int
+    forces it with that many time chunks (tests)."""
     E, T, C = shape
     d = device
     st = state or ElectronicsState.zeros(E * C)
@@ -460,17 +674,23 @@ def readout_warp(
     else:
         arr = wp.array(np.ascontiguousarray(noise, np.float64).reshape(-1), dtype=wp.float64, device=d)
         noise_in = [arr, 0, wp.empty(0, dtype=wp.uint64, device=d), t0, f64(0.0), f64(0.0)]
-    wp.launch(
-        readout_kernel,
-        dim=E * C,
-        inputs=[
-            g, *noise_in, vec_pink_ar(*PINK_A), vec_pink_ar(*PINK_C), f64(PINK_D), f64(PINK_E), mat_pink(*PINK_CHOL.ravel()),
-            T, C, ns, vec_sos(*sos), vec_zi(*zi), f64(ep.excitation_v), f64(ep.bridge_resistance_ohm),
-            f64(ep.amp_gain), f64(ep.amp_offset_v), f64(ep.lsb_v), f64(ep.code_min), f64(ep.code_max),
-            filt, primed, pink, *outs,
-        ],
-        device=d,
-    )
+    if parallel is None:
+        parallel = wp.get_device(d).is_cuda
+    if parallel:
+        _readout_chunked(g, E, T, C, noise_in, isinstance(noise, NoiseSeeds), ep, sos, zi, ns, filt, primed, pink, outs, d,
+                         chunks=None if parallel is True else int(parallel))
+    else:
+        wp.launch(
+            readout_kernel,
+            dim=E * C,
+            inputs=[
+                g, *noise_in, vec_pink_ar(*PINK_A), vec_pink_ar(*PINK_C), f64(PINK_D), f64(PINK_E), mat_pink(*PINK_CHOL.ravel()),
+                T, C, ns, vec_sos(*sos), vec_zi(*zi), f64(ep.excitation_v), f64(ep.bridge_resistance_ohm),
+                f64(ep.amp_gain), f64(ep.amp_offset_v), f64(ep.lsb_v), f64(ep.code_min), f64(ep.code_max),
+                filt, primed, pink, *outs,
+            ],
+            device=d,
+        )
     names = ["resistance", "bridge_v", "adc", "filtered_v", "resistance_measured"]
     if np.dtype(adc_dtype) == np.int16:  # narrow the codes on the device: half the bytes to copy back
         codes = wp.empty(E * T * C, dtype=wp.int16, device=d)

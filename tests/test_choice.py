@@ -25,13 +25,13 @@ def test_gpu_machine_takes_the_gpu_feed():
     c = choose(load_scene("cnt_pdms"), cuda=H100, mjw=True)
     assert (c.physics, c.physics_device, c.device) == ("mujoco_warp", "cuda:0", "cuda:0")
     assert c.workers >= 2  # writer processes of the feed
-    assert c.overrides == ["generation.physics=mujoco_warp", "generation.device=cuda", "generation.compression=zstd"]
-    assert "zstd compression" in c.line()
+    assert c.overrides == ["generation.physics=mujoco_warp", "generation.device=cuda", "generation.compression=lz4"]
+    assert "lz4 compression" in c.line()
     c2 = choose(load_scene("cnt_pdms", ["generation.compression=none"]), cuda=H100, mjw=True)
     assert not any("compression" in o for o in c2.overrides)  # the scene's own choice stays
     assert "MuJoCo Warp on cuda:0" in c.line() and "NVIDIA H100" in c.line() and "GPU feed" in c.line()
     cfg = load_scene("cnt_pdms", c.overrides)  # the recordings name the engine that ran, not "auto"
-    assert cfg.generation.physics == "mujoco_warp" and cfg.generation.device == "cuda" and cfg.generation.compression == "zstd"
+    assert cfg.generation.physics == "mujoco_warp" and cfg.generation.device == "cuda" and cfg.generation.compression == "lz4"
 
 
 def test_user_choice_wins():
@@ -83,3 +83,17 @@ def _contents(path) -> dict:
         visit("/", f)
         f.visititems(visit)
     return out
+
+
+def test_cpu_physics_with_gpu_sensors_takes_worker_processes(monkeypatch):
+    """C MuJoCo with the sensor kernels on a GPU (auto): shards in all cores but 4 (at most 12) worker processes;
+    the same scene on a machine without CUDA keeps one process (the CPU path as before)."""
+    import simulate.generation.choice as ch
+
+    monkeypatch.setattr(ch.os, "cpu_count", lambda: 16)
+    c = choose(load_scene("fabric_1"), cuda=H100, mjw=True)
+    assert (c.physics, c.device, c.workers) == ("mujoco", "cuda:0", 12)
+    assert "12 worker process(es)" in c.line()
+    monkeypatch.setattr(ch.os, "cpu_count", lambda: 2)
+    assert choose(load_scene("fabric_1"), cuda=H100, mjw=True).workers == 1
+    assert choose(load_scene("fabric_1"), cuda=(0, ""), mjw=True).workers == 1

@@ -239,3 +239,41 @@ def test_gpu_feed_bounded_by_host_memory_still_finishes(cfg, serial, tmp_path, m
     out = tmp_path / "bounded"
     executors.generate(cfg, out, workers=2, feed=True)
     _assert_same_dataset(serial, out, 4)
+
+
+def test_feed_hands_each_shard_on_as_its_last_slice_is_packed(monkeypatch):
+    """A modest batch as on MuJoCo Warp (the slicing of the GPU path, here over C MuJoCo's physics: the engine
+    name is patched): its one length group goes in SLICES_PER_LENGTH slices, and `iter_produce` yields each
+    shard right after the slice that completes it (the writers start while the batch's later slices run),
+    with the channels the plain path makes."""
+    from sensors.data.manifest import episode_seed
+    from simulate.contact import load_field as contact
+    from simulate.generation import feed
+
+    cfg = load_scene("cnt_pdms", FAST[:-3] + ["sensor.readout=taxel", "generation.record=[time,position,force_taxel,adc]",
+                                              "generation.episodes=7", "generation.episodes_per_shard=2", "generation.root_seed=3"])
+    sensor = run.make_sensor(cfg, "warp", "cpu")
+    monkeypatch.setattr(run, "physics_engine", lambda cfg: ("mujoco_warp", "elsewhere"))  # GPU slicing, host load field
+    physics, real = [], contact.simulate_sensors  # one physics run for both paths
+    monkeypatch.setattr(contact, "simulate_sensors", lambda *a: physics[0] if physics else physics.append(real(*a)) or physics[0])
+    events, plain = [], run.simulate_slices
+
+    def slices(*a, **k):
+        for part, protos, arrays in plain(*a, **k):
+            events.append(len(part))
+            yield part, protos, arrays
+
+    monkeypatch.setattr(run, "simulate_slices", slices)
+    got = {}
+    for p in feed.iter_produce(cfg, [0, 1, 2, 3], sensor):
+        events.append(f"shard {p.shard}")
+        for ep_id, _, piece, row in p.episodes:
+            got[ep_id] = {n: p.pieces[piece][n][row] if spec[3] else p.pieces[piece][n] for n, spec in p.specs.items()}
+    assert feed.SLICES_PER_LENGTH == 4 and events == [2, "shard 0", 2, "shard 1", 2, "shard 2", 1, "shard 3"]
+    monkeypatch.setattr(run, "simulate_slices", plain)
+    seeds = [episode_seed(cfg.generation.root_seed, k) for k in range(7)]
+    ref = run.simulate_episodes(cfg, seeds, [f"ep-{k:06d}" for k in range(7)], sensor, indices=list(range(7)))
+    assert max(float(np.abs(r.channels["force_taxel"].data).max()) for r in ref) > 0.1  # they press
+    for r in ref:
+        for n, c in r.channels.items():
+            np.testing.assert_array_equal(got[r.ep_id][n], c.data, err_msg=f"{r.ep_id} {n}")

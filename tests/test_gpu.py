@@ -43,3 +43,26 @@ def test_full_chain_cuda_equals_cpu(gpu_device):
     c2 = CntPdmsSensor(cfg, device=gpu_device).run(drive, [1, 2])
     for k in c1:
         np.testing.assert_array_equal(c1[k], c2[k])
+
+
+def test_parallel_readout_cuda_equals_serial_cpu(gpu_device):
+    """The time-parallel readout on the device (its default there) against the serial kernel on the cpu."""
+    import warp as wp
+
+    from sensors import electronics as el
+    from sensors.cnt_pdms.params import electronics_params
+
+    for mode in ("zero_phase", "causal"):
+        ep = electronics_params(load_scene("cnt_pdms", [f"sensor.electronics.filter_mode={mode}"]))
+        E, T, C = 16, 1000, 2
+        g = np.full((E, T, C), 1.0 / (ep.bridge_resistance_ohm * 1.001)) * (1 + 0.01 * np.sin(np.arange(T) / 30.0))[None, :, None]
+        noise = el.NoiseSeeds(list(range(100, 100 + E)), 3e-3, 5e-3)
+        ref, st = el.readout_warp(wp.array(g.reshape(-1), dtype=wp.float64, device="cpu"), (E, T, C), noise, ep, None, "cpu")
+        got, st_g = el.readout_warp(wp.array(g.reshape(-1), dtype=wp.float64, device=gpu_device), (E, T, C), noise, ep,
+                                    None, gpu_device)
+        d = got["adc"].astype(int) - ref["adc"].astype(int)
+        assert np.abs(d).max() <= 1 and (d == 0).mean() > 0.999
+        for k in ("resistance", "bridge_v"):
+            np.testing.assert_allclose(got[k], ref[k], rtol=1e-12, err_msg=k)
+        np.testing.assert_allclose(got["filtered_v"], ref["filtered_v"], rtol=0, atol=2 * ep.lsb_v)
+        np.testing.assert_allclose(st_g.pink, st.pink, rtol=1e-9, atol=1e-9)

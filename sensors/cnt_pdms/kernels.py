@@ -8,7 +8,10 @@ neighbouring threads read neighbouring taxels, so loads coalesce on CUDA.
 The kernel writes strain, stress and conductance per taxel; the channel sums run afterwards as a tiled,
 coalesced reduction (sensors/electronics.py). A variant that reduced over each thread block at every
 step inside this kernel was measured slower on an H100 (3.6e10 vs 5.0e10 taxel-steps/s for the whole
-chain): the per-step block synchronisation costs more than re-reading the arrays once.
+chain): the per-step block synchronisation costs more than re-reading the arrays once. Two more fused variants
+were measured slower on the H100 in session 6 (256 x 4096 x 1000, bench/results/logs/transduction-h100-s6-*):
+tile sums per step in blocks of 32-256 taxels (33-36 ms against 13.0 ms for this kernel + the tiled sum), and
+4-16 taxels per thread with per-thread partial sums, no sync (36-40 ms): both lose the memory parallelism.
 """
 
 # no `from __future__ import annotations`: Warp must see the closure types as real objects

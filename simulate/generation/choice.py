@@ -22,10 +22,15 @@ from scenes import SceneConfig
 # force-controlled kinds run on MuJoCo Warp only when asked for (--physics mujoco_warp).
 GPU_PROTOCOL_KINDS = ("sinusoid", "hold")
 GPU_CONTROLS = ("displacement",)
-# where the GPU feed runs and the scene names no compression: Blosc2 zstd (level 1 + shuffle), the lzf size at
-# ~2x its write speed (bench/results/compression-cpu.json); the CPU path keeps lzf (the same bytes as before)
-GPU_COMPRESSION = "zstd"
-MAX_AUTO_WRITERS = 8  # writer processes of the GPU feed: 8 measured best on the 16-core H100 host (bench/README.md)
+# where the GPU feed runs and the scene names no compression: Blosc2 lz4 (level 1 + shuffle). The plain CLI on the
+# H100 (`generate cnt_pdms --episodes 4096`, 8 writers) ran 117 s with lz4 against 156 s with zstd for 14 % more
+# bytes (bench/results/user-cli-h100-cnt-lz4.json vs user-cli-h100-cnt.json): the writers' compression was the
+# bound. The CPU path keeps lzf (the same bytes as before)
+GPU_COMPRESSION = "lz4"
+# writer processes of the GPU feed: all cores but 4 (the driver, the physics, the OS), at most 12: on the 16-core
+# H100 host 12 writers ran the 4096-episode CLI run in 122 s against 156 s with 8 (user-cli-h100-cnt-w12.json)
+MAX_AUTO_WRITERS = 12
+RESERVED_CORES = 4
 
 
 @dataclass(frozen=True)
@@ -120,7 +125,13 @@ def choose(cfg: SceneConfig, physics: str = "auto", device: str = "auto", worker
             overrides.append(f"generation.physics={physics}")  # "auto" made concrete
     if workers is None:
         if physics == "mujoco_warp" and physics_device.startswith("cuda") and n_cuda == 1:
-            workers = max(2, min(MAX_AUTO_WRITERS, (os.cpu_count() or 2) // 2))
+            workers = max(2, min(MAX_AUTO_WRITERS, (os.cpu_count() or 2) - RESERVED_CORES))
+        elif physics == "mujoco" and device.startswith("cuda") and why.startswith("auto"):
+            # C MuJoCo with the sensor kernels on a GPU (fabric, velostat, ntype): shards in worker processes
+            # (spawned, each with its own CUDA context). fabric_1 64 episodes on the H100 host: 19.0 s with 8
+            # workers against 36.1 s with 1 (user-cli-h100-s6-fabric-w8.json, user-cli-h100.json). A machine
+            # without CUDA keeps one process, as before
+            workers = max(1, min(MAX_AUTO_WRITERS, (os.cpu_count() or 2) - RESERVED_CORES))
         else:
             workers = 1
     return Choice(physics, physics_device, device, workers, why, overrides)

@@ -9,8 +9,9 @@ batches. Here a three-stage pipeline runs over batches of several shards' episod
    straight into shared memory;
 2. the driver runs the load field and the sensor chain of batch b on the same GPU, slice by slice; each slice's
    outputs come back into reused page-locked buffers and are packed into shared blocks that a `BlockPool`
-   lends until their shard is written (`produce`); the first batches are smaller (RAMP_BATCHES), so the
-   driver and writers start early;
+   lends until their shard is written (`iter_produce`); each length group goes in SLICES_PER_LENGTH slices and
+   a shard goes to the writers as soon as its episodes are packed, and the first batches are smaller
+   (RAMP_BATCHES), so the writers start early (a modest run is one batch);
 3. writer processes (spawned; one shard per task, at most PENDING_PER_WRITER queued each) write the shards and
    make their manifest entries.
 
@@ -24,7 +25,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -321,11 +322,23 @@ def _groups(cfg: SceneConfig, todo: list[int], worlds: int) -> list[list[int]]:
 
 def produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, seconds: dict | None = None,
             stepped: tuple[list, dict] | None = None, pool: BlockPool | None = None) -> list[PackedShard]:
-    """Simulate the episodes of `shards` as one batch and pack each shard's recorded channels (seconds: adds
-    the time spent simulating and packing). stepped: `step_worlds` of these episodes, run in the physics
-    process; this process then runs only the load field and the sensor chain. pool: pack into its shared
-    blocks. Each slice's outputs come back from the GPU into reused page-locked buffers (`host_staging`)
-    and are packed before the next slice runs."""
+    """`iter_produce`'s shards in the order of `shards`."""
+    packs = {p.shard: p for p in iter_produce(cfg, shards, sensor, threads, seconds, stepped, pool)}
+    return [packs[s] for s in shards]
+
+
+SLICES_PER_LENGTH = 4  # slices (at most SENSOR_SLICE episodes each) per length group of a batch: a modest run's
+# shards are handed to the writers as the last length group's slices finish, not after the whole batch
+
+
+def iter_produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, seconds: dict | None = None,
+                 stepped: tuple[list, dict] | None = None, pool: BlockPool | None = None) -> Iterator[PackedShard]:
+    """Simulate the episodes of `shards` as one batch and pack each shard's recorded channels, yielding each
+    shard as soon as all its episodes are packed (seconds: adds the time spent simulating and packing).
+    stepped: `step_worlds` of these episodes, run in the physics process; this process then runs only the load
+    field and the sensor chain. pool: pack into its shared blocks. Each slice's outputs come back from the GPU
+    into reused page-locked buffers (`host_staging`) and are packed before the next slice runs; each length
+    group goes in SLICES_PER_LENGTH slices or more."""
     import time
 
     from sensors.data.manifest import episode_seed
@@ -336,6 +349,7 @@ def produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, secon
     owner = {k: s for s in shards for k in episode_ids_of_shard(cfg, s)}
     seeds = [episode_seed(cfg.generation.root_seed, k) for k in gids]
     packs = {s: PackedShard(s) for s in shards}
+    left = {s: len(episode_ids_of_shard(cfg, s)) for s in shards}
     placed: dict[int, tuple[str, dict, int, int]] = {}
     seconds = {} if seconds is None else seconds
     protos, physics, blocks = None, None, []
@@ -349,12 +363,13 @@ def produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, secon
     try:
         with host_staging():
             t0 = time.perf_counter()
-            for pos, protos_s, arrays in simulate_slices(cfg, seeds, sensor, threads, gids, protos, physics):
+            for pos, protos_s, arrays in simulate_slices(cfg, seeds, sensor, threads, gids, protos, physics, SLICES_PER_LENGTH):
                 t1 = time.perf_counter()
                 seconds["simulate"] = seconds.get("simulate", 0.0) + t1 - t0
                 runs: dict[int, list[int]] = {}
                 for j, i in enumerate(pos):
                     runs.setdefault(owner[gids[i]], []).append(j)
+                done = []
                 for s, rows in runs.items():
                     p = packs[s]
                     p.specs = {n: (c.units, c.dims, c.description, c.per_episode) for n, c in arrays.items()}
@@ -363,8 +378,15 @@ def produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, secon
                     for r, j in enumerate(rows):
                         i = pos[j]
                         placed[gids[i]] = (f"ep-{gids[i]:06d}", episode_attrs(seeds[i], protos_s[j], gids[i]), len(p.pieces) - 1, r)
+                    left[s] -= len(rows)
+                    if not left[s]:
+                        p.episodes = [placed.pop(k) for k in episode_ids_of_shard(cfg, s)]
+                        done.append(p)
                 t0 = time.perf_counter()
                 seconds["pack"] = seconds.get("pack", 0.0) + t0 - t1
+                for p in sorted(done, key=lambda p: p.shard):
+                    yield p
+                t0 = time.perf_counter()
     finally:
         physics = None
         for shm in blocks:
@@ -373,9 +395,6 @@ def produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, secon
             except BufferError:  # a view still alive (an error unwinding): the memory goes with it
                 pass
             shm.unlink()
-    for k in gids:
-        packs[owner[k]].episodes.append(placed[k])
-    return [packs[s] for s in shards]
 
 
 def generate_feed(
@@ -452,12 +471,13 @@ def generate_feed(
                     pool.shutdown(wait=False, cancel_futures=True)
                     pool = ProcessPoolExecutor(writers, mp_context=ctx)
 
-    def collect(room_for: int | None) -> None:
+    def collect(room_for: int | None, block: bool = True) -> None:
         """Handle finished writes; wait until `room_for` more shards fit under PENDING_PER_WRITER per writer
-        (a batch larger than that waits for every write), or with None until every write is done."""
+        (a batch larger than that waits for every write), or with None until every write is done; with
+        block=False only those already finished."""
         nonlocal pool
         while pending:
-            waiting = (room_for is None or len(pending) + room_for > max(PENDING_PER_WRITER * writers, room_for)
+            waiting = block and (room_for is None or len(pending) + room_for > max(PENDING_PER_WRITER * writers, room_for)
                        or sum(p.nbytes for p in pending.values()) > ram_budget)
             done, _ = wait(list(pending), timeout=None if waiting else 0, return_when=FIRST_COMPLETED)
             if not done:
@@ -515,8 +535,9 @@ def generate_feed(
                     ahead.append(step(b + PHYSICS_PROCESSES))
                 elif not ahead:  # the last batch is here: the physics processes exit (free the GPU) meanwhile
                     physics.shutdown(wait=False)
-            for p in produce(cfg, group, sensor, threads, seconds, stepped, shared):
-                submit(p)
+            for p in iter_produce(cfg, group, sensor, threads, seconds, stepped, shared):
+                submit(p)  # as soon as its episodes are packed: the writers start while the batch's last slices run
+                collect(0, block=False)
         shared.drain()
         t0 = time.perf_counter()
         collect(None)

@@ -71,13 +71,16 @@ class ChannelArray:
 def simulate_slices(
     cfg: SceneConfig, seeds: list[int], sensor: SensorModel, threads: int = 1, indices: list[int] | None = None,
     protos: list[EpisodeProtocol] | None = None, physics: dict[int, tuple[np.ndarray, np.ndarray]] | None = None,
+    pieces: int = 1,
 ) -> Iterator[tuple[list[int], list[EpisodeProtocol], dict[str, ChannelArray]]]:
     """Simulate the episodes of `seeds` and yield their recorded channels slice by slice: (positions in
     seeds, their protocols, channel name -> ChannelArray). Episodes of one length run as one batch of worlds
     (MuJoCo Warp) or one rollout (C MuJoCo); on the GPU the load field and sensor chain then go per
     SENSOR_SLICE episodes, with the taxel fields left on the device for a sensor that takes them.
     protos, physics: the episodes' protocols and, per length, (sensordata, target) of its `length_groups`
-    entry, made elsewhere (the GPU feed steps the worlds in another process)."""
+    entry, made elsewhere (the GPU feed steps the worlds in another process). pieces: on the GPU, each length
+    group in at least this many slices (at most SENSOR_SLICE episodes each), so the GPU feed can hand on the
+    shards finished by the first ones while the rest run."""
     protos = protos or episode_protocols(cfg, seeds, indices)
     engine, engine_device = physics_engine(cfg)
     gpu = engine == "mujoco_warp"
@@ -88,7 +91,8 @@ def simulate_slices(
             padded = simulate_sensors_padded(cfg, [protos[i] for _, idx in run for i in idx], threads)
         for n, idx in run:
             done = physics[n] if physics is not None else None if padded is None else padded.pop(n)
-            for sl, batch in iter_load_batches(cfg, [protos[i] for i in idx], threads, SENSOR_SLICE if gpu else None, on_device, done):
+            per = min(SENSOR_SLICE, max(1, -(-len(idx) // max(1, pieces))))
+            for sl, batch in iter_load_batches(cfg, [protos[i] for i in idx], threads, per if gpu else None, on_device, done):
                 part = idx[sl]
                 out = run_sensor(cfg, sensor, batch if on_device else batch.on_host(), [seeds[i] for i in part],
                                  [protos[i] for i in part])
