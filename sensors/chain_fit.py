@@ -11,7 +11,13 @@ Chain (one taxel or one film pressed by one tip; all SI):
             so from force and reading alone A is not identifiable: it is taken from the user (tip) and kept.
   creep     c = sum_k c_k, c_k[t] = d_k c_k[t-1] + (1 - d_k) w_k Phi(F), Phi = a F_c ln(1 + F / F_c),
             d_k = exp(-dt / tau_k), tau_k log-spaced in [tau_min, tau_max], w_k = 1 / K (Schapery-type
-            log-time creep as sensors/velostat/reference.py, written in force units).
+            log-time creep as sensors/velostat/reference.py, written in force units): creep_law "force".
+            creep_law "aging" (contact aging, Dieterich & Kilgore 1994: the real contact area, so the
+            conductance, grows by a load-independent fraction per log time of hold): R_film = r0 e^l (F / F_ref)^-n
+            e^-c, c_k driven by Phi = a F / (F + F_c) (a: ln conductance gained at full aging; F_c: the force that
+            establishes the contact). Its steady state is a constant in ln R above F_c, so it leaves the force law
+            to the exponent; in force units it adds ~a F_c ln(1 + F / F_c) to F and flattens the law (measured on
+            the Lupasic runs: the hold drop is ~0.17 ln at 1 to 40 N, bench/bench_s2r_diagnose.py).
   readout   R = R_film + r_series (traces, mux), in parallel with r_leak (unloaded: the leak alone);
             divider with reference resistor r_ref: reading = offset + FS * R / (R + r_ref)  ("high": reading
             rises with resistance, the Lupasic board) or offset + FS * r_ref / (R + r_ref) ("low": TAMS,
@@ -54,6 +60,7 @@ class ChainParams:
     tau_min_s: float = 0.3  # estimate
     tau_max_s: float = 30.0  # estimate
     n_creep: int = 4
+    creep_law: str = "force"  # "force": c adds to F; "aging": c multiplies the conductance by e^c (see module doc)
     level_log_sd: float = 0.0  # press-to-press std of ln level (placement)
     miss_prob: float = 0.0
     r_series_ohm: float = 0.0
@@ -89,7 +96,10 @@ def creep_force(force: np.ndarray, dt: float, p: ChainParams) -> np.ndarray:
     from scipy.signal import lfilter
 
     f = np.maximum(np.asarray(force, np.float64), 0.0)
-    phi = p.creep_amplitude * p.creep_force_n * np.log1p(f / p.creep_force_n)
+    if p.creep_law == "aging":  # ln conductance gained (dimensionless)
+        phi = p.creep_amplitude * f / (f + p.creep_force_n)
+    else:  # force units (N)
+        phi = p.creep_amplitude * p.creep_force_n * np.log1p(f / p.creep_force_n)
     c = np.zeros_like(f)
     w = 1.0 / p.n_creep
     for tau in p.times_s:
@@ -103,6 +113,8 @@ def film_resistance(force: np.ndarray, dt: float, p: ChainParams, level: np.ndar
     f = np.maximum(np.asarray(force, np.float64) - p.threshold_force_n, 0.0)
     c = creep_force(f, dt, p)
     with np.errstate(divide="ignore", over="ignore"):
+        if p.creep_law == "aging":
+            return np.where(f > 0, p.r0_ohm * np.exp(level - c) * (f / F_REF_N) ** (-p.exponent), np.inf)
         return np.where(f > 0, p.r0_ohm * np.exp(level) * ((f + c) / F_REF_N) ** (-p.exponent), np.inf)
 
 
