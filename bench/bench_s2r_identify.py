@@ -9,6 +9,10 @@ rest level; sensors/chain_fit.py), per press of every run (loaded stretch as cha
   the hold: ln R on the plateau (>= 90 % of peak) regressed on ln F and ln(1 + t / 0.05 s) jointly: a creep that
   follows log time (contact aging, Dieterich & Kilgore 1994) shows in the second coefficient, a force-law
   effect in the first.
+Per press also a local fit, ln R on [1, ln F, ln(1 + t / 0.05 s)] over its ramp and hold (a press's own power law
+and log-time creep): the spread of the presses' slopes within a run and its regression on the press level, and the
+local fit's residual variance against the rate |d ln F / dt| (e^2 = floor^2 + (s_t rate)^2 on ten quantile bins): a
+timing error s_t between the two streams would show there as errors in variables on the fast ramps.
 Chain fits on the training runs (no bootstrap), creep_law "force" (the default) and "aging": parameters,
 within-press error, held-out press levels, and the plateau sensitivity -d ln(reading) / d ln F of the run medians,
 real vs the chain's noise-free reading at level 0, with the run-mean level trend per ln F (what free press levels
@@ -52,10 +56,18 @@ def model_free(runs, C) -> dict:
             lf = np.log(r.force[hold])
             X = np.c_[np.ones(len(hold)), lf - lf.mean(), np.log1p(np.arange(len(hold)) * r.dt / T0_S)]
             b = np.linalg.lstsq(X, lnr[hold], rcond=None)[0]
+            loc = seg[r.force[seg] > 0.3 * f.max()]
+            loc = loc[: np.flatnonzero(r.force[loc] >= 0.9 * f.max())[-1] + 1]
+            lf2 = np.log(r.force[loc])
+            A = np.c_[np.ones(len(loc)), lf2, np.log1p(np.arange(len(loc)) * r.dt / T0_S)]
+            cl = np.linalg.lstsq(A, lnr[loc], rcond=None)[0]
+            e = lnr[loc] - A @ cl
+            rate = np.abs(np.gradient(np.log(np.maximum(r.force, 1e-9)))[loc]) / r.dt
             rows.append(dict(run=r.key, ln_plateau_force=float(np.median(lf)), ln_plateau_r=float(np.median(lnr[hold])),
                              ramp_slope=s, hold_dlnr_dlnf=float(b[1]), hold_dlnr_dlnt=float(b[2]),
                              hold_s=float(len(hold) * r.dt), hold_dlnr=float(lnr[hold[-1]] - lnr[hold[0]]),
-                             hold_dlnf=float(lf[-1] - lf[0])))
+                             hold_dlnf=float(lf[-1] - lf[0]), local_slope=float(cl[1]),
+                             local_e2=(e ** 2 * len(e) / max(len(e) - 3, 1)).tolist(), local_rate=rate.tolist()))
     per_run = {}
     for k in dict.fromkeys(r["run"] for r in rows):
         a = [r for r in rows if r["run"] == k]
@@ -64,7 +76,30 @@ def model_free(runs, C) -> dict:
                       "ln_plateau_force_mean": float(np.mean([r["ln_plateau_force"] for r in a])),
                       "ln_plateau_r_mean": float(np.mean([r["ln_plateau_r"] for r in a])),
                       "ln_plateau_r_sd": float(np.std([r["ln_plateau_r"] for r in a]))}
-    return {"rows": rows, "per_run": per_run}
+    # per-press slopes within runs (run means removed), against the press level at the run's common slope
+    ds, dl = [], []
+    for k in per_run:
+        a = [r for r in rows if r["run"] == k]
+        if len(a) < 4:
+            continue
+        sl = np.array([r["local_slope"] for r in a])
+        lv = np.array([r["ln_plateau_r"] for r in a]) - np.polyfit([r["ln_plateau_force"] for r in a], [r["ln_plateau_r"] for r in a], 0)[0]
+        ds.extend(sl - sl.mean())
+        dl.extend(lv - lv.mean())
+    ds, dl = np.array(ds), np.array(dl)
+    e2 = np.concatenate([r["local_e2"] for r in rows])
+    g2 = np.concatenate([r["local_rate"] for r in rows]) ** 2
+    edges = np.unique(np.quantile(g2, np.linspace(0, 1, 11)))
+    b = np.clip(np.searchsorted(edges, g2, side="right") - 1, 0, len(edges) - 2)
+    bins = [{"rate_per_s": float(np.sqrt(np.median(g2[b == k]))), "sd_log": float(np.sqrt(np.median(e2[b == k]) / 0.455)),
+             "n": int(np.sum(b == k))} for k in range(len(edges) - 1) if np.sum(b == k) >= 10]
+    c = np.linalg.lstsq(np.c_[np.ones(len(bins)), [x["rate_per_s"] ** 2 for x in bins]], [x["sd_log"] ** 2 for x in bins], rcond=None)[0]
+    for r in rows:
+        del r["local_e2"], r["local_rate"]
+    local = {"slope_sd_within_run": float(np.std(ds, ddof=1)), "slope_vs_level": float(np.polyfit(dl, ds, 1)[0]),
+             "slope_level_corr": float(np.corrcoef(ds, dl)[0, 1]), "n_presses": int(len(ds)),
+             "residual_by_rate": bins, "floor_sd_log": float(np.sqrt(max(c[0], 0.0))), "timing_sd_s": float(np.sqrt(max(c[1], 0.0)))}
+    return {"rows": rows, "per_run": per_run, "local": local}
 
 
 def across(rows, keys) -> dict:
@@ -123,9 +158,9 @@ def main(argv=None):
     mf = model_free(runs, C)
     out = {"real": str(a.real), "test_episodes": a.test_episodes, "hold_time_origin_s": T0_S,
            "train": across(mf["rows"], [r.key for r in train]), "test": across(mf["rows"], [r.key for r in test]),
-           "per_run": mf["per_run"], "fits": [fit_law(law, train, test, runs, C) for law in ("force", "aging")]}
+           "per_press_local_fit": mf["local"], "per_run": mf["per_run"], "fits": [fit_law(law, train, test, runs, C) for law in ("force", "aging")]}
     Path(a.out).write_text(json.dumps(out, indent=1, default=float))
-    print(json.dumps({k: out[k] for k in ("train", "test")}, indent=1))
+    print(json.dumps({k: out[k] for k in ("train", "test", "per_press_local_fit")}, indent=1))
     for f in out["fits"]:
         print(f["creep_law"], {k: f[k] for k in ("params", "within_press_rms_log_reading", "plateau_sensitivity_real", "plateau_sensitivity_chain", "run_level_trend_per_ln_force")})
 
