@@ -13,7 +13,8 @@ Per press also a local fit, ln R on [1, ln F, ln(1 + t / 0.05 s)] over its ramp 
 and log-time creep): the spread of the presses' slopes within a run and its regression on the press level, and the
 local fit's residual variance against the rate |d ln F / dt| (e^2 = floor^2 + (s_t rate)^2 on ten quantile bins): a
 timing error s_t between the two streams would show there as errors in variables on the fast ramps.
-Chain fits on the training runs (no bootstrap), creep_law "force" (the default) and "aging": parameters,
+Chain fits on the training runs (no bootstrap), creep_law "force" (the default) and "aging", free press levels and
+the level prior (fit_chain level_prior): parameters,
 within-press error, held-out press levels, and the plateau sensitivity -d ln(reading) / d ln F of the run medians,
 real vs the chain's noise-free reading at level 0, with the run-mean level trend per ln F (what free press levels
 absorb when the law is too flat; bench/bench_s2r_diagnose.py's definition).
@@ -113,12 +114,12 @@ def across(rows, keys) -> dict:
             "hold_dlnr_dlnt_median": float(np.median([r["hold_dlnr_dlnt"] for r in a])), "n_presses": len(a)}
 
 
-def fit_law(law, train, test, all_runs, C) -> dict:
+def fit_law(law, train, test, all_runs, C, level_prior=False) -> dict:
     from learn.sim2real import _chain_prior
 
     p0 = replace(_chain_prior("velostat", all_runs), creep_law=law)
     t = time.time()
-    fit = C.fit_chain(train, p0, n_boot=0)
+    fit = C.fit_chain(train, p0, n_boot=0, level_prior=level_prior)
     p = fit.params
     held = C.evaluate(fit, test)
     q = replace(p, noise_sd=0.0, miss_prob=0.0)
@@ -136,7 +137,7 @@ def fit_law(law, train, test, all_runs, C) -> dict:
         X.append(np.median(xx))
         XC.append(np.median(cc))
         LV.append(np.mean(lv))
-    return {"creep_law": law, "fit_s": time.time() - t,
+    return {"creep_law": law, "level_prior": level_prior, "fit_s": time.time() - t,
             "params": {k: getattr(p, k) for k in ("exponent", "r0_ohm", "creep_amplitude", "creep_force_n", "tau_min_s", "tau_max_s", "level_log_sd")},
             "within_press_rms_log_reading": fit.error["rms_log_reading_within_press"],
             "held_out": {k: held[k] for k in ("rms_log_reading_within_press", "level_in_band90", "level_mean_log_vs_fit", "level_sd_log", "plateau_drop")},
@@ -158,11 +159,11 @@ def main(argv=None):
     mf = model_free(runs, C)
     out = {"real": str(a.real), "test_episodes": a.test_episodes, "hold_time_origin_s": T0_S,
            "train": across(mf["rows"], [r.key for r in train]), "test": across(mf["rows"], [r.key for r in test]),
-           "per_press_local_fit": mf["local"], "per_run": mf["per_run"], "fits": [fit_law(law, train, test, runs, C) for law in ("force", "aging")]}
+           "per_press_local_fit": mf["local"], "per_run": mf["per_run"], "fits": [fit_law(law, train, test, runs, C, lp) for lp in (False, True) for law in ("force", "aging")]}
     Path(a.out).write_text(json.dumps(out, indent=1, default=float))
     print(json.dumps({k: out[k] for k in ("train", "test", "per_press_local_fit")}, indent=1))
     for f in out["fits"]:
-        print(f["creep_law"], {k: f[k] for k in ("params", "within_press_rms_log_reading", "plateau_sensitivity_real", "plateau_sensitivity_chain", "run_level_trend_per_ln_force")})
+        print(f["creep_law"], f["level_prior"], {k: f[k] for k in ("params", "within_press_rms_log_reading", "plateau_sensitivity_real", "plateau_sensitivity_chain", "run_level_trend_per_ln_force")})
 
 
 if __name__ == "__main__":
