@@ -13,8 +13,9 @@ Measured (no training unless --lr-check):
   the simulated spread of the plateau reading at the real force histories (bootstrap replicate; + episode
   gain; + press level), and the force ambiguity it implies for an MSE-trained net: posterior sd of ln F =
   spread / sensitivity, mean / median = exp(sd^2 / 2);
-  the identification check (not adopted): the chain fit with press levels forced to carry no trend in ln
-  force, on the training runs and on a synthetic chain of known parameters (tests/test_fit.py's);
+  the identification check: the chain fit with free press levels, with press levels forced to carry no trend in ln
+  force (not adopted), and with the level prior (fit_chain level_prior: adopted for the Lupasic board), on the
+  training runs and on a synthetic chain of known parameters (tests/test_fit.py's);
   --lr-check: fine-tuning at scratch's learning rate (2e-3) instead of the budget's, same seeds and epochs.
 """
 
@@ -78,12 +79,13 @@ def identification_check(recording, test_glob, C) -> dict:
     true = C.ChainParams(exponent=1.2, r0_ohm=3000.0, creep_amplitude=2.0, creep_force_n=4.0, tau_min_s=0.1, tau_max_s=5.0,
                          n_creep=4, level_log_sd=0.4, r_ref_ohm=1e4, full_scale=1000.0, noise_sd=0.0)
     syn, syn_new = _synthetic_runs(true), _synthetic_runs(true, n_runs=4, seed=7)
-    for mode in ("free_levels", "levels_without_force_trend"):
-        undo = _independent_levels(C) if mode != "free_levels" else (lambda: None)
+    for mode in ("free_levels", "levels_without_force_trend", "level_prior"):
+        undo = _independent_levels(C) if mode == "levels_without_force_trend" else (lambda: None)
         try:
-            fit = C.fit_chain(train, _chain_prior("velostat", runs), n_boot=0)
+            lp = mode == "level_prior"
+            fit = C.fit_chain(train, _chain_prior("velostat", runs), n_boot=0, level_prior=lp)
             held = C.evaluate(fit, test)
-            sfit = C.fit_chain(syn, C.ChainParams(r_ref_ohm=1e4, full_scale=1000.0, n_creep=4), n_boot=0)
+            sfit = C.fit_chain(syn, C.ChainParams(r_ref_ohm=1e4, full_scale=1000.0, n_creep=4), n_boot=0, level_prior=lp)
         finally:
             undo()
         q = replace(sfit.params, noise_sd=0.0, level_log_sd=0.0)

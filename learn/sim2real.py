@@ -430,8 +430,9 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
         if "fit" not in state["done"] or not fit_f.is_file():
             task = bar.add_task("1/4 fit (bootstrap over presses)", total=B["n_boot"] + 1)
             p0 = _chain_prior(family, runs)
+            # placement-level prior where presses land at varying places (the Lupasic board: no ADC full scale)
             fit = C.fit_chain(train_runs, p0, n_boot=int(B["n_boot"]), seed=seed,
-                              progress=lambda k, n: bar.update(task, completed=k))
+                              progress=lambda k, n: bar.update(task, completed=k), level_prior=not any(r.attrs.get("adc_full_scale") for r in runs))
             held = C.evaluate(fit, [r for r in runs if r.key in test_keys])
             rand = C.randomization_from_fit(fit, train_runs)
             C.save_fit(fit, fit_f, {"family": family, "recording": str(recording), "fit_runs": [r.key for r in train_runs],

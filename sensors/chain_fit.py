@@ -11,13 +11,19 @@ Chain (one taxel or one film pressed by one tip; all SI):
             so from force and reading alone A is not identifiable: it is taken from the user (tip) and kept.
   creep     c = sum_k c_k, c_k[t] = d_k c_k[t-1] + (1 - d_k) w_k Phi(F), Phi = a F_c ln(1 + F / F_c),
             d_k = exp(-dt / tau_k), tau_k log-spaced in [tau_min, tau_max], w_k = 1 / K (Schapery-type
-            log-time creep as sensors/velostat/reference.py, written in force units).
+            log-time creep as sensors/velostat/reference.py, written in force units): creep_law "force".
+            creep_law "aging" (contact aging, Dieterich & Kilgore 1994: the real contact area, so the
+            conductance, grows by a load-independent fraction per log time of hold): R_film = r0 e^l (F / F_ref)^-n
+            e^-c, c_k driven by Phi = a F / (F + F_c) (a: ln conductance gained at full aging; F_c: the force that
+            establishes the contact). Its steady state is a constant in ln R above F_c, so it leaves the force law
+            to the exponent; in force units it adds ~a F_c ln(1 + F / F_c) to F and flattens the law (measured on
+            the Lupasic runs: the hold drop is ~0.17 ln at 1 to 40 N, bench/bench_s2r_diagnose.py).
   readout   R = R_film + r_series (traces, mux), in parallel with r_leak (unloaded: the leak alone);
             divider with reference resistor r_ref: reading = offset + FS * R / (R + r_ref)  ("high": reading
             rises with resistance, the Lupasic board) or offset + FS * r_ref / (R + r_ref) ("low": TAMS,
             reading falls with force); FS = full scale (ADC counts x samples summed, or the board's rest
             level); noise: white, noise_sd in reading units; ADC step adc_step (0: none).
-Fit (scipy least_squares, trust-region reflective, bounded) of ln R on loaded samples (R from the reading
+Fit (scipy least_squares, trust-region reflective, bounded; with level_prior, random-effects levels: fit_chain) of ln R on loaded samples (R from the reading
 through the inverse divider), each press's level l_j profiled out (its mean log residual): theta =
 [n, ln a, ln F_c, ln tau_min, ln tau_max] (+ ln r_series when the readout saturates). Then ln r0 = mean of
 the press levels, level_log_sd = their std (the press-to-press spread is a parameter of the model, drawn
@@ -54,6 +60,7 @@ class ChainParams:
     tau_min_s: float = 0.3  # estimate
     tau_max_s: float = 30.0  # estimate
     n_creep: int = 4
+    creep_law: str = "force"  # "force": c adds to F; "aging": c multiplies the conductance by e^c (see module doc)
     level_log_sd: float = 0.0  # press-to-press std of ln level (placement)
     miss_prob: float = 0.0
     r_series_ohm: float = 0.0
@@ -89,7 +96,10 @@ def creep_force(force: np.ndarray, dt: float, p: ChainParams) -> np.ndarray:
     from scipy.signal import lfilter
 
     f = np.maximum(np.asarray(force, np.float64), 0.0)
-    phi = p.creep_amplitude * p.creep_force_n * np.log1p(f / p.creep_force_n)
+    if p.creep_law == "aging":  # ln conductance gained (dimensionless)
+        phi = p.creep_amplitude * f / (f + p.creep_force_n)
+    else:  # force units (N)
+        phi = p.creep_amplitude * p.creep_force_n * np.log1p(f / p.creep_force_n)
     c = np.zeros_like(f)
     w = 1.0 / p.n_creep
     for tau in p.times_s:
@@ -103,6 +113,8 @@ def film_resistance(force: np.ndarray, dt: float, p: ChainParams, level: np.ndar
     f = np.maximum(np.asarray(force, np.float64) - p.threshold_force_n, 0.0)
     c = creep_force(f, dt, p)
     with np.errstate(divide="ignore", over="ignore"):
+        if p.creep_law == "aging":
+            return np.where(f > 0, p.r0_ohm * np.exp(level - c) * (f / F_REF_N) ** (-p.exponent), np.inf)
         return np.where(f > 0, p.r0_ohm * np.exp(level) * ((f + c) / F_REF_N) ** (-p.exponent), np.inf)
 
 
@@ -286,7 +298,9 @@ class _Data:
         return out, np.asarray(lev)
 
 
-def _fit_shape(data: _Data, p0: ChainParams, idx: np.ndarray, fit_series: bool, max_nfev: int):
+def _fit_shape(data: _Data, p0: ChainParams, idx: np.ndarray, fit_series: bool, max_nfev: int,
+               prior: tuple[float, float] | None = None):
+    """prior = (within-press rms, level sd): fit with the level prior (see fit_chain's level_prior)."""
     from scipy.optimize import least_squares
 
     n = 7 if fit_series else 5
@@ -294,8 +308,11 @@ def _fit_shape(data: _Data, p0: ChainParams, idx: np.ndarray, fit_series: bool, 
     def fun(th):
         q = _with(p0, np.concatenate([th, _theta(p0)[n:]]), fit_series)
         # series resistance enters inside the log: refit the level per press through ln(R_film e^l + r_s)
-        out, _ = _profile(data, q, idx)
-        return np.concatenate(out)
+        out, lev = _profile(data, q, idx)
+        if prior is None:
+            return np.concatenate(out)
+        sw, sl = prior
+        return np.concatenate([np.concatenate([e / (np.sqrt(max(len(e), 1)) * sw) for e in out]), (lev - np.mean(lev)) / sl])
 
     th0 = np.clip(_theta(p0)[:n], LB[:n] + 1e-6, UB[:n] - 1e-6)
     res = least_squares(fun, th0, bounds=(LB[:n], UB[:n]), x_scale="jac", max_nfev=max_nfev, method="trf")
@@ -355,8 +372,15 @@ def leak_from_unloaded(runs: Seq[RealRun], p: ChainParams) -> float:
 
 def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = None, n_boot: int = 16,
               min_force_frac: float = 0.1, min_force_n: float = 0.05, max_nfev: int = 60, seed: int = 0,
-              progress=None) -> ChainFit:
-    """Fit the chain to real runs (see the module docstring); progress(k, n) is called after each fit."""
+              progress=None, level_prior: bool = False) -> ChainFit:
+    """Fit the chain to real runs (see the module docstring); progress(k, n) is called after each fit.
+
+    level_prior: the press levels are draws l_j ~ N(mu, sd^2) of a placement chosen before the press, so
+    independent of its force; free levels (the default) let them absorb a force law that is too flat. With the
+    prior the shape is refit on [e_j / (sqrt(n_j) rms_w), (l_j - mean l) / sd]: each press's within-press
+    residuals count as one observation (its samples are strongly correlated: the presses' own ln R-ln F slopes
+    spread by sd 0.16 within a Lupasic run, bench/bench_s2r_identify.py) beside its level's prior term;
+    rms_w and sd from the free-level fit (random-effects least squares, one step)."""
     p0 = replace(p0, r_leak_ohm=leak_from_unloaded(runs, p0))
     data = _Data(runs, p0, min_force_frac, min_force_n)
     if len(data.presses) < 3:
@@ -365,6 +389,11 @@ def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = 
         fit_series = any("adc_full_scale" in r.attrs for r in runs)  # an ADC of known full scale: a floor shows
     idx = np.arange(len(data.presses))
     q, res = _fit_shape(data, p0, idx, fit_series, max_nfev)
+    prior = None
+    if level_prior:
+        out, lev = _profile(data, q, idx)
+        prior = (float(np.sqrt(np.mean(np.concatenate(out) ** 2))), float(np.std(lev, ddof=1)))
+        q, res = _fit_shape(data, q, idx, fit_series, max_nfev, prior)
     if progress:
         progress(1, n_boot + 1)
     fin = _finish(q, data, idx, runs)
@@ -373,7 +402,7 @@ def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = 
     for b in range(n_boot):
         # resample presses with replacement (runs keep their own presses' force histories)
         bi = rng.integers(0, len(idx), len(idx))
-        qb, _ = _fit_shape(data, q, bi, fit_series, max(10, max_nfev // 3))
+        qb, _ = _fit_shape(data, q, bi, fit_series, max(10, max_nfev // 3), prior)
         boot.append(_summary(_finish(qb, data, bi, runs)))
         if progress:
             progress(b + 2, n_boot + 1)

@@ -182,3 +182,32 @@ def test_randomization_draw_is_seeded_and_recorded(tmp_path):
 def test_bad_distribution_rejected():
     with pytest.raises(ValueError):
         Dist(kind="uniform", low=2, high=1)
+
+
+def test_chain_fit_aging_creep_recovers_known_parameters():
+    """creep_law "aging" (load-independent ln-conductance creep): the exponent is the across-press force law."""
+    true = CF.ChainParams(exponent=0.95, r0_ohm=3000.0, creep_amplitude=0.25, creep_force_n=0.5, tau_min_s=0.1,
+                          tau_max_s=3.0, n_creep=4, creep_law="aging", level_log_sd=0.4, r_ref_ohm=1e4,
+                          full_scale=1000.0, noise_sd=0.0)
+    runs = _synthetic_runs(true, n_runs=3)
+    fit = CF.fit_chain(runs, CF.ChainParams(r_ref_ohm=1e4, full_scale=1000.0, n_creep=4, creep_law="aging"), n_boot=0)
+    q = fit.params
+    assert abs(q.exponent - 0.95) < 0.05, q.exponent
+    assert fit.error["rms_log_reading_within_press"] < 0.03
+    # the creep over the observed holds (amplitude and tau_max trade off beyond the longest hold)
+    d = CF.evaluate(fit, _synthetic_runs(true, n_runs=2, seed=7))["plateau_drop"]
+    assert abs(d["sim_median"] - d["real_median"]) < 0.03
+
+
+def test_chain_fit_level_prior_recovers_known_parameters():
+    """Random-effects levels (level_prior): the known chain is still recovered, force law and creep."""
+    true = CF.ChainParams(exponent=1.2, r0_ohm=3000.0, creep_amplitude=2.0, creep_force_n=4.0, tau_min_s=0.1,
+                          tau_max_s=5.0, n_creep=4, level_log_sd=0.4, r_ref_ohm=1e4, full_scale=1000.0, noise_sd=0.0)
+    runs = _synthetic_runs(true, n_runs=3)
+    fit = CF.fit_chain(runs, CF.ChainParams(r_ref_ohm=1e4, full_scale=1000.0, n_creep=4), n_boot=0, level_prior=True)
+    q = fit.params
+    assert abs(q.exponent - 1.2) < 0.05, q.exponent
+    assert fit.error["rms_log_reading_within_press"] < 0.03
+    assert abs(q.level_log_sd - 0.4) < 0.15
+    d = CF.evaluate(fit, _synthetic_runs(true, n_runs=2, seed=7))["plateau_drop"]
+    assert abs(d["sim_median"] - d["real_median"]) < 0.03

@@ -428,11 +428,41 @@ def sim2real_results() -> str:
                 "sd = spread / chain sensitivity:\n\n"
                 + table(["split", "zero-shot / F, real", "zero-shot / F, chain's reading", "test levels vs chain",
                          "sim spread", "sensitivity real / chain", "run-level trend", "implied mean / median"], drows)
-                + "\n\nIdentification check (not adopted): the chain fit with free press levels (as shipped) and with "
-                "levels forced to carry no trend in ln force, on the Lupasic training runs and on a synthetic chain of "
-                "known parameters (exponent 1.2; plateau error of the fitted chain on new synthetic runs):\n\n"
+                + "\n\nIdentification check: the chain fit with free press levels, with levels forced to carry no "
+                "trend in ln force (not adopted), and with the level prior (random-effects levels; adopted for the "
+                "Lupasic board), on the Lupasic training runs and on a synthetic chain of known parameters (exponent "
+                "1.2; plateau error of the fitted chain on new synthetic runs):\n\n"
                 + table(["split", "fit", "within-press (fit runs)", "within-press (held out)", "levels in 90 % band",
                          "creep amplitude", "synthetic exponent", "synthetic plateau error sd (ln)"], irows))
+    ident = sorted(RESULTS.glob("s2r-identification-*.json"))
+    if ident:
+        mrows, frows = [], []
+        for f in ident:
+            d = json.loads(f.read_text())
+            name = f.stem.removeprefix("s2r-identification-")
+            tr, lo = d["train"], d["per_press_local_fit"]
+            mrows.append([name, num(tr["ramp_slope_median"], 2), num(tr["across_press_dlnr_dlnf"], 2), num(tr["run_mean_dlnr_dlnf"], 2),
+                          num(tr["hold_dlnr_dlnf_median"], 2), num(tr["hold_dlnr_dlnt_median"], 3), num(lo["slope_sd_within_run"], 2),
+                          num(lo["slope_level_corr"], 2), num(lo["floor_sd_log"], 3), num(1e3 * lo["timing_sd_s"], 1)])
+            for v in d["fits"]:
+                frows.append([name, v["creep_law"], "prior" if v.get("level_prior") else "free", num(v["params"]["exponent"], 2),
+                              num(v["params"]["creep_amplitude"], 2), num(v["within_press_rms_log_reading"]),
+                              num(v["held_out"]["rms_log_reading_within_press"]), pct(v["held_out"]["level_in_band90"]),
+                              f"{num(v['plateau_sensitivity_real'], 2)} / {num(v['plateau_sensitivity_chain'], 2)}",
+                              num(v["run_level_trend_per_ln_force"], 2)])
+        out += ("\n\nWhere the fitted law goes flat (`bench/bench_s2r_identify.py`; `bench/results/s2r-identification-*.json`), "
+                "model-free on ln R of the training presses: the loading-ramp slope d ln R / d ln F (median over presses), the "
+                "across-press slope of the plateaus (all presses; run means), the hold regressed on ln F and ln(1 + t / 0.05 s) "
+                "(median coefficients), the spread of the presses' own slopes within a run and its correlation with the "
+                "press level, and the timing error between the streams read from the residuals' growth with the ramp rate "
+                "(floor sd ln; timing sd, ms):\n\n"
+                + table(["split", "ramp slope", "across presses", "run means", "hold: ln F", "hold: ln t", "press slope sd",
+                         "slope-level corr", "floor", "timing (ms)"], mrows)
+                + "\n\nChain fits on the training runs (no bootstrap) by creep law and press levels (free or the level "
+                "prior): exponent, creep amplitude, within-press rms ln reading (fit runs / held out), held-out levels in the "
+                "90 % band, plateau sensitivity real / chain, and the run-level trend per ln F:\n\n"
+                + table(["split", "creep law", "levels", "exponent", "creep amplitude", "within (fit)", "within (held out)",
+                         "levels in 90 % band", "sensitivity real / chain", "run-level trend"], frows))
     abl = sorted(RESULTS.glob("s2r-ablation-*.json"))
     if abl:
         arows = []
