@@ -72,7 +72,8 @@ class ProtocolConfig(Strict):
 
     kind: Literal[
         "sinusoid", "hold", "staircase", "press_stroke", "element_loads",
-        "velostat_steps", "velostat_staircase", "velostat_calibration", "velostat_calibration_sweep", "velostat_mix",
+        "velostat_steps", "velostat_staircase", "velostat_calibration", "velostat_calibration_sweep",
+        "velostat_site_sweep", "velostat_mix",
     ] = "sinusoid"
     control: Literal["displacement", "force"] = "displacement"
     frequencies_hz: list[Pos(1000.0)] = Field(default_factory=lambda: [0.1, 0.5, 1.0, 2.0])  # cnt_pdms

@@ -16,6 +16,10 @@ kinds
                         episode k calibrates unit perm_r[k mod U], r = k div U, perm_r a shuffle of the U units
                         seeded by (root_seed, r); so each round of U consecutive episodes covers every unit
                         once. Needs the episode's global index (EpisodeProtocol.index).
+  velostat_site_sweep   the staircase at the sites A-E in turn (sect. 5.4, Fig. 23: each of the four corners and
+                        the centre pressed 1-15 N): episode k at SITES_AE[k mod 5], so every 5 consecutive episodes
+                        cover A-E once (velostat_staircase draws its site from A-E and random places, and 10
+                        episodes may miss one). Needs the episode's global index.
   velostat_mix          one of the three per episode (0.4 / 0.3 / 0.3; estimate): the default dataset.
 Positions: the corners A-D (the corner units' centres), the centre E, or uniform over the film (sect. 3.2, 5.4).
 
@@ -29,6 +33,7 @@ import dataclasses
 import numpy as np
 
 SITES = ("A", "B", "C", "D", "E", "random")
+SITES_AE = SITES[:5]  # the paper's test sites (sect. 5.4)
 MIX = (("velostat_steps", 0.4), ("velostat_staircase", 0.3), ("velostat_calibration", 0.3))  # estimate
 REST_MIN_S, REST_MAX_S = 2.0, 10.0  # estimate: rest between presses
 
@@ -110,6 +115,12 @@ def draw(proto, cfg, rng: np.random.Generator):
     dur = p.duration_s
     speed = float(p.loading_speeds_m_per_s[int(rng.integers(len(p.loading_speeds_m_per_s)))])
     sweep = kind == "velostat_calibration_sweep"
+    site_sweep = kind == "velostat_site_sweep"
+    if site_sweep:
+        if proto.index is None:
+            raise ValueError("protocol.kind=velostat_site_sweep needs the episode's global index "
+                             "(make_episode_protocol(cfg, seed, index))")
+        kind = "velostat_staircase"  # the inner kind: the same staircase
     if sweep:
         if proto.index is None:
             raise ValueError("protocol.kind=velostat_calibration_sweep needs the episode's global index "
@@ -128,7 +139,9 @@ def draw(proto, cfg, rng: np.random.Generator):
         t, f = knots_staircase(cfg, levels, hold, speed)
         params.update(unit=u, site=f"unit{u}")
     else:
-        site = SITES[int(rng.integers(len(SITES)))]
+        site = SITES[int(rng.integers(len(SITES)))]  # drawn either way, as the calibration sweep draws its unit
+        if site_sweep:
+            site = SITES_AE[int(proto.index) % len(SITES_AE)]
         xy = _position(cfg, rng, site)
         params["site"] = site
         if kind == "velostat_staircase":
@@ -164,7 +177,8 @@ def waveform(proto, cfg, tau: np.ndarray) -> np.ndarray:
     return np.where(tau < 0.0, 0.0, np.interp(tau, t, f))
 
 
-KINDS = ("velostat_steps", "velostat_staircase", "velostat_calibration", "velostat_calibration_sweep", "velostat_mix")
+KINDS = ("velostat_steps", "velostat_staircase", "velostat_calibration", "velostat_calibration_sweep", "velostat_site_sweep",
+         "velostat_mix")
 
 
 def register(waveforms: dict, drawers: dict) -> None:
