@@ -204,7 +204,7 @@ def test_experiment_velostat_tiny(tmp_path):
     assert sb["bp"] == "paper_cluster" and sb["raw"]["n_holds"] == sb["compensated"]["n_holds"] > 0
     assert F["creep_drift_removed_frac"] == pytest.approx(sb["drift_removed_frac"])
     # ours: both input sets trained, the one with the lower validation RMSE kept
-    assert set(T["valid_rmse_by_inputs"]) == {"raw", "calibrated"}
+    assert set(T["valid_rmse_by_inputs"]) == {"raw", "calibrated", "aged"}
     assert T["inputs"] == min(T["valid_rmse_by_inputs"], key=T["valid_rmse_by_inputs"].get)
     text = (out / "report.md").read_text()
     assert "0.931" in text and "Where we differ" in text
@@ -323,3 +323,25 @@ def test_hold_diagnostics_bands_and_readout_resolution():
     assert out["bands"][1]["force_n"] == [8.0, 16.0] and out["bands"][1]["creep_start_s_median"] == 0.6
     assert out["adc_step_ohm"] == pytest.approx(3.3 / 4096 / 50e-6) and out["noise_ohm"] == pytest.approx(20.0)
     assert out["adc_step_ohm"] / 400.0 > 0.00612
+
+
+def test_site_sweep_presses_every_paper_site_in_turn():
+    """The A-E test (sect. 5.4, Fig. 23: each corner and the centre, 1-15 N): velostat_site_sweep puts episode k at
+    A-E[k mod 5], the same staircase as velostat_staircase; the random kind left sites out (10 episodes, 6 sites)."""
+    from sensors.data.manifest import episode_seed
+    from simulate.protocols.compression_tester import SITES_AE, site_xy_m
+    from simulate.protocols.indenter import make_episode_protocol
+
+    ov = ["protocol.staircase_max_n=15", "protocol.step_hold_s=5", "generation.episodes=10"]
+    cfg = load_scene("velostat", ["protocol.kind=velostat_site_sweep", *ov])
+    rnd = load_scene("velostat", ["protocol.kind=velostat_staircase", *ov])
+    P = [make_episode_protocol(cfg, episode_seed(0, k), k) for k in range(10)]
+    assert [p.params["site"] for p in P] == list(SITES_AE) * 2
+    for k, p in enumerate(P):
+        q = make_episode_protocol(rnd, episode_seed(0, k), k)
+        assert p.params["kind"] == q.params["kind"] == "velostat_staircase"
+        assert p.params["knots_f_n"] == q.params["knots_f_n"] and max(p.params["knots_f_n"]) == 15.0
+        np.testing.assert_allclose(p.offset_xy_m, site_xy_m(cfg, p.params["site"]))
+    assert {"A", "B", "C", "D", "E"} - {make_episode_protocol(rnd, episode_seed(0, k), k).params["site"] for k in range(10)}
+    with pytest.raises(ValueError, match="global index"):
+        make_episode_protocol(cfg, episode_seed(0, 0))

@@ -67,7 +67,7 @@ class Mode:
     tcn_members: int  # members of ours (seed ensemble), chosen on the validation recordings
     # input sets of ours (TCN_INPUTS) trained side by side; the one with the lower validation RMSE is ours.
     # "calibrated" holds every input of "compensated" plus the static calibrations' force estimates
-    tcn_inputs: tuple[str, ...] = ("raw", "calibrated")
+    tcn_inputs: tuple[str, ...] = ("raw", "calibrated", "aged")
     # the paper's membership band (eqs. 8-9) drives the compensation; our K-means band is fitted and reported
     tracker: dict[str, Any] = field(default_factory=lambda: {"smooth": 5, "lag": 5, "domain": "conductance",
                                                              "bounds": tuple(PAPER["bounds"])})
@@ -115,7 +115,7 @@ MODES = {
     "full": Mode("full", _gen(144, 24, 150), CAL + _gen(216, 24, CAL_S), AE + _gen(30, 15, 120),
                  {"max_epochs": 500, "patience": 60}, list(range(3, 13)),
                  {**TCN_BASE, "max_epochs": 200, "patience": 15}, 3),
-    "quick": Mode("quick", _gen(36, 18, 120), CAL + _gen(76, 19, CAL_S), AE + _gen(10, 10, 110),
+    "quick": Mode("quick", _gen(36, 18, 120), CAL + _gen(40, 20, CAL_S), AE + _gen(10, 10, 110),
                   {"max_epochs": 150, "patience": 25, "batch_size": 64}, list(range(3, 13)),
                   {**TCN_BASE, "max_epochs": 40, "patience": 8, "max_batches_per_epoch": 40}, 3),
     "tiny": Mode("tiny", _gen(4, 4, 40), CAL + _gen(4, 4, 50), AE + _gen(2, 2, 40),
@@ -180,18 +180,34 @@ def holds(target: np.ndarray, min_len: int, min_force: float = 0.5) -> list[slic
 TCN_INPUTS = {"raw": ["conductance_ms", "x_mm", "y_mm", "touch"],
               "compensated": ["conductance_ms", "x_mm", "y_mm", "touch", "conductance_comp_ms", "creep_stage"],
               "calibrated": ["conductance_ms", "x_mm", "y_mm", "touch", "conductance_comp_ms", "creep_stage",
-                             "bp_raw_force_n", "bp_comp_force_n"]}
+                             "bp_raw_force_n", "bp_comp_force_n"],
+              "aged": ["conductance_ms", "x_mm", "y_mm", "touch", "conductance_comp_ms", "creep_stage",
+                       "bp_raw_force_n", "bp_comp_force_n", "contact_age_log"]}
+# the creep clock of the aging law (Dieterich & Kilgore 1994: creep ~ ln(1 + t / theta_c)) read from the measured
+# signal: the time since the decoded touch began, as ln(1 + t / AGE_SCALE_S). A 1-15 N staircase at 5 s per step
+# lasts ~90 s, past the TCN's 25 s of history, while eq. 2's accumulated creep runs over the whole contact
+AGE_SCALE_S = 1.0  # estimate: Dieterich & Kilgore's theta_c ~ 1 s (not the simulator's cutoff_time_s)
 # the static calibrations the "calibrated" input set reads: the uncompensated BP and the compensated BP chain of
 # the Fig. 22a comparison (paper_unit, else paper_cluster)
 CALIBRATED_FROM = ("raw_bp", ("paper_unit", "paper_cluster"))
 
 
-def tcn_features(s: Sequence, tracker=None, chains: dict | None = None) -> np.ndarray:
+def contact_age_s(touch: np.ndarray, rate: float) -> np.ndarray:
+    """Seconds since the current touch began (causal; 0 without touch)."""
+    touch = np.asarray(touch, bool)
+    n = np.arange(len(touch))
+    start = np.maximum.accumulate(np.where(touch & ~np.concatenate([[False], touch[:-1]]), n, 0))
+    return np.where(touch, (n - start + 1) / rate, 0.0)
+
+
+def tcn_features(s: Sequence, tracker=None, chains: dict | None = None, age_rate: float | None = None) -> np.ndarray:
     """[conductance (mS), x (mm), y (mm), touch] per sample; decoded position 0 without touch. With a fitted
     CreepTracker also the paper's creep-compensated conductance (eq. 2, mS) and its stage (1 creep, else 0):
     the inputs of the paper's compensated chains, besides the measured signal. With `chains` (an uncompensated and
     a compensated BP chain, CALIBRATED_FROM, fitted on the training split) also their force estimates (N): the
-    per-unit static calibration of the present R, which the TCN corrects with the load history (creep, borders)."""
+    per-unit static calibration of the present R, which the TCN corrects with the load history (creep, borders).
+    With `age_rate` (the sample rate, Hz) also ln(1 + contact age / AGE_SCALE_S), the creep clock of the whole
+    contact."""
     r, xy = s.x[:, 0], s.x[:, 1:3]
     touch = np.isfinite(xy).all(1)
     cols = [1e3 / r, np.nan_to_num(xy) * 1e3, touch.astype(float)]
@@ -200,6 +216,8 @@ def tcn_features(s: Sequence, tracker=None, chains: dict | None = None) -> np.nd
         cols += [np.where(touch, 1e3 / rc, 0.0), (stage == 0).astype(float)]
     if chains is not None:
         cols += [ch.predict(s) for ch in chains.values()]
+    if age_rate is not None:
+        cols.append(np.log1p(contact_age_s(touch, age_rate) / AGE_SCALE_S))
     return np.column_stack(cols)
 
 
@@ -512,13 +530,13 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
         cand = {}
         for variant in md.tcn_inputs:
             chs = None
-            if variant == "calibrated":
+            if variant in ("calibrated", "aged"):
                 raw_k, comp_k = CALIBRATED_FROM[0], next((k for k in CALIBRATED_FROM[1] if k in chains), None)
                 if raw_k not in chains or comp_k is None:
                     continue
                 chs = {raw_k: chains[raw_k], comp_k: chains[comp_k]}
-            trk = tracker if variant in ("compensated", "calibrated") else None
-            feats = (lambda t, c: (lambda s: tcn_features(s, t, c)))(trk, chs)
+            trk = tracker if variant in ("compensated", "calibrated", "aged") else None
+            feats = (lambda t, c, a: (lambda s: tcn_features(s, t, c, a)))(trk, chs, rate if variant == "aged" else None)
             names = TCN_INPUTS[variant]
             tcn = make_model("ensemble", member="tcn", n_members=md.tcn_members, member_hparams=md.tcn)
             t0 = time.perf_counter()
