@@ -203,6 +203,11 @@ def test_experiment_velostat_tiny(tmp_path):
     sb = j["creep"]["force_same_bp"]
     assert sb["bp"] == "paper_cluster" and sb["raw"]["n_holds"] == sb["compensated"]["n_holds"] > 0
     assert F["creep_drift_removed_frac"] == pytest.approx(sb["drift_removed_frac"])
+    # the readout diagnostic: both delta readings at every noise scale, the ideal readout without noise
+    rs = j["creep"]["readout_sensitivity"]
+    assert len(rs) == 2 * 3 and {r["reading"] for r in rs} == {"paper", "ours"}
+    assert [r["noise_ohm"] for r in rs if r["reading"] == "paper"] == pytest.approx([20.0, 10.0, 0.0])
+    assert F["creep_target"]["removed_frac"] == pytest.approx(F["r_drift_removed_frac"])
     # ours: both input sets trained, the one with the lower validation RMSE kept
     assert set(T["valid_rmse_by_inputs"]) == {"raw", "calibrated", "aged"}
     assert T["inputs"] == min(T["valid_rmse_by_inputs"], key=T["valid_rmse_by_inputs"].get)

@@ -33,7 +33,8 @@ from learn.experiments.common import fmt, md_table, single_thread
 from learn import metrics as M
 
 KEY = "velostat"
-INPUTS, TARGETS, EXTRA = ["resistance_measured", "position_measured"], ["force"], ["target"]
+# "resistance" (the true R_film + R_ITO) only for the readout diagnostic (readout_sensitivity), never a model input
+INPUTS, TARGETS, EXTRA = ["resistance_measured", "position_measured"], ["force"], ["target", "resistance"]
 SITES_AE = ("A", "B", "C", "D", "E")
 PAPER = {
     "silhouette": 0.931,  # sect. 3.2, eq. 7
@@ -322,6 +323,61 @@ def hold_errors(seqs: list[Sequence], preds: list[np.ndarray], rate: float) -> d
             "drift_signed_mean": float(signed.mean()) if len(mx) else float("nan"), "levels": lv, "max_err": mx.tolist()}
 
 
+def r_drift(tracker, seqs: list[Sequence], rs: list[np.ndarray], rate: float) -> tuple[list, list, list]:
+    """Per test hold (>= 2 s) of recordings `seqs` read as resistances `rs`: relative R drift over the hold,
+    measured (smoothed as the tracker smooths) and compensated, and the diagnostic row of hold_diagnostics."""
+    dr_raw, dr_comp, diag = [], [], []
+    for s, r in zip(seqs, rs):
+        (rc, stage), sm = tracker.transform(r), tracker.smoothed(r)
+        for h in holds(s.extra["target"], int(2 * rate)):
+            a, b = h.start + tracker.smooth, h.stop - 1
+            dr_raw.append(abs(sm[b] - sm[a]) / sm[a])
+            dr_comp.append(abs(rc[b] - rc[a]) / rc[a])
+            st = stage[h]
+            diag.append((float(s.extra["target"][h][0]), dr_raw[-1], dr_comp[-1],
+                         (int(np.argmax(st == 0)) if (st == 0).any() else len(st)) / rate,
+                         int(np.sum((st[1:] != 0) & (st[:-1] == 0)))))
+    return dr_raw, dr_comp, diag
+
+
+# readout noise x these scales (0: an ideal readout, no noise and no ADC) for the readout diagnostic
+READOUT_SCALES = (1.0, 0.5, 0.0)
+
+
+def reread(r_true: np.ndarray, cfg, scale: float, rng: np.random.Generator) -> np.ndarray:
+    """The true R (R_film + R_ITO) through the force channel again (sensors.velostat.reference: V = I R clipped at
+    compliance, white noise, ADC at the code centre) with the readout noise times `scale`; scale 0: V / I ideal."""
+    from sensors.velostat.reference import quantise
+
+    ro = cfg.sensor.readout
+    v = np.minimum(ro.current_a * np.asarray(r_true, np.float64), ro.compliance_v)
+    if scale <= 0:
+        return v / ro.current_a
+    _, va = quantise(v + rng.standard_normal(len(v)) * ro.noise_v * scale, ro.adc_bits, ro.adc_range_v)
+    return va.astype(np.float64) / ro.current_a
+
+
+def readout_sensitivity(fit_on: list[Sequence], te: list[Sequence], cfg, tracker_kw: dict, seed: int,
+                        rate: float) -> list[dict[str, Any]]:
+    """What the readout costs the creep tracking (a diagnostic on the true R, which no model sees): the recordings'
+    true resistance re-read at READOUT_SCALES x the readout noise, then for eq. 3 as printed (PAPER_READING) and
+    for the compensation's period (tracker_kw) the K-means band, silhouette and R drift removed in the test holds."""
+    from learn.models.velostat import CreepTracker
+
+    out = []
+    for scale in READOUT_SCALES:
+        rng = np.random.default_rng([int(seed), 0x5E45])
+        fr = [reread(s.extra["resistance"], cfg, scale, rng) for s in fit_on]
+        tr_ = [reread(s.extra["resistance"], cfg, scale, rng) for s in te]
+        for name, kw in (("paper", {**tracker_kw, **PAPER_READING}), ("ours", dict(tracker_kw))):
+            t = CreepTracker(seed=seed, **kw).fit(fr)
+            a, b, _ = r_drift(t, te, tr_, rate)
+            out.append({"noise_scale": scale, "noise_ohm": scale * cfg.sensor.readout.noise_v / cfg.sensor.readout.current_a,
+                        "reading": name, "smooth": t.smooth, "lag": t.lag, "period_s": t.lag / rate, "kmeans_bounds": list(t.kmeans_bounds_),
+                        "silhouette": t.silhouette_, "r_drift_removed_frac": float(1 - np.mean(b) / np.mean(a))})
+    return out
+
+
 FORCE_BANDS_N = ((0.0, 3.0), (3.0, 8.0), (8.0, 16.0))  # low / middle / high force of the 1-15 N range
 
 
@@ -428,19 +484,15 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
     log(f"creep tracker: K-means band {tracker.kmeans_bounds_[0]:.4f}/{tracker.kmeans_bounds_[1]:.4f}, used "
         f"{tracker.bounds[0]:.4f}/{tracker.bounds[1]:.4f}, silhouette {tracker.silhouette_:.3f}")
     # resistance drift during holds, before/after
-    dr_raw, dr_comp, diag = [], [], []
-    for s in te:
-        (rc, stage), rs = tracker.transform(s.x[:, 0]), tracker.smoothed(s.x[:, 0])
-        for h in holds(s.extra["target"], int(2 * rate)):
-            a, b = h.start + tracker.smooth, h.stop - 1
-            dr_raw.append(abs(rs[b] - rs[a]) / rs[a])
-            dr_comp.append(abs(rc[b] - rc[a]) / rc[a])
-            st = stage[h]
-            diag.append((float(s.extra["target"][h][0]), dr_raw[-1], dr_comp[-1],
-                         (int(np.argmax(st == 0)) if (st == 0).any() else len(st)) / rate,
-                         int(np.sum((st[1:] != 0) & (st[:-1] == 0)))))
+    dr_raw, dr_comp, diag = r_drift(tracker, te, [s.x[:, 0] for s in te], rate)
     creep["r_drift_raw_mean"], creep["r_drift_comp_mean"] = float(np.mean(dr_raw)), float(np.mean(dr_comp))
     creep["hold_diagnostics"] = hold_diagnostics(np.asarray(diag, float), cfg)
+    if all("resistance" in s.extra for s in fit_on + te):
+        t0 = time.perf_counter()
+        creep["readout_sensitivity"] = readout_sensitivity(fit_on, te, cfg, md.tracker, seed, rate)
+        log(f"readout sensitivity ({time.perf_counter() - t0:.0f} s): " + "; ".join(
+            f"x{r['noise_scale']:g} {r['reading']}: sil {r['silhouette']:.3f}, R drift removed {100 * r['r_drift_removed_frac']:.0f} %"
+            for r in creep["readout_sensitivity"]))
 
     # --- units: Ward clustering of R(F) curves from the holds at whole-newton levels (calibrations and
     # staircases, wherever the decoded position puts them); the BP nets train on every training hold
@@ -800,6 +852,16 @@ def report(m: dict[str, Any]) -> str:
         rows.append(["readout resolution at the force channel: noise rms / ADC step",
                      f"{hd['noise_ohm']:.0f} / {hd['adc_step_ohm']:.0f} ohm", "creep band from delta < 0.6 % (eq. 9)"])
     L.append(md_table(["quantity", "ours", "paper"], rows))
+    if C.get("readout_sensitivity"):
+        L += ["", "What the readout costs the creep tracking (a diagnostic: the recordings' true R re-read through the "
+              "force channel with the readout noise scaled, x0 = an ideal readout without noise or ADC; no model sees "
+              "it): K-means band, silhouette and R drift removed in the test holds, for eq. 3 as printed (one "
+              "sample) and for the compensation's 0.5 s period.", ""]
+        L.append(md_table(["readout noise", "delta", "K-means band lo / hi", "silhouette", "R drift removed"],
+                          [[f"x{r['noise_scale']:g} ({r['noise_ohm']:.0f} ohm rms" + (", ADC" if r["noise_scale"] > 0 else ", no ADC") + ")",
+                            "eq. 3 as printed" if r["reading"] == "paper" else f"{r['period_s']:g} s period, {r['smooth']}-sample average",
+                            f"{r['kmeans_bounds'][0]:.4f} / {r['kmeans_bounds'][1]:.4f}", f"{r['silhouette']:.3f}",
+                            f"{100 * r['r_drift_removed_frac']:.0f} %"] for r in C["readout_sensitivity"]]))
     L += ["", "## Models on the held-out recordings", ""]
     rows = []
     for k in MODEL_KEYS:
