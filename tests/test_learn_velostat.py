@@ -230,7 +230,7 @@ def quick_run(tmp_path_factory):
 def test_experiment_velostat_quick(quick_run):
     """Issue 14's targets that the quick run meets (bench/results/experiments/velostat-quick.json)."""
     m = quick_run
-    assert m["findings"]["r_drift_removed_frac"] > 0  # the paper's band: little drift removed, loading kept
+    assert m["findings"]["r_drift_removed_frac"] > 0.3  # Figs. 9-10 (resistance): the paper's band removes ~half
     assert all(m["findings"]["all_beat_mean"].values())
     R = m["models"]
     assert R["paper_unit"]["test"]["rmse"] < R["literal_unit"]["test"]["rmse"]  # ln R + one-hot beats the literal
@@ -239,9 +239,16 @@ def test_experiment_velostat_quick(quick_run):
     # Ward on the units' calibrations (eq. 10): the paper's "about 5" groups
     assert 4 <= m["clustering"]["k_elbow"] <= 6
     assert m["creep"]["silhouette"] >= 0.8
-    # the K-means of Fig. 6 on the delta over one detection cycle lands within 2x of the paper's band (eqs. 8-9)
+    # the K-means of Fig. 6 on eq. 3 as printed (one detection cycle of the measured R) lands within 2x of the
+    # paper's band (eqs. 8-9); so does the one-cycle delta of the 0.5 s average
+    assert m["findings"]["kmeans_paper_reading"]["band_within_2x"]
     lo, hi = m["creep"]["one_cycle"]["kmeans_bounds"]
     assert 0.5 < lo / 0.00612 < 2.0 and 0.5 < hi / 0.02374 < 2.0
+    # the readout diagnostic: the readout noise is what keeps eq. 3 as printed from the paper's silhouette and
+    # drift removal (an ideal readout: silhouette near the paper's 0.931, most of the R drift removed)
+    rs = {(r["reading"], r["noise_scale"]): r for r in m["creep"]["readout_sensitivity"]}
+    assert rs["paper", 0.0]["silhouette"] > 0.85 > rs["paper", 1.0]["silhouette"] + 0.2
+    assert rs["paper", 0.0]["r_drift_removed_frac"] > 0.9 > rs["paper", 0.5]["r_drift_removed_frac"] > rs["paper", 1.0]["r_drift_removed_frac"]
     # ours (a 3-seed TCN ensemble) beats the paper's literal chains on every column but the hold drift, and every
     # chain (the uncompensated BP included) on the held-out RMSE, the hold error and the worst A-E point
     assert R["tcn"]["hparams"]["n_members"] == 3 and len(R["tcn"]["members"]) == 3
@@ -257,18 +264,19 @@ def test_experiment_velostat_quick(quick_run):
 
 @pytest.mark.slow
 @pytest.mark.xfail(strict=False, reason="issue 14 open (measured in bench/results/experiments/velostat-quick.json): "
-                   "the force hold drift removed stays under 50 % (low-force aging creep outruns the paper's band, "
-                   "high-force readout noise flips holds to loading: report, 'What limits the compensation'); the "
-                   "literal chains' worst A-E point stays above 2 N (E, the corner of four units; the top steps); "
-                   "ours loses the hold drift to the compensated chains and the A-E share under 1 N to the "
-                   "uncompensated BP by one point")
+                   "the R hold drift removed (Figs. 9-10) is 50 % on the site-sweep test, just under the target, and "
+                   "eq. 3 as printed clusters at silhouette ~0.56: both limited by the readout noise (an estimate; "
+                   "the readout diagnostic: with an ideal readout 0.90 and 97 %); the literal chains miss their own "
+                   "bound (BP test RMSE on held-out holds 2.1 / 1.5 N, worst A-E point 5.1 / 3.6 N: R in ohm min-max "
+                   "scaled crowds the top steps); ours loses the unsigned hold drift to the compensated chains "
+                   "(noise-following; its signed drift is the smallest)")
 def test_experiment_velostat_quick_open_targets(quick_run):
     m = quick_run
-    R = m["models"]
-    assert m["findings"]["creep_drift_removed_frac"] >= 0.5
-    for k in ("literal_unit", "literal_cluster"):
-        assert R[k]["test"]["rmse"] < 2.0 and R[k]["ae"]["max_abs_n"] < 2.0
-    assert m["findings"]["ours_beats_every_paper_model_on_every_metric"]
+    F = m["findings"]
+    assert F["creep_target"]["met"]
+    assert F["kmeans_paper_reading"]["silhouette_ge_0_8"]
+    assert all(v["met"] for v in F["literal_bound"].values())
+    assert F["ours_beats_every_paper_model_on_every_metric"]
 
 
 def test_calibration_holds_do_not_depend_on_the_loading_speed():
@@ -350,3 +358,20 @@ def test_site_sweep_presses_every_paper_site_in_turn():
     assert {"A", "B", "C", "D", "E"} - {make_episode_protocol(rnd, episode_seed(0, k), k).params["site"] for k in range(10)}
     with pytest.raises(ValueError, match="global index"):
         make_episode_protocol(cfg, episode_seed(0, 0))
+
+
+def test_reread_matches_the_readout_and_contact_age():
+    """The readout diagnostic re-reads the true R as the force channel does: x0 is V / I (compliance kept), x1 has the
+    readout's noise and ADC step (rms error ~ sqrt(20^2 + 16^2 / 12) ohm); the contact age restarts at every touch."""
+    from learn.experiments.velostat import contact_age_s, reread
+
+    cfg = load_scene("velostat")
+    r = np.r_[np.full(4000, 1000.0), np.full(10, 1e12)]
+    ideal = reread(r, cfg, 0.0, np.random.default_rng(0))
+    assert ideal[0] == pytest.approx(1000.0) and ideal[-1] == pytest.approx(3.0 / 50e-6)
+    e = reread(r, cfg, 1.0, np.random.default_rng(0))[:4000] - 1000.0
+    assert np.sqrt(np.mean(e ** 2)) == pytest.approx(np.sqrt(20.0 ** 2 + 16.11 ** 2 / 12), rel=0.1)
+    half = reread(r, cfg, 0.5, np.random.default_rng(0))[:4000] - 1000.0
+    assert np.std(half) < 0.7 * np.std(e)
+    t = np.array([0, 1, 1, 1, 0, 0, 1, 1], bool)
+    np.testing.assert_allclose(contact_age_s(t, 10.0), [0, 0.1, 0.2, 0.3, 0, 0, 0.1, 0.2])
