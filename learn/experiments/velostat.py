@@ -988,7 +988,7 @@ DIFFERENCES = """
   is the preset's 10 Hz. The K-means of Fig. 6 on this delta is reported (band and silhouette, and in the
   findings the ratio to eqs. 8-9) and not used by the compensation. Consequence, measured by the readout
   diagnostic (the true R re-read with the noise scaled): on one sample the readout noise (20 ohm rms, 16 ohm ADC
-  steps on ~1 kohm at 8-15 N) spreads the creep stage over the transitional one, so the silhouette falls to ~0.6;
+  steps on 0.5-3 kohm at 8-15 N in the quick data) spreads the creep stage over the transitional one, so the silhouette falls to ~0.6;
   with an ideal readout the same K-means reaches ~0.9 (paper 0.931) and the compensation on this delta removes
   nearly all the R drift. The paper's own band (creep for delta <= 0.00612 per period) implies its readout
   resolves R to a few tenths of a % per period; ours is an estimate (1 mV rms at the ADC on a 50 uA source, a
@@ -1012,8 +1012,8 @@ DIFFERENCES = """
   readout noise (2.7 flips per hold): the fast first second of aging creep stays in the compensated output.
 - **What limits the compensation** (the per-force-band rows under the R drift in the first table): at low force
   (1-3 N) the aging creep early in a hold changes R faster per 0.5 s period than the band's upper bound, so the
-  start of the hold is booked as loading and its creep stays in the output; at high force (R a few hundred ohm)
-  the readout noise and the ADC step (the readout row) are several % of R, far above the 0.6 % under which eq. 9
+  start of the hold is booked as loading and its creep stays in the output; at high force (R 0.5-3 kohm)
+  the readout noise and the ADC step (the readout row) are 1-4 % of R, above the 0.6 % under which eq. 9
   calls a sample creep, so holds flip back to loading on noise. Both come from the sensor (log-time aging creep;
   a 12-bit channel on a 50 uA source, estimates) against the paper's fixed band; neither is tuned away.
 - **Ours' hold drift** is mostly not creep: its signed mean (the systematic part, table) is a fraction of its
