@@ -252,8 +252,11 @@ def _report(out: Path, m: dict[str, Any], other: str | None) -> None:
 S2R_BUDGET = {  # the default budget of `piezotwin sim2real` (2 CPU cores, <= 15 min on the Lupasic logs)
     "fit_rate_hz": 20.0, "n_boot": 16, "n_episodes": 96, "episode_s": 60.0, "pretrain_epochs": 40,
     "pretrain_patience": 12, "finetune_epochs": 120, "finetune_patience": 20, "lr": 2e-3, "policy": "none",
-    "finetune_norm": "checkpoint", "rehearsal": 0.0, "n_train_seeds": 3, "time_budget_s": 900.0,
+    "finetune_norm": "checkpoint", "rehearsal": 0.0, "n_train_seeds": 3, "time_budget_s": 900.0, "valid_tail": 0.25,
+    "press_slope": False,
 }
+# valid_tail: the share of each training run (its last presses) that stops fine-tuning and scratch early (round 4;
+# before, whole runs of the pool did, which for the TAMS covers was another cover and for pike2 the only other run)
 # rehearsal 0: the grid [0, 1] chosen on the real valid runs picked 0 at every budget of both Lupasic directions
 # (results of 2026-11-24) and doubled the fine-tuning time; `--budget`-style overrides can still pass a grid.
 # n_train_seeds: fine-tuned and scratch each averaged over the same 3 training seeds (fixed before any test score).
@@ -261,7 +264,7 @@ S2R_BUDGET = {  # the default budget of `piezotwin sim2real` (2 CPU cores, <= 15
 # stopping; at 3e-4 the fine-tuning stopped on the valid runs (best epochs ~20) with the pre-trained net's 2x
 # over-prediction (bench/results/s2r-diagnosis-*.json) only partly unlearned.
 FINETUNE_KEYS = ("finetune_epochs", "finetune_patience", "lr", "policy", "finetune_norm", "rehearsal", "n_train_seeds",
-                 "time_budget_s")
+                 "time_budget_s", "valid_tail")
 
 
 def isotonic_decreasing(x: np.ndarray, y: np.ndarray, n_knots: int = 200) -> tuple[np.ndarray, np.ndarray]:
@@ -434,7 +437,7 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
             fit = C.fit_chain(train_runs, p0, n_boot=int(B["n_boot"]), seed=seed,
                               progress=lambda k, n: bar.update(task, completed=k), level_prior=not any(r.attrs.get("adc_full_scale") for r in runs))
             held = C.evaluate(fit, [r for r in runs if r.key in test_keys])
-            rand = C.randomization_from_fit(fit, train_runs)
+            rand = C.randomization_from_fit(fit, train_runs, press_slope=bool(B["press_slope"]))
             C.save_fit(fit, fit_f, {"family": family, "recording": str(recording), "fit_runs": [r.key for r in train_runs],
                                     "held_out": held, "randomization": rand.model_dump(mode="json")})
             mark("fit", {"within_press_fit": fit.error["rms_log_reading_within_press"], "held_out": held})
@@ -545,7 +548,9 @@ def _mean_metrics(runs: list[dict[str, Any]]) -> dict[str, Any]:
 
 def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target, rate, tick, log, sim=()) -> dict[str, Any]:
     seqs = FT.apply_map(FT.load_recording(recording, [input_channel], [target], rate_hz=rate), "log")
-    sp = FT.split_runs(seqs, train_fraction=None, test_glob=test_glob, seed=seed)
+    # every run outside the test glob is a training run (added in a seeded order along the learning curve); early
+    # stopping uses the last presses of the budget's own runs (FT.split_tail), never a run of another series/cover
+    sp = FT.split_runs(seqs, train_fraction=None, test_glob=test_glob, seed=seed, n_valid=0)
 
     def score(comp, test=None) -> dict[str, Any]:
         test = test or sp.test
@@ -575,22 +580,24 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
     lc = []
     for i, k in enumerate(sizes):
         tr = [s for s in sp.train if s.key in sp.order[:k]]
+        heads, tails = FT.split_tail(tr, float(B["valid_tail"]))
         fts, scs, infos = [], [], []
         for sd in seeds:
             # the share of simulated episodes mixed in: chosen per budget on the real valid runs (never the test runs)
             ft, fi, reh_ratio = None, None, None
             for r in _rehearsals(B):
-                reh = rehearsal_set(sim, int(r * sum(len(s) for s in tr)), sd) if sim and r > 0 else []
-                c, ci = FT.finetune(base, tr, sp.valid, rehearsal=reh, seed=sd, **kw)
+                reh = rehearsal_set(sim, int(r * sum(len(s) for s in heads)), sd) if sim and r > 0 else []
+                c, ci = FT.finetune(base, heads, tails, rehearsal=reh, seed=sd, **kw)
                 if fi is None or ci["best_loss"] < fi["best_loss"]:
                     ft, fi, reh_ratio = c, ci, r
-            sc = FT.train_from_scratch(base.kind, base.hparams, tr, sp.valid, seed=sd, max_epochs=int(B["finetune_epochs"]),
+            sc = FT.train_from_scratch(base.kind, base.hparams, heads, tails, seed=sd, max_epochs=int(B["finetune_epochs"]),
                                        patience=int(B["finetune_patience"]))
             fts.append(score(ft))
             scs.append(score(sc))
             infos.append({"seed": sd, "finetune_epochs": fi["epochs"], "finetune_best_epoch": fi["best_epoch"],
+                          "finetune_valid_mse_z_before": fi["valid_mse_z_before"], "finetune_valid_mse_z_best": fi["best_loss"],
                           "rehearsal": reh_ratio, "scratch_epochs": (getattr(sc, "history", {}) or {}).get("epochs")})
-        st = StaticCurve(tr + list(sp.valid))  # the curve sees every labelled real run the others see
+        st = StaticCurve(tr)  # the curve sees every labelled real sample the others see (heads and tails)
         row = {"n_runs": k, "runs": [s.key for s in tr], "finetuned": _mean_metrics(fts), "scratch": _mean_metrics(scs),
                "static_curve": score(st), "seeds": infos}
         lc.append(row)
@@ -616,6 +623,8 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
     }
     return {"recording": str(recording), "split": sp.keys(), "full_scale_n": full, "results": res, "learning_curve": curve,
             "targets": tg, "train_seeds": seeds,
+            "validation": f"early stopping on the last presses of each training run of the budget (about {100 * float(B['valid_tail']):.0f} % "
+                          "of its samples, cut between presses; learn.finetune.split_tail); the pre-trained weights are the first candidate",
             "input_map": "x = ln(reading) at %g Hz; the simulated reading is in the real board's units" % rate}
 
 
