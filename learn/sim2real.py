@@ -379,7 +379,8 @@ def two_point_calibration(p, run_seq, rate_hz: float) -> tuple[TwoPoint, dict[st
 
 def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, test_glob: str, budget: dict | None = None,
                  seed: int = 0, input_channel: str = "sensor", target: str = "force", model: str = "tcn",
-                 progress: bool = False, log: Callable[[str], None] = lambda s: None) -> dict[str, Any]:
+                 progress: bool = False, log: Callable[[str], None] = lambda s: None,
+                 command: str | None = None) -> dict[str, Any]:
     """fit -> randomized generation -> pre-training -> fine-tuning -> report; each step's artefact is written
     whole (tmp + rename) and skipped when present with the same step config (state.json)."""
     import fnmatch
@@ -438,9 +439,11 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
                               progress=lambda k, n: bar.update(task, completed=k), level_prior=not any(r.attrs.get("adc_full_scale") for r in runs))
             held = C.evaluate(fit, [r for r in runs if r.key in test_keys])
             rand = C.randomization_from_fit(fit, train_runs, press_slope=bool(B["press_slope"]))
+            spread = C.press_slope_spread(fit, train_runs)  # measured whether drawn or not (reported)
             C.save_fit(fit, fit_f, {"family": family, "recording": str(recording), "fit_runs": [r.key for r in train_runs],
-                                    "held_out": held, "randomization": rand.model_dump(mode="json")})
-            mark("fit", {"within_press_fit": fit.error["rms_log_reading_within_press"], "held_out": held})
+                                    "held_out": held, "randomization": rand.model_dump(mode="json"), "press_slope_spread": spread})
+            mark("fit", {"within_press_fit": fit.error["rms_log_reading_within_press"], "held_out": held,
+                         "press_slope_spread": spread})
             log(f"fit: within-press rms ln reading {fit.error['rms_log_reading_within_press']:.3f} (fit runs), "
                 f"{held.get('rms_log_reading_within_press', float('nan')):.3f} (held-out), levels in 90 % band "
                 f"{held.get('level_in_band90', float('nan')):.2f}")
@@ -486,6 +489,9 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
     w4, c4 = time.perf_counter() - clock["wall"], time.process_time() - clock["cpu"]
     m["steps"] = state["done"]
     m["budget"] = B
+    m["command"] = command
+    m["press_slope"] = {"measured": fj.get("press_slope_spread") or {},
+                        "drawn": {k: rand.episode[k].value for k in ("slope_level_coef", "slope_press_sd") if k in rand.episode} or None}
     m["seconds_total_this_call"] = time.perf_counter() - t_all
     m["timing"] = _timing(state["done"], w4, c4, B)
     (out / "metrics.json").write_text(dumps(m))
@@ -536,6 +542,22 @@ def rehearsal_set(sim: Seq[Sequence], n_samples: int, seed: int) -> list[Sequenc
     return out
 
 
+def coverage_order(runs: Seq[Sequence], seeded: Seq[str]) -> list[str]:
+    """The order the learning curve adds training runs: spread over the force range as a calibration is (each
+    budget's runs cover the working range, ISO 376's principle of calibrating across it): the run of the largest
+    peak force first, then each time the run whose ln peak force lies farthest from those already taken
+    (farthest-point order); ties keep the seeded order ``seeded``."""
+    lp = {s.key: float(np.log(max(float(s.y[:, 0].max()), 1e-9))) for s in runs}
+    rest = [k for k in seeded if k in lp]
+    out = [max(rest, key=lambda k: lp[k])]
+    rest.remove(out[0])
+    while rest:
+        nxt = max(rest, key=lambda k: min(abs(lp[k] - lp[o]) for o in out))
+        out.append(nxt)
+        rest.remove(nxt)
+    return out
+
+
 def _mean_metrics(runs: list[dict[str, Any]]) -> dict[str, Any]:
     """Mean over training seeds of each scalar metric (and of each run's RMSE), with the seeds' RMSEs and spread."""
     out: dict[str, Any] = {k: float(np.mean([r[k] for r in runs])) for k, v in runs[0].items() if isinstance(v, (int, float))}
@@ -548,9 +570,10 @@ def _mean_metrics(runs: list[dict[str, Any]]) -> dict[str, Any]:
 
 def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target, rate, tick, log, sim=()) -> dict[str, Any]:
     seqs = FT.apply_map(FT.load_recording(recording, [input_channel], [target], rate_hz=rate), "log")
-    # every run outside the test glob is a training run (added in a seeded order along the learning curve); early
+    # every run outside the test glob is a training run (added along the learning curve in coverage_order); early
     # stopping uses the last presses of the budget's own runs (FT.split_tail), never a run of another series/cover
     sp = FT.split_runs(seqs, train_fraction=None, test_glob=test_glob, seed=seed, n_valid=0)
+    sp.order = coverage_order(sp.train, sp.order)
 
     def score(comp, test=None) -> dict[str, Any]:
         test = test or sp.test
@@ -568,6 +591,8 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
     n_steps = len(sizes) + 1
     res: dict[str, Any] = {}
     res["zero_shot"] = score(base)
+    # the pre-trained net on the real training runs (labelled, never tested on): the training-side sim-to-real gap
+    res["zero_shot"]["training_runs_rmse"] = FT.rmse_on(base, sp.train)
     # two-point calibration on the test sensor's own first press; scored on the test data after that press
     cal, info = two_point_calibration(p, sp.test[0], rate)
     t0 = sp.test[0]
@@ -594,8 +619,10 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
                                        patience=int(B["finetune_patience"]))
             fts.append(score(ft))
             scs.append(score(sc))
+            fv, sv = FT.rmse_on(ft, tails), FT.rmse_on(sc, tails)  # N, on the training runs' validation tails
             infos.append({"seed": sd, "finetune_epochs": fi["epochs"], "finetune_best_epoch": fi["best_epoch"],
                           "finetune_valid_mse_z_before": fi["valid_mse_z_before"], "finetune_valid_mse_z_best": fi["best_loss"],
+                          "finetune_valid_rmse_n": fv, "scratch_valid_rmse_n": sv,
                           "rehearsal": reh_ratio, "scratch_epochs": (getattr(sc, "history", {}) or {}).get("epochs")})
         st = StaticCurve(tr)  # the curve sees every labelled real sample the others see (heads and tails)
         row = {"n_runs": k, "runs": [s.key for s in tr], "finetuned": _mean_metrics(fts), "scratch": _mean_metrics(scs),
@@ -614,6 +641,8 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
     curve = [{"n_runs": r["n_runs"], "runs": r["runs"], **{f"{k}_rmse": r[k]["rmse"] for k in ("finetuned", "scratch", "static_curve")},
               "finetuned_rmse_sd": r["finetuned"]["rmse_sd"], "scratch_rmse_sd": r["scratch"]["rmse_sd"],
               "finetuned_rmse_seeds": r["finetuned"]["rmse_seeds"], "scratch_rmse_seeds": r["scratch"]["rmse_seeds"],
+              "finetuned_valid_rmse": float(np.mean([x["finetune_valid_rmse_n"] for x in r["seeds"]])),
+              "scratch_valid_rmse": float(np.mean([x["scratch_valid_rmse_n"] for x in r["seeds"]])),
               "seeds": r["seeds"]} for r in lc]
     tg = {
         "finetuned_beats_scratch_and_static_every_budget": all(r["finetuned_rmse"] < min(r["scratch_rmse"], r["static_curve_rmse"]) for r in curve),

@@ -59,3 +59,16 @@ def test_seed_mean_and_spread():
     m = _mean_metrics(runs)
     assert m["rmse"] == 3.0 and m["mae"] == 2.0 and m["per_run_rmse"]["a"] == 2.0
     assert m["rmse_seeds"] == [2.0, 4.0] and abs(m["rmse_sd"] - np.sqrt(2.0)) < 1e-12
+
+
+def test_coverage_order_spreads_the_budgets_over_the_force_range():
+    """The learning curve adds the largest-force run first, then each time the run farthest in ln peak force from
+    those taken: one or two runs already span the range (a seeded order gave pike1 -> pike2 two 2 N runs first)."""
+    from learn.sim2real import coverage_order
+
+    peaks = {"a": 1.0, "b": 2.0, "c": 10.0, "d": 11.0, "e": 40.0, "f": 40.0}
+    runs = [Sequence(np.zeros((5, 1)), np.linspace(0, v, 5)[:, None], ["x"], ["force"], {}, {"key": k}) for k, v in peaks.items()]
+    seeded = ["b", "f", "a", "d", "c", "e"]
+    order = coverage_order(runs, seeded)
+    assert order[:3] == ["f", "a", "c"]  # f before e: ties keep the seeded order
+    assert sorted(order) == sorted(peaks)
