@@ -61,14 +61,15 @@ def test_seed_mean_and_spread():
     assert m["rmse_seeds"] == [2.0, 4.0] and abs(m["rmse_sd"] - np.sqrt(2.0)) < 1e-12
 
 
-def test_coverage_order_spreads_the_budgets_over_the_force_range():
-    """The learning curve adds the largest-force run first, then each time the run farthest in ln peak force from
-    those taken: one or two runs already span the range (a seeded order gave pike1 -> pike2 two 2 N runs first)."""
-    from learn.sim2real import coverage_order
+def test_curve_order_keeps_the_earlier_budgets_and_adds_the_former_valid_runs():
+    """Round 4 validates on each training run's tail, so the whole runs that used to stop early train too: they
+    join the learning curve after the runs it had (budgets 1, 2, 4 unchanged; 'all' gains them)."""
+    from learn import finetune as FT
+    from learn.sim2real import curve_order
 
-    peaks = {"a": 1.0, "b": 2.0, "c": 10.0, "d": 11.0, "e": 40.0, "f": 40.0}
-    runs = [Sequence(np.zeros((5, 1)), np.linspace(0, v, 5)[:, None], ["x"], ["force"], {}, {"key": k}) for k, v in peaks.items()]
-    seeded = ["b", "f", "a", "d", "c", "e"]
-    order = coverage_order(runs, seeded)
-    assert order[:3] == ["f", "a", "c"]  # f before e: ties keep the seeded order
-    assert sorted(order) == sorted(peaks)
+    seqs = [Sequence(np.zeros((5, 1)), np.zeros((5, 1)), ["x"], ["force"], {}, {"key": f"run{i}"}) for i in range(10)]
+    seqs += [Sequence(np.zeros((5, 1)), np.zeros((5, 1)), ["x"], ["force"], {}, {"key": "test0"})]
+    old = FT.split_runs(seqs, train_fraction=None, test_glob="test*", seed=0)
+    order = curve_order(seqs, "test*", 0)
+    assert order[: len(old.order)] == old.order and len(old.valid) >= 2
+    assert sorted(order) == sorted(f"run{i}" for i in range(10))
