@@ -403,8 +403,8 @@ def sim2real_results() -> str:
     if slopes:
         out += ("\n\nPress-to-press sensitivity (contact variation; `sensors.chain_fit.press_slope_spread` on the training "
                 "runs): within-run sd of the presses' local d ln R / d ln F, its correlation with the press level, the "
-                "chain's own sd of the same statistic on the same forces, and what the generator draws per press "
-                "(coefficient on the level, independent sd; the level term only where |r| > 2 / sqrt(n)); last column: "
+                "chain's own sd of the same statistic on the same forces, and what the generator draws per press when `press_slope` is on "
+                "(coefficient on the level, independent sd; the level term only where |r| > 2 / sqrt(n); the default is off, column drawn); last column: "
                 "the pre-trained net's RMSE on the real training runs (N):\n\n"
                 + table(["split", "drawn", "presses", "slope sd, real", "corr. with level", "slope sd, chain",
                          "coef. on level", "independent sd", "pre-trained on training runs"], slopes))
@@ -484,6 +484,27 @@ def sim2real_results() -> str:
                 "90 % band, plateau sensitivity real / chain, and the run-level trend per ln F:\n\n"
                 + table(["split", "creep law", "levels", "exponent", "creep amplitude", "within (fit)", "within (held out)",
                          "levels in 90 % band", "sensitivity real / chain", "run-level trend"], frows))
+    psl = sorted(RESULTS.glob("s2r-press-slope-*.json"))
+    if psl:
+        prow = []
+        for f in psl:
+            d = json.loads(f.read_text())
+            for side in ("off", "on"):
+                v = d[side]
+                drawn = (v.get("press_slope") or {}).get("drawn") or {}
+                prow.append([f.stem.removeprefix("s2r-press-slope-"), side,
+                             f"{num(drawn.get('slope_level_coef'), 3)} / {num(drawn.get('slope_press_sd'), 3)}" if drawn else "–",
+                             num(v["pretrain_sim_valid_rmse"]), num(v["zero_shot_training_runs_rmse"]),
+                             num(v["finetuned_valid_rmse_mean"]),
+                             "; ".join(f"{c['n_runs']}: {num(c['test_finetuned_rmse'])}" for c in v["curve"]),
+                             "yes" if d["training_side_helps"] else "no"])
+        out += ("\n\nPress-to-press sensitivity drawn in the generation or not (`bench/bench_s2r_press_slope.py`, "
+                "`bench/results/s2r-press-slope-*.json`): chosen on the training side only, by the fine-tuned RMSE on "
+                "the training runs' own validation tails (mean over budgets and seeds, N) in both Lupasic directions; "
+                "the pre-trained net's RMSE on the real training runs beside it; the test RMSE by budget is reported, "
+                "not used:\n\n"
+                + table(["split", "press slope", "drawn coef / sd", "pre-train sim valid (N)", "pre-trained on training runs (N)",
+                         "fine-tuned validation (N)", "test fine-tuned by budget (N)", "training side helps"], prow))
     abl = sorted(RESULTS.glob("s2r-ablation-*.json"))
     if abl:
         arows = []
