@@ -23,7 +23,9 @@ dense layer) and a learnable affine of the normalised input (scale a, shift b pe
 saved. With one to a few real runs (a few thousand samples) this is tens of parameters instead of
 thousands. ``none`` retrains every layer (same small learning rate), for comparison.
 
-Early stopping uses held-out real runs (whole episodes, never samples of a training run).
+Early stopping uses held-out real data: whole runs (`split_runs`), or, in `piezotwin sim2real`, the last
+presses of each training run (`split_tail`: the same sensor, cut between presses). The pre-trained weights
+are the first candidate (fine-tuning that never improves on them returns them).
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ from sensors.data.resample import resample
 
 __all__ = [
     "InputMap", "FREEZE_POLICIES", "load_recording", "resample", "apply_map", "head_parameter_names",
-    "finetune", "train_from_scratch", "restandardise", "split_runs", "RealSplit",
+    "finetune", "train_from_scratch", "restandardise", "split_runs", "RealSplit", "split_tail", "VALID_TAIL_FRACTION",
 ]
 
 FREEZE_POLICIES = ("head", "none")
@@ -166,6 +168,36 @@ def split_runs(seqs: Seq[Sequence], *, train_fraction: float | None, test_glob: 
                      sorted(test, key=lambda s: s.key), order=[s.key for s in train])
 
 
+VALID_TAIL_FRACTION = 0.25  # estimate: a quarter of each run's presses stops early; the rest (3/4) trains
+
+
+def split_tail(seqs: Seq[Sequence], frac: float = VALID_TAIL_FRACTION) -> tuple[list[Sequence], list[Sequence]]:
+    """Each run cut in time into (head, tail): the tail (about ``frac`` of the samples, its last presses) is the
+    validation data for early stopping, the head trains. The cut lies in the middle of the release between two
+    presses nearest to (1 - frac) of the run, so no press is split (a run of fewer than two presses: at that
+    sample). Validation then measures the sensor being calibrated, never another series or cover (with a whole
+    run of another cover as validation, early stopping chose the weights that suited that cover)."""
+    from sensors.chain_fit import presses_of
+
+    if not 0.0 < frac < 1.0:
+        raise ValueError(f"validation tail fraction must lie in (0, 1); got {frac}")
+    heads, tails = [], []
+    for s in seqs:
+        n = len(s)
+        f = s.y[:, 0]
+        want = (1.0 - frac) * n
+        pr = presses_of(f, max(0.1 * float(f.max()), 1e-9))
+        gaps = [(a.stop + b.start) // 2 for a, b in zip(pr[:-1], pr[1:])]
+        cut = min(gaps, key=lambda g: abs(g - want)) if gaps else int(round(want))
+        cut = int(min(max(cut, 1), n - 1))
+        part = lambda a, b, tag: Sequence(s.x[a:b], s.y[a:b], s.inputs, s.targets, s.units,  # noqa: E731
+                                          {**s.meta, "key": f"{s.key}[{tag}]"},
+                                          {k: v[a:b] for k, v in s.extra.items() if len(v) == n})
+        heads.append(part(0, cut, "head"))
+        tails.append(part(cut, n, "tail"))
+    return heads, tails
+
+
 # ---------------------------------------------------------------------------------------------- freezing
 
 
@@ -248,7 +280,8 @@ def finetune(comp: Compensator, train: Seq[Sequence], valid: Seq[Sequence], *, p
         before = torch.nn.functional.mse_loss(wrapped(va[0]), va[1]).item()
     cfg = TrainConfig(lr=lr, batch_size=int(batch_size or c.hparams.get("batch_size", 32)), max_epochs=max_epochs,
                       patience=patience, grad_clip=1.0, seed=seed)
-    hist = train_model(wrapped, tr, va, cfg, progress=progress, description=f"finetune[{policy}]")
+    # the pre-trained weights stay a candidate: no step that worsens the validation loss is kept
+    hist = train_model(wrapped, tr, va, cfg, progress=progress, description=f"finetune[{policy}]", keep_initial=True)
     a = wrapped.a.detach().double().numpy()
     b = wrapped.b.detach().double().numpy()
     # fold z' = a (x - m) / s + b into the z-score: mean m - b s / a, std s / a

@@ -252,8 +252,11 @@ def _report(out: Path, m: dict[str, Any], other: str | None) -> None:
 S2R_BUDGET = {  # the default budget of `piezotwin sim2real` (2 CPU cores, <= 15 min on the Lupasic logs)
     "fit_rate_hz": 20.0, "n_boot": 16, "n_episodes": 96, "episode_s": 60.0, "pretrain_epochs": 40,
     "pretrain_patience": 12, "finetune_epochs": 120, "finetune_patience": 20, "lr": 2e-3, "policy": "none",
-    "finetune_norm": "checkpoint", "rehearsal": 0.0, "n_train_seeds": 3, "time_budget_s": 900.0,
+    "finetune_norm": "checkpoint", "rehearsal": 0.0, "n_train_seeds": 3, "time_budget_s": 900.0, "valid_tail": 0.25,
+    "press_slope": False,
 }
+# valid_tail: the share of each training run (its last presses) that stops fine-tuning and scratch early (round 4;
+# before, whole runs of the pool did, which for the TAMS covers was another cover and for pike2 the only other run)
 # rehearsal 0: the grid [0, 1] chosen on the real valid runs picked 0 at every budget of both Lupasic directions
 # (results of 2026-11-24) and doubled the fine-tuning time; `--budget`-style overrides can still pass a grid.
 # n_train_seeds: fine-tuned and scratch each averaged over the same 3 training seeds (fixed before any test score).
@@ -261,7 +264,7 @@ S2R_BUDGET = {  # the default budget of `piezotwin sim2real` (2 CPU cores, <= 15
 # stopping; at 3e-4 the fine-tuning stopped on the valid runs (best epochs ~20) with the pre-trained net's 2x
 # over-prediction (bench/results/s2r-diagnosis-*.json) only partly unlearned.
 FINETUNE_KEYS = ("finetune_epochs", "finetune_patience", "lr", "policy", "finetune_norm", "rehearsal", "n_train_seeds",
-                 "time_budget_s")
+                 "time_budget_s", "valid_tail")
 
 
 def isotonic_decreasing(x: np.ndarray, y: np.ndarray, n_knots: int = 200) -> tuple[np.ndarray, np.ndarray]:
@@ -376,7 +379,8 @@ def two_point_calibration(p, run_seq, rate_hz: float) -> tuple[TwoPoint, dict[st
 
 def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, test_glob: str, budget: dict | None = None,
                  seed: int = 0, input_channel: str = "sensor", target: str = "force", model: str = "tcn",
-                 progress: bool = False, log: Callable[[str], None] = lambda s: None) -> dict[str, Any]:
+                 progress: bool = False, log: Callable[[str], None] = lambda s: None,
+                 command: str | None = None) -> dict[str, Any]:
     """fit -> randomized generation -> pre-training -> fine-tuning -> report; each step's artefact is written
     whole (tmp + rename) and skipped when present with the same step config (state.json)."""
     import fnmatch
@@ -434,10 +438,12 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
             fit = C.fit_chain(train_runs, p0, n_boot=int(B["n_boot"]), seed=seed,
                               progress=lambda k, n: bar.update(task, completed=k), level_prior=not any(r.attrs.get("adc_full_scale") for r in runs))
             held = C.evaluate(fit, [r for r in runs if r.key in test_keys])
-            rand = C.randomization_from_fit(fit, train_runs)
+            rand = C.randomization_from_fit(fit, train_runs, press_slope=bool(B["press_slope"]))
+            spread = C.press_slope_spread(fit, train_runs)  # measured whether drawn or not (reported)
             C.save_fit(fit, fit_f, {"family": family, "recording": str(recording), "fit_runs": [r.key for r in train_runs],
-                                    "held_out": held, "randomization": rand.model_dump(mode="json")})
-            mark("fit", {"within_press_fit": fit.error["rms_log_reading_within_press"], "held_out": held})
+                                    "held_out": held, "randomization": rand.model_dump(mode="json"), "press_slope_spread": spread})
+            mark("fit", {"within_press_fit": fit.error["rms_log_reading_within_press"], "held_out": held,
+                         "press_slope_spread": spread})
             log(f"fit: within-press rms ln reading {fit.error['rms_log_reading_within_press']:.3f} (fit runs), "
                 f"{held.get('rms_log_reading_within_press', float('nan')):.3f} (held-out), levels in 90 % band "
                 f"{held.get('level_in_band90', float('nan')):.2f}")
@@ -483,6 +489,9 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
     w4, c4 = time.perf_counter() - clock["wall"], time.process_time() - clock["cpu"]
     m["steps"] = state["done"]
     m["budget"] = B
+    m["command"] = command
+    m["press_slope"] = {"measured": fj.get("press_slope_spread") or {},
+                        "drawn": {k: rand.episode[k].value for k in ("slope_level_coef", "slope_press_sd") if k in rand.episode} or None}
     m["seconds_total_this_call"] = time.perf_counter() - t_all
     m["timing"] = _timing(state["done"], w4, c4, B)
     (out / "metrics.json").write_text(dumps(m))
@@ -533,6 +542,15 @@ def rehearsal_set(sim: Seq[Sequence], n_samples: int, seed: int) -> list[Sequenc
     return out
 
 
+def curve_order(seqs: Seq[Sequence], test_glob: str, seed: int) -> list[str]:
+    """The order the learning curve adds training runs: rounds 1-3's (the seeded split_runs order of its training
+    runs), then the runs that were its early-stopping runs, so every budget but the last keeps the runs it had
+    (fixed before round 4; a coverage order, largest peak force first, was measured beside it and not adopted:
+    CHANGELOG, fourth round)."""
+    old = FT.split_runs(seqs, train_fraction=None, test_glob=test_glob, seed=seed)
+    return list(old.order) + [s.key for s in old.valid]
+
+
 def _mean_metrics(runs: list[dict[str, Any]]) -> dict[str, Any]:
     """Mean over training seeds of each scalar metric (and of each run's RMSE), with the seeds' RMSEs and spread."""
     out: dict[str, Any] = {k: float(np.mean([r[k] for r in runs])) for k, v in runs[0].items() if isinstance(v, (int, float))}
@@ -545,7 +563,10 @@ def _mean_metrics(runs: list[dict[str, Any]]) -> dict[str, Any]:
 
 def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target, rate, tick, log, sim=()) -> dict[str, Any]:
     seqs = FT.apply_map(FT.load_recording(recording, [input_channel], [target], rate_hz=rate), "log")
-    sp = FT.split_runs(seqs, train_fraction=None, test_glob=test_glob, seed=seed)
+    # every run outside the test glob is a training run (added along the learning curve in curve_order); early
+    # stopping uses the last presses of the budget's own runs (FT.split_tail), never a run of another series/cover
+    sp = FT.split_runs(seqs, train_fraction=None, test_glob=test_glob, seed=seed, n_valid=0)
+    sp.order = curve_order(seqs, test_glob, seed)
 
     def score(comp, test=None) -> dict[str, Any]:
         test = test or sp.test
@@ -563,6 +584,8 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
     n_steps = len(sizes) + 1
     res: dict[str, Any] = {}
     res["zero_shot"] = score(base)
+    # the pre-trained net on the real training runs (labelled, never tested on): the training-side sim-to-real gap
+    res["zero_shot"]["training_runs_rmse"] = FT.rmse_on(base, sp.train)
     # two-point calibration on the test sensor's own first press; scored on the test data after that press
     cal, info = two_point_calibration(p, sp.test[0], rate)
     t0 = sp.test[0]
@@ -575,22 +598,26 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
     lc = []
     for i, k in enumerate(sizes):
         tr = [s for s in sp.train if s.key in sp.order[:k]]
+        heads, tails = FT.split_tail(tr, float(B["valid_tail"]))
         fts, scs, infos = [], [], []
         for sd in seeds:
             # the share of simulated episodes mixed in: chosen per budget on the real valid runs (never the test runs)
             ft, fi, reh_ratio = None, None, None
             for r in _rehearsals(B):
-                reh = rehearsal_set(sim, int(r * sum(len(s) for s in tr)), sd) if sim and r > 0 else []
-                c, ci = FT.finetune(base, tr, sp.valid, rehearsal=reh, seed=sd, **kw)
+                reh = rehearsal_set(sim, int(r * sum(len(s) for s in heads)), sd) if sim and r > 0 else []
+                c, ci = FT.finetune(base, heads, tails, rehearsal=reh, seed=sd, **kw)
                 if fi is None or ci["best_loss"] < fi["best_loss"]:
                     ft, fi, reh_ratio = c, ci, r
-            sc = FT.train_from_scratch(base.kind, base.hparams, tr, sp.valid, seed=sd, max_epochs=int(B["finetune_epochs"]),
+            sc = FT.train_from_scratch(base.kind, base.hparams, heads, tails, seed=sd, max_epochs=int(B["finetune_epochs"]),
                                        patience=int(B["finetune_patience"]))
             fts.append(score(ft))
             scs.append(score(sc))
+            fv, sv = FT.rmse_on(ft, tails), FT.rmse_on(sc, tails)  # N, on the training runs' validation tails
             infos.append({"seed": sd, "finetune_epochs": fi["epochs"], "finetune_best_epoch": fi["best_epoch"],
+                          "finetune_valid_mse_z_before": fi["valid_mse_z_before"], "finetune_valid_mse_z_best": fi["best_loss"],
+                          "finetune_valid_rmse_n": fv, "scratch_valid_rmse_n": sv,
                           "rehearsal": reh_ratio, "scratch_epochs": (getattr(sc, "history", {}) or {}).get("epochs")})
-        st = StaticCurve(tr + list(sp.valid))  # the curve sees every labelled real run the others see
+        st = StaticCurve(tr)  # the curve sees every labelled real sample the others see (heads and tails)
         row = {"n_runs": k, "runs": [s.key for s in tr], "finetuned": _mean_metrics(fts), "scratch": _mean_metrics(scs),
                "static_curve": score(st), "seeds": infos}
         lc.append(row)
@@ -607,6 +634,8 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
     curve = [{"n_runs": r["n_runs"], "runs": r["runs"], **{f"{k}_rmse": r[k]["rmse"] for k in ("finetuned", "scratch", "static_curve")},
               "finetuned_rmse_sd": r["finetuned"]["rmse_sd"], "scratch_rmse_sd": r["scratch"]["rmse_sd"],
               "finetuned_rmse_seeds": r["finetuned"]["rmse_seeds"], "scratch_rmse_seeds": r["scratch"]["rmse_seeds"],
+              "finetuned_valid_rmse": float(np.mean([x["finetune_valid_rmse_n"] for x in r["seeds"]])),
+              "scratch_valid_rmse": float(np.mean([x["scratch_valid_rmse_n"] for x in r["seeds"]])),
               "seeds": r["seeds"]} for r in lc]
     tg = {
         "finetuned_beats_scratch_and_static_every_budget": all(r["finetuned_rmse"] < min(r["scratch_rmse"], r["static_curve_rmse"]) for r in curve),
@@ -616,6 +645,8 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
     }
     return {"recording": str(recording), "split": sp.keys(), "full_scale_n": full, "results": res, "learning_curve": curve,
             "targets": tg, "train_seeds": seeds,
+            "validation": f"early stopping on the last presses of each training run of the budget (about {100 * float(B['valid_tail']):.0f} % "
+                          "of its samples, cut between presses; learn.finetune.split_tail); the pre-trained weights are the first candidate",
             "input_map": "x = ln(reading) at %g Hz; the simulated reading is in the real board's units" % rate}
 
 

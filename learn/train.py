@@ -96,11 +96,15 @@ def train_model(
     *,
     progress: bool = True,
     description: str = "train",
+    keep_initial: bool = False,
 ) -> TrainHistory:
     """Train ``net`` so that ``net(x) ~ y`` in MSE; returns the history; leaves the best weights loaded.
 
     ``train``/``valid`` are (inputs, targets) tensors whose first axis indexes examples; any
     shapes the net accepts. Without ``valid`` the training loss drives early stopping.
+    ``keep_initial``: the weights the net arrives with are a candidate too (epoch -1, their validation loss
+    before any step): fine-tuning that never improves on the pre-trained net returns it unchanged instead of
+    the first epoch's weights.
     """
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -111,6 +115,8 @@ def train_model(
     hist = TrainHistory()
     best_state = copy.deepcopy(net.state_dict())
     bad = 0
+    if keep_initial and valid is not None:
+        hist.best_loss, hist.best_epoch = evaluate(net, *valid), -1
     t0 = time.perf_counter()
     cols = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("epochs"),
             TimeElapsedColumn(), TextColumn("{task.fields[info]}"))

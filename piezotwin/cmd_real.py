@@ -210,8 +210,12 @@ def sim2real(
                 fail(f"--{k.replace('_', '-')} must be >= 1 (got {v})")
             b[k] = v
     try:
+        import shlex
+        import sys
+
+        cmd = "piezotwin " + " ".join(shlex.quote(a) for a in sys.argv[1:])  # recorded in metrics.json
         m = run_sim2real(family, recording, out, test_glob=test_episodes, budget=b, seed=seed, progress=err.is_terminal,
-                         log=lambda s: console.print(s, highlight=False))
+                         log=lambda s: console.print(s, highlight=False), command=cmd)
     except (ValueError, KeyError) as exc:
         fail(str(exc.args[0] if exc.args else exc))
     r = m["results"]

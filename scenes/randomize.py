@@ -15,6 +15,8 @@ Quantities (all optional; units in the names):
   exponent, creep_amplitude, creep_force_n, tau_min_s, tau_max_s: the film law and creep
   full_scale          the readout's full scale (the Lupasic board: its rest level)
   noise_scale         readout noise relative to the fitted one
+  slope_level_coef, slope_press_sd: each press's own sensitivity, ds_j = coef l_j + N(0, sd^2) added to its
+                      d ln R / d ln F (sensors.chain_fit.press_slope_spread; chain_gen.press_slopes)
   peak_force_n, rise_s, hold_s, fall_s, gap_s: the press protocol (per press, drawn per episode's stream)
 """
 

@@ -553,7 +553,69 @@ def press_stats(runs: Seq[RealRun], min_force_frac: float = 0.1, min_force_n: fl
     return out
 
 
-def randomization_from_fit(fit: ChainFit, runs: Seq[RealRun]):
+SLOPE_T0_S = 0.05  # estimate: one sample at 20 Hz, the earliest time a hold is resolved (bench_s2r_identify)
+
+
+def _press_slopes(force_runs: Seq[tuple[np.ndarray, np.ndarray, float, float]], p: ChainParams) -> tuple[np.ndarray, np.ndarray]:
+    """Per press (runs of >= 4 usable presses): the local slope d ln R / d ln F (ln R on [1, ln F, ln(1 + t / T0)]
+    over the ramp above 30 % of the peak and the hold; R through the inverse divider) minus its run mean, and the
+    press level (median ln R on the hold, >= 90 % of the peak) minus its run mean."""
+    ds, dl = [], []
+    for force, reading, dt, fs in force_runs:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lnr = np.log(resistance_from_reading(reading, p, fs))
+        s_run, l_run = [], []
+        for sl in presses_of(force, max(0.1 * float(force.max()), 0.05)):
+            seg = np.arange(sl.start, sl.stop)
+            f = force[seg]
+            loc = seg[f > max(0.3 * f.max(), p.threshold_force_n + 1e-6)]
+            if len(loc) < 8:
+                continue
+            loc = loc[: np.flatnonzero(force[loc] >= 0.9 * f.max())[-1] + 1]
+            fe = force[loc] - p.threshold_force_n
+            hold = loc[force[loc] >= 0.9 * f.max()]
+            if len(loc) < 8 or len(hold) < 3 or not np.all(np.isfinite(lnr[loc])) or np.ptp(np.log(fe)) < 0.3:
+                continue
+            A = np.c_[np.ones(len(loc)), np.log(fe), np.log1p(np.arange(len(loc)) * dt / SLOPE_T0_S)]
+            s_run.append(float(np.linalg.lstsq(A, lnr[loc], rcond=None)[0][1]))
+            l_run.append(float(np.median(lnr[hold])))
+        if len(s_run) >= 4:
+            ds.extend(np.asarray(s_run) - np.mean(s_run))
+            dl.extend(np.asarray(l_run) - np.mean(l_run))
+    return np.asarray(ds), np.asarray(dl)
+
+
+def press_slope_spread(fit: ChainFit, runs: Seq[RealRun], seed: int = 0) -> dict[str, float]:
+    """Press-to-press sensitivity variation (contact variation: tip tilt and local film thickness change where
+    and how the contact area grows with force, so each press has its own level AND slope; Holm, Electric
+    Contacts 1967, sect. 1-5: constriction resistance of a multi-spot contact): measured model-free on the
+    runs (the training runs) as the within-run spread of the presses' local slopes d ln R / d ln F and their
+    regression on the press level; the chain's own spread of the same statistic (its creep and noise on the
+    same forces at one level, seeded) is removed in quadrature. Returns slope_level_coef (per unit ln level),
+    slope_press_sd (the rest, independent of the level) and the measured parts."""
+    p = fit.params
+    ds, dl = _press_slopes([(r.force, r.reading, r.dt, r.fs) for r in runs], p)
+    if len(ds) < 8:
+        return {"slope_level_coef": 0.0, "slope_press_sd": 0.0, "n_presses": int(len(ds))}
+    rng = np.random.default_rng([int(seed), 0x51])
+    q = replace(p, miss_prob=0.0)
+    sim = [(r.force, simulate_reading(r.force, r.dt, q, fs=r.fs, rng=rng), r.dt, r.fs) for r in runs]
+    cs, _ = _press_slopes(sim, p)
+    var_dl = float(np.var(dl, ddof=1))
+    corr = float(np.corrcoef(ds, dl)[0, 1]) if var_dl > 0 else 0.0
+    # the level term only where the correlation is resolved (|r| > 2 / sqrt(n), about two standard errors)
+    coef = float(np.cov(ds, dl)[0, 1] / var_dl) if var_dl > 0 and abs(corr) > 2.0 / np.sqrt(len(ds)) else 0.0
+    resid = float(np.var(ds - coef * dl, ddof=1))
+    out = {"slope_sd_real": float(np.std(ds, ddof=1)), "slope_level_corr": corr, "n_presses": int(len(ds)),
+           "n_presses_chain": int(len(cs))}
+    if len(cs) < 8:  # the chain's own spread is not measurable on these forces (saturated readout): nothing added
+        return {"slope_level_coef": 0.0, "slope_press_sd": 0.0, **out}
+    chain = float(np.var(cs, ddof=1))
+    return {"slope_level_coef": coef, "slope_press_sd": float(np.sqrt(max(resid - chain, 0.0))),
+            "slope_sd_chain": float(np.sqrt(chain)), **out}
+
+
+def randomization_from_fit(fit: ChainFit, runs: Seq[RealRun], press_slope: bool = False):
     """The Randomization `fit` writes: joint bootstrap replicates of the chain, the gain (bootstrap spread of
     ln r0), the board's full scale (run-to-run spread), the noise, and press protocols spanning the real
     presses (peak force log-uniform from half the smallest to 1.2 x the largest peak; times uniform over
@@ -586,4 +648,8 @@ def randomization_from_fit(fit: ChainFit, runs: Seq[RealRun]):
                "noise_scale": Dist(kind="loguniform", low=0.5, high=2.0)}  # estimate
     if p.full_scale_log_sd > 0:
         episode["full_scale"] = Dist(kind="lognormal", median=p.full_scale, log_sd=p.full_scale_log_sd)
+    if press_slope:  # each press's own sensitivity (press_slope_spread), drawn per press by the generator
+        sp = press_slope_spread(fit, runs)
+        episode["slope_level_coef"] = Dist(kind="fixed", value=sp["slope_level_coef"])
+        episode["slope_press_sd"] = Dist(kind="fixed", value=sp["slope_press_sd"])
     return Randomization(episode=episode, press=press, boot=boot)

@@ -179,3 +179,34 @@ def test_checkpoint_norm_and_rehearsal(ckpt):
     assert info2["n_rehearsal_episodes"] == 2 and info2["valid_mse_z_before"] == pytest.approx(info["valid_mse_z_before"])
     with pytest.raises(ValueError, match="norm"):
         FT.finetune(base, real[:1], real[1:], norm="sim")
+
+
+def test_finetune_returns_the_pretrained_net_when_no_step_helps(ckpt):
+    """Early stopping counts the pre-trained weights as a candidate (epoch -1): a fine-tuning whose every step
+    worsens the validation loss returns the pre-trained net, not the first epoch's weights (round 3: TAMS
+    fine-tuning stopped at epoch 0 on another cover's run, and 'fine-tuned' was one Adam step off the net)."""
+    base = load_checkpoint(ckpt)
+    sim = FT.apply_map(sim_seqs(2), "log")
+    # validation: the pre-trained net's own predictions, so no weight change can improve on it
+    valid = [Sequence(s.x, base.predict(s.x), s.inputs, s.targets, s.units, s.meta) for s in sim]
+    real = FT.apply_map(sim_seqs(2, REALP, rest=800.0), "log")
+    ft, info = FT.finetune(base, real, valid, policy="none", lr=1e-2, max_epochs=4, patience=2, norm="checkpoint")
+    assert info["best_epoch"] == -1
+    assert info["best_loss"] == pytest.approx(info["valid_mse_z_before"])
+    x = real[0].x
+    np.testing.assert_allclose(ft.predict(x), base.predict(x), rtol=1e-6, atol=1e-6)
+
+
+def test_split_tail_cuts_each_run_between_presses():
+    f = presses(3, T=800)
+    s = Sequence(np.log(1.0 + f)[:, None], f[:, None], ["x"], ["force"], {"force": "N"}, {"key": "run"},
+                 {"time": np.arange(len(f)) / RATE})
+    (h,), (t,) = FT.split_tail([s], 0.25)
+    assert len(h) + len(t) == len(s)
+    np.testing.assert_array_equal(np.concatenate([h.y, t.y]), s.y)
+    np.testing.assert_array_equal(t.extra["time"], s.extra["time"][len(h):])
+    assert f[len(h)] < 0.1 * f.max() and f[len(h) - 1] < 0.1 * f.max()  # the cut lies in a release, no press split
+    assert 0.1 < len(t) / len(s) < 0.45 and t.y.max() > 0.1 * f.max()  # the tail holds presses of its own
+    assert h.key == "run[head]" and t.key == "run[tail]"
+    with pytest.raises(ValueError):
+        FT.split_tail([s], 1.0)

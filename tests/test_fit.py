@@ -211,3 +211,53 @@ def test_chain_fit_level_prior_recovers_known_parameters():
     assert abs(q.level_log_sd - 0.4) < 0.15
     d = CF.evaluate(fit, _synthetic_runs(true, n_runs=2, seed=7))["plateau_drop"]
     assert abs(d["sim_median"] - d["real_median"]) < 0.03
+
+
+def _sloped_runs(p, coef, sd, n_runs=4, seed=3, fs=1000.0, rate=20.0):
+    """Runs whose presses each have their own sensitivity (chain_gen.press_slopes) as well as their own level."""
+    from simulate.generation.chain_gen import press_protocol, press_slopes
+
+    rand = Randomization(press={"peak_force_n": Dist(kind="loguniform", low=2.0, high=30.0),
+                                "rise_s": Dist(kind="uniform", low=0.8, high=1.5), "hold_s": Dist(kind="uniform", low=1.0, high=1.5),
+                                "fall_s": Dist(kind="fixed", value=0.1), "gap_s": Dist(kind="uniform", low=1.0, high=2.0)})
+    rng = np.random.default_rng(seed)
+    runs, offsets = [], []
+    for k in range(n_runs):
+        f, pid = press_protocol(rand, rng, 60.0, 1 / rate)
+        lev = rng.normal(0, p.level_log_sd, pid.max() + 1)
+        level = np.where(pid >= 0, lev[np.maximum(pid, 0)], 0.0)
+        s = press_slopes(f, pid, lev, p, {"slope_level_coef": coef, "slope_press_sd": sd}, rng)
+        if s is not None:
+            level = level + s[1]
+            offsets.append(s[0])
+        y = CF.simulate_reading(f, 1 / rate, p, level=level, fs=fs, rng=rng)
+        runs.append(CF.RealRun(f"run{k}", f, y, 1 / rate, fs, p.noise_sd))
+    return runs, offsets
+
+
+def test_press_slope_spread_recovers_known_sensitivity_variation():
+    """Contact variation: each press's own d ln R / d ln F, correlated with its level; measured on the runs as the
+    chain's identification would see them (chain_fit.press_slope_spread), the chain's own spread removed."""
+    from simulate.generation.chain_gen import press_slopes
+
+    true = CF.ChainParams(exponent=1.0, r0_ohm=3000.0, creep_amplitude=0.5, creep_force_n=4.0, tau_min_s=0.1,
+                          tau_max_s=5.0, n_creep=4, level_log_sd=0.5, r_ref_ohm=1e4, full_scale=1000.0, noise_sd=0.5)
+    runs, offs = _sloped_runs(true, coef=0.15, sd=0.12)
+    fit = CF.ChainFit(true, {}, [0.0, 0.0], [], {}, [])  # the known chain: this test is about the press statistic
+    sp = CF.press_slope_spread(fit, runs)
+    assert sp["n_presses"] >= 40
+    assert abs(sp["slope_level_coef"] - 0.15) < 0.06, sp
+    assert abs(sp["slope_press_sd"] - 0.12) < 0.04, sp
+    flat, _ = _sloped_runs(true, coef=0.0, sd=0.0)
+    sp0 = CF.press_slope_spread(fit, flat)
+    assert sp0["slope_press_sd"] < 0.04 and abs(sp0["slope_level_coef"]) < 0.05, sp0
+    # the offsets pivot at each press's peak: its plateau level is unchanged, its ramp is not
+    f = np.r_[np.zeros(5), np.linspace(0.5, 10, 20), np.full(10, 10.0), np.zeros(5)]
+    pid = np.where(f > 0, 0, -1)
+    ds, add = press_slopes(f, pid, np.array([0.0]), true, {"slope_press_sd": 0.2}, np.random.default_rng(0))
+    assert np.all(add[f == 10.0] == 0.0) and add[5] == pytest.approx(ds[0] * np.log(0.05))
+    assert press_slopes(f, pid, np.array([0.0]), true, {}, np.random.default_rng(0)) is None
+    # the randomization records them (fixed per episode) only when asked
+    r1 = CF.randomization_from_fit(fit, runs, press_slope=True)
+    assert r1.episode["slope_press_sd"].value == pytest.approx(sp["slope_press_sd"])
+    assert "slope_press_sd" not in CF.randomization_from_fit(fit, runs).episode

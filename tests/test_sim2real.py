@@ -59,3 +59,17 @@ def test_seed_mean_and_spread():
     m = _mean_metrics(runs)
     assert m["rmse"] == 3.0 and m["mae"] == 2.0 and m["per_run_rmse"]["a"] == 2.0
     assert m["rmse_seeds"] == [2.0, 4.0] and abs(m["rmse_sd"] - np.sqrt(2.0)) < 1e-12
+
+
+def test_curve_order_keeps_the_earlier_budgets_and_adds_the_former_valid_runs():
+    """Round 4 validates on each training run's tail, so the whole runs that used to stop early train too: they
+    join the learning curve after the runs it had (budgets 1, 2, 4 unchanged; 'all' gains them)."""
+    from learn import finetune as FT
+    from learn.sim2real import curve_order
+
+    seqs = [Sequence(np.zeros((5, 1)), np.zeros((5, 1)), ["x"], ["force"], {}, {"key": f"run{i}"}) for i in range(10)]
+    seqs += [Sequence(np.zeros((5, 1)), np.zeros((5, 1)), ["x"], ["force"], {}, {"key": "test0"})]
+    old = FT.split_runs(seqs, train_fraction=None, test_glob="test*", seed=0)
+    order = curve_order(seqs, "test*", 0)
+    assert order[: len(old.order)] == old.order and len(old.valid) >= 2
+    assert sorted(order) == sorted(f"run{i}" for i in range(10))

@@ -343,7 +343,7 @@ def sim2real_results() -> str:
         sd = c.get(f"{k}_rmse_sd")
         return num(c[f"{k}_rmse"]) + (f" ± {num(sd, 2)}" if sd is not None else "")
 
-    rows, curve, cal, two, tim, budgets = [], [], [], [], [], {}
+    rows, curve, cal, two, tim, budgets, slopes, valid_note = [], [], [], [], [], {}, [], None
     for f in files:
         m = json.loads(f.read_text())
         name = f.stem.removeprefix("sim2real-")
@@ -357,8 +357,18 @@ def sim2real_results() -> str:
                      f"{num(z['rmse'])} ({z['rmse_pct_full_scale']:.1f} %)",
                      f"{sum(bool(v) for v in tg.values())}/{len(tg)}"])
         for c in m["learning_curve"]:
+            va = (f"{num(c['finetuned_valid_rmse'])} / {num(c['scratch_valid_rmse'])}" if "finetuned_valid_rmse" in c else "–")
             curve.append([name, c["n_runs"], pm(c, "finetuned"), pm(c, "scratch"), num(c["static_curve_rmse"]),
-                          "yes" if c["finetuned_rmse"] < min(c["scratch_rmse"], c["static_curve_rmse"]) else "no"])
+                          "yes" if c["finetuned_rmse"] < min(c["scratch_rmse"], c["static_curve_rmse"]) else "no", va])
+        ps = m.get("press_slope")
+        if ps:
+            me = ps.get("measured", {})
+            slopes.append([name, "yes" if ps.get("drawn") else "no", me.get("n_presses", "–"), num(me.get("slope_sd_real"), 3),
+                           num(me.get("slope_level_corr"), 2), num(me.get("slope_sd_chain"), 3),
+                           num(me.get("slope_level_coef"), 3), num(me.get("slope_press_sd"), 3),
+                           num(r["zero_shot"].get("training_runs_rmse"))])
+        if m.get("validation"):
+            valid_note = m["validation"]
         if "calibration_run" in z:
             two.append([name, z["calibration_run"], num(z.get("unloaded_reading")), num(z.get("chain_full_scale")),
                         num(z.get("known_load_n")), num(z.get("level_ln")), f"{z['rmse_pct_full_scale']:.1f} %"])
@@ -385,8 +395,19 @@ def sim2real_results() -> str:
            "pooled <= 12 % FS, zero-shot with two-point gain <= 25 %.\n\n"
            + table(["split", "test runs", "full scale (N)", "fine-tuned", "scratch", "static curve", "zero-shot",
                     "zero-shot, two-point calibration", "targets met"], rows)
-           + "\n\nLearning curve (test RMSE, N, vs real training runs; ± the sd over training seeds):\n\n"
-           + table(["split", "real runs", "fine-tuned", "scratch", "static curve", "fine-tuned best"], curve))
+           + "\n\nLearning curve (test RMSE, N, vs real training runs; ± the sd over training seeds; last column: "
+           "RMSE on the training runs' own validation data, fine-tuned / scratch, where recorded"
+           + (f"; validation: {valid_note}" if valid_note else "") + "):\n\n"
+           + table(["split", "real runs", "fine-tuned", "scratch", "static curve", "fine-tuned best",
+                    "validation RMSE (training runs), ft / scratch"], curve))
+    if slopes:
+        out += ("\n\nPress-to-press sensitivity (contact variation; `sensors.chain_fit.press_slope_spread` on the training "
+                "runs): within-run sd of the presses' local d ln R / d ln F, its correlation with the press level, the "
+                "chain's own sd of the same statistic on the same forces, and what the generator draws per press when `press_slope` is on "
+                "(coefficient on the level, independent sd; the level term only where |r| > 2 / sqrt(n); the default is off, column drawn); last column: "
+                "the pre-trained net's RMSE on the real training runs (N):\n\n"
+                + table(["split", "drawn", "presses", "slope sd, real", "corr. with level", "slope sd, chain",
+                         "coef. on level", "independent sd", "pre-trained on training runs"], slopes))
     if two:
         out += ("\n\nTwo-point calibration on the sensor under test (its first press: the unloaded reading sets the "
                 "readout's rest level, the known load the film level; scored on the test data after that press):\n\n"
@@ -463,6 +484,27 @@ def sim2real_results() -> str:
                 "90 % band, plateau sensitivity real / chain, and the run-level trend per ln F:\n\n"
                 + table(["split", "creep law", "levels", "exponent", "creep amplitude", "within (fit)", "within (held out)",
                          "levels in 90 % band", "sensitivity real / chain", "run-level trend"], frows))
+    psl = sorted(RESULTS.glob("s2r-press-slope-*.json"))
+    if psl:
+        prow = []
+        for f in psl:
+            d = json.loads(f.read_text())
+            for side in ("off", "on"):
+                v = d[side]
+                drawn = (v.get("press_slope") or {}).get("drawn") or {}
+                prow.append([f.stem.removeprefix("s2r-press-slope-"), side,
+                             f"{num(drawn.get('slope_level_coef'), 3)} / {num(drawn.get('slope_press_sd'), 3)}" if drawn else "–",
+                             num(v["pretrain_sim_valid_rmse"]), num(v["zero_shot_training_runs_rmse"]),
+                             num(v["finetuned_valid_rmse_mean"]),
+                             "; ".join(f"{c['n_runs']}: {num(c['test_finetuned_rmse'])}" for c in v["curve"]),
+                             "yes" if d["training_side_helps"] else "no"])
+        out += ("\n\nPress-to-press sensitivity drawn in the generation or not (`bench/bench_s2r_press_slope.py`, "
+                "`bench/results/s2r-press-slope-*.json`): chosen on the training side only, by the fine-tuned RMSE on "
+                "the training runs' own validation tails (mean over budgets and seeds, N) in both Lupasic directions; "
+                "the pre-trained net's RMSE on the real training runs beside it; the test RMSE by budget is reported, "
+                "not used:\n\n"
+                + table(["split", "press slope", "drawn coef / sd", "pre-train sim valid (N)", "pre-trained on training runs (N)",
+                         "fine-tuned validation (N)", "test fine-tuned by budget (N)", "training side helps"], prow))
     abl = sorted(RESULTS.glob("s2r-ablation-*.json"))
     if abl:
         arows = []

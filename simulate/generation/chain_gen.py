@@ -57,6 +57,29 @@ def press_protocol(rand: Randomization, rng: np.random.Generator, duration_s: fl
     return np.concatenate(f), np.concatenate(idx)
 
 
+def press_slopes(force: np.ndarray, pid: np.ndarray, lev: np.ndarray, p: ChainParams, vals: dict,
+                 rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray] | None:
+    """Each press's own sensitivity (contact variation, sensors.chain_fit.press_slope_spread; Holm 1967): the
+    offset ds_j = slope_level_coef l_j + N(0, slope_press_sd^2) of d ln R / d ln F, pivoted at the press's peak
+    (its plateau level stays l_j): ln R gains ds_j ln(F_eff / F_eff,peak). Returns (ds [presses], ln-level
+    addition [T]) or None when neither quantity is randomized (the rng then draws nothing: older scenes keep
+    their streams)."""
+    sd, coef = float(vals.get("slope_press_sd", 0.0)), float(vals.get("slope_level_coef", 0.0))
+    if sd <= 0 and coef == 0:
+        return None
+    n = len(lev)
+    # |ds| <= half the exponent: the film law stays a falling power law (estimate: 3 sd of the measured 0.16)
+    ds = np.clip(coef * lev + rng.normal(0.0, max(sd, 0.0), n), -0.5 * p.exponent, 0.5 * p.exponent)
+    fe = np.maximum(np.asarray(force, np.float64) - p.threshold_force_n, 0.0)
+    on = pid >= 0
+    pk = np.zeros(n)
+    np.maximum.at(pk, pid[on], fe[on])
+    j = np.maximum(pid, 0)
+    rel = np.where(on & (pk[j] > 0), fe / np.where(pk[j] > 0, pk[j], 1.0), 1.0)
+    add = np.where(on, ds[j] * np.log(np.clip(rel, 1e-3, None)), 0.0)
+    return ds, add
+
+
 def episode(p0: ChainParams, rand: Randomization, seed: int, duration_s: float, dt: float) -> tuple[dict, dict[str, Any]]:
     vals, rng = draw(rand, seed)
     p = replace(p0)
@@ -76,12 +99,16 @@ def episode(p0: ChainParams, rand: Randomization, seed: int, duration_s: float, 
     lev = rng.normal(0.0, p.level_log_sd, n_press)
     miss = rng.random(n_press) < p.miss_prob
     level = np.where(pid >= 0, lev[np.maximum(pid, 0)], 0.0)
+    slopes = press_slopes(force, pid, lev, p, vals, rng)
+    if slopes is not None:
+        level = level + slopes[1]
     lvl = np.where((pid >= 0) & miss[np.maximum(pid, 0)], 60.0, level)  # a miss: the film stays open
     y = simulate_reading(force, dt, p, level=lvl, fs=fs, rng=rng)
     y = np.maximum(y, 1e-6)
     ch = {"force": force, "sensor": y}
     attrs = {"seed": int(seed), "randomized": {k: float(v) for k, v in vals.items()}, "n_presses": n_press,
              "n_missed_presses": int(miss.sum()), "press_levels_log": lev.tolist(),
+             **({"press_slope_offsets": slopes[0].tolist()} if slopes is not None else {}),
              "chain": {k: v for k, v in p.to_json().items() if k != "times_s"}, "full_scale": fs}
     return ch, attrs
 
