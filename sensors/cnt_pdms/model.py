@@ -101,10 +101,16 @@ class CntPdmsSensor:
 
             chain = TaxelChainWarp(self.tp, E, N, self.device)
             d = drive if isinstance(drive, wp.array) else wp.array(np.ascontiguousarray(drive, np.float32).reshape(-1), dtype=wp.float32, device=self.device)
-            s_d, st_d, c_d = chain.run_device(d, T, self.mode)
-            g_d, f_d = el.sum_channels_warp(
-                c_d, st_d, self.taxel_channel, self.n_channels, self.tp.taxel_area_m2, (E, T, N), self.device
-            )
+            if self.n_channels == 1 and wp.get_device(self.device).is_cuda:
+                # whole pad on CUDA: the channel sum fused into the taxel kernel (warp partial sums), and only
+                # the per-taxel fields the record keeps are written (issue 16)
+                s_d, st_d, g_d, f_d = chain.run_pad_device(d, T, self.mode, self.tp.taxel_area_m2,
+                                                           write_strain="strain" in want, write_stress="force_taxel" in want)
+            else:
+                s_d, st_d, c_d = chain.run_device(d, T, self.mode)
+                g_d, f_d = el.sum_channels_warp(
+                    c_d, st_d, self.taxel_channel, self.n_channels, self.tp.taxel_area_m2, (E, T, N), self.device
+                )
             keep_ro = {ro_names[k] for k in want if k in ro_names}
             if self.ep.offline_sos is not None and keep_ro & {"filtered_v", "resistance_measured"}:
                 keep_ro |= {"filtered_v"}  # the zero-phase pass filters the ADC voltage on the host
