@@ -143,18 +143,19 @@ def taxel_kernels(n_prony: int, n_play: int):
     return {"chain": k_chain, "Params": Params, "vec_p": vec_p, "vec_k": vec_k, "invariants": invariants_f, "core": core_f}
 
 
-# Sum of a float64 over the 32 lanes of a CUDA warp, in a fixed tree order (shuffle down 16, 8, 4, 2, 1; lane 0
-# holds the sum): no shared memory and no block barrier, so the taxel loop keeps its memory parallelism. On the
-# CPU a "group" is one thread and the sum is the value itself.
+# Sum of a float64 over the 32 lanes of a CUDA warp, every lane getting the same sum (butterfly: xor-shuffles by
+# 16, 8, 4, 2, 1; a + b == b + a in IEEE arithmetic, so all lanes hold the same bits, in a fixed tree order): no
+# shared memory and no block barrier, so the taxel loop keeps its memory parallelism. On the CPU a "group" is
+# one thread and the sum is the value itself.
 WARP_LANES = 32
 _group_sum_snippet = """
 #if defined(__CUDA_ARCH__)
     double v = x;
-    v += __shfl_down_sync(0xffffffffu, v, 16);
-    v += __shfl_down_sync(0xffffffffu, v, 8);
-    v += __shfl_down_sync(0xffffffffu, v, 4);
-    v += __shfl_down_sync(0xffffffffu, v, 2);
-    v += __shfl_down_sync(0xffffffffu, v, 1);
+    v += __shfl_xor_sync(0xffffffffu, v, 16);
+    v += __shfl_xor_sync(0xffffffffu, v, 8);
+    v += __shfl_xor_sync(0xffffffffu, v, 4);
+    v += __shfl_xor_sync(0xffffffffu, v, 2);
+    v += __shfl_xor_sync(0xffffffffu, v, 1);
     return v;
 #else
     return x;
@@ -173,8 +174,9 @@ PREFETCH = 2  # drive samples loaded ahead of the step that uses them (fused ker
 def taxel_sum_kernel(n_prony: int, n_play: int, depth: int = PREFETCH):
     """The taxel chain with the whole-pad channel sum fused in (issue 16): one thread per (episode, taxel) as in
     `chain`, the episode's taxels padded to whole groups (CUDA: warps of 32 lanes; padding lanes rerun the last
-    taxel and add nothing), and per step each group's conductance and stress sums (float64, fixed order) written
-    as one partial per (episode, group, step); `sum_parts` adds a row's partials in group order. No per-taxel
+    taxel and add nothing), and per step each group's conductance and stress sums (float64, fixed order) kept as
+    one partial per (episode, group, step), written `group` steps at a time; `sum_parts` adds a row's partials in
+    group order. No per-taxel
     conductance is written, and strain / stress only when asked (write_strain / write_stress). `depth` drive
     samples are loaded ahead of their step (0: at the step), so a thread has loads in flight while it computes."""
     k = taxel_kernels(n_prony, n_play)
@@ -222,6 +224,8 @@ def taxel_sum_kernel(n_prony: int, n_play: int, depth: int = PREFETCH):
         base = ep * n_steps * n_taxels + nc
         last = wp.max(n_steps - 1, 0)
         buf = vec_d()
+        mine_g = wp.float64(0.0)
+        mine_f = wp.float64(0.0)
         if wp.static(depth > 0):
             if n_steps > 0:
                 for i in range(depth):
@@ -248,9 +252,17 @@ def taxel_sum_kernel(n_prony: int, n_play: int, depth: int = PREFETCH):
                 fs = wp.float64(sig)
             gs = group_sum_f64(gs)
             fs = group_sum_f64(fs)
-            if lane == 0:
-                part_g[prow + kk] = gs
-                part_f[prow + kk] = fs
+            # lane j keeps the sums of step k0 + j; every `group` steps the group writes them at once, one
+            # coalesced store of `group` consecutive float64 per array (single 8-byte stores per step from one
+            # lane left partly written sectors and ran ~3x slower on the H100, bench/results/logs/transduction-h100-s7-first.log)
+            j = kk - (kk // group) * group
+            if lane == j:
+                mine_g = gs
+                mine_f = fs
+            if j == group - 1 or kk == n_steps - 1:
+                if lane <= j:
+                    part_g[prow + kk - j + lane] = mine_g
+                    part_f[prow + kk - j + lane] = mine_f
         if active:
             st_strain[sid] = e
             st_phi[sid] = phi
