@@ -69,6 +69,15 @@ def test_fused_pad_sum_cuda(gpu_device):
     np.testing.assert_allclose(f2, f, rtol=1e-5, atol=1e-7 * float(np.abs(f).max()))
     for x, y in zip(runs[0], runs[1]):
         np.testing.assert_array_equal(x.numpy(), y.numpy())
+    # the sensor takes the fused path on CUDA for a record without per-taxel fields: same outputs as on the CPU
+    cfg2 = load_scene("cnt_pdms", ["generation.record=[force,resistance,adc]"])
+    d = drive[:2, :, : cfg2.pad.n_taxels]
+    a = CntPdmsSensor(cfg2, device="cpu").run(d, [1, 2])
+    b = CntPdmsSensor(cfg2, device=gpu_device).run(d, [1, 2])
+    assert set(a) == set(b) == {"force", "resistance", "adc"}
+    for k in ("force", "resistance"):
+        np.testing.assert_allclose(b[k], a[k], rtol=1e-5, atol=1e-6 * float(np.abs(a[k]).max()), err_msg=k)
+    assert np.abs(b["adc"].astype(int) - a["adc"].astype(int)).max() <= 1
 
 
 def test_parallel_readout_cuda_equals_serial_cpu(gpu_device):

@@ -241,15 +241,14 @@ def taxel_sum_kernel(n_prony: int, n_play: int, depth: int = PREFETCH):
             else:
                 d = drive[idx]
             e, phi, h, s, z, dmg, sig, g = core_f(p, e_max, eb_sum, w_sum, phi_max, mode, d, e, phi, h, s, z, dmg)
-            gs = wp.float64(0.0)
-            fs = wp.float64(0.0)
-            if active:
-                if write_strain != 0:
-                    out_strain[idx] = e
-                if write_stress != 0:
-                    out_stress[idx] = sig
-                gs = wp.float64(g)
-                fs = wp.float64(sig)
+            # no branch on `active` before the shuffles: a padding lane computes the last taxel bit for bit, so
+            # its stores repeat that taxel's values; it adds zero to the sums
+            if write_strain != 0:
+                out_strain[idx] = e
+            if write_stress != 0:
+                out_stress[idx] = sig
+            gs = wp.where(active, wp.float64(g), wp.float64(0.0))
+            fs = wp.where(active, wp.float64(sig), wp.float64(0.0))
             gs = group_sum_f64(gs)
             fs = group_sum_f64(fs)
             # lane j keeps the sums of step k0 + j; every `group` steps the group writes them at once, one

@@ -33,6 +33,13 @@ OUTPUTS: dict[str, ChannelSpec] = {
 }
 
 
+# The pad's channel sum fused into the taxel kernel on CUDA (sensors/cnt_pdms/kernels.py: taxel_sum_kernel) is
+# taken where the record keeps no per-taxel field; with strain / force_taxel recorded the fused kernel's stores
+# ran ~2.4x slower than the plain kernel + tiled sum on the H100 (bench/results/transduction-h100-s7*.json), so
+# those records keep the plain path until that is understood.
+FUSED_WITH_PER_TAXEL = False
+
+
 class CntPdmsSensor:
     """Batched CNT-PDMS sensor. Shapes: E episodes, T samples, N taxels, C channels: 1 (whole pad,
     sensor.readout = "pad") or N (one per taxel, "taxel")."""
@@ -101,7 +108,8 @@ class CntPdmsSensor:
 
             chain = TaxelChainWarp(self.tp, E, N, self.device)
             d = drive if isinstance(drive, wp.array) else wp.array(np.ascontiguousarray(drive, np.float32).reshape(-1), dtype=wp.float32, device=self.device)
-            if self.n_channels == 1 and wp.get_device(self.device).is_cuda:
+            per_taxel = bool(want & {"strain", "force_taxel"})
+            if self.n_channels == 1 and wp.get_device(self.device).is_cuda and (FUSED_WITH_PER_TAXEL or not per_taxel):
                 # whole pad on CUDA: the channel sum fused into the taxel kernel (warp partial sums), and only
                 # the per-taxel fields the record keeps are written (issue 16)
                 s_d, st_d, g_d, f_d = chain.run_pad_device(d, T, self.mode, self.tp.taxel_area_m2,
