@@ -27,4 +27,10 @@ D)  # a mix e2e with "$2" extra bench args and tag suffix "$3", then pytest -m g
     cp bench/results/gpu-pipeline-h100-s7-mix$3.json $OUT/
     timeout 250 python3 -m pytest -q -m gpu -p no:cacheprovider 2>&1 | tee $OUT/pytest-gpu-h100-s7-final.log | tail -8
     echo "pytest rc $?" | tee -a $OUT/pytest-gpu-h100-s7-final.log ;;
+R)  # registers / spills of the taxel kernels, then the transduction chain again (the kernel as now)
+    python3 bench/kernel_resources.py --out $OUT/kernel-resources-h100-s7.json 2>&1 | tee $OUT/kernel-resources-h100-s7.log
+    python3 bench/bench_transduction.py --cuda-only --gpu-episodes 256 --tag h100-s7 2>&1 | tee $OUT/transduction-h100-s7.log | tail -4
+    cp bench/results/transduction-h100-s7.json $OUT/ ;;
+V)  # variants of the fused kernel: where its per-taxel stores lose time
+    python3 bench/fused_variants.py --out $OUT/fused-variants-h100-s7.json 2>&1 | tee $OUT/fused-variants-h100-s7.log ;;
 esac

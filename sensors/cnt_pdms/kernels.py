@@ -171,14 +171,16 @@ PREFETCH = 2  # drive samples loaded ahead of the step that uses them (fused ker
 
 
 @functools.cache
-def taxel_sum_kernel(n_prony: int, n_play: int, depth: int = PREFETCH):
+def taxel_sum_kernel(n_prony: int, n_play: int, depth: int = PREFETCH, shuffle: bool = True, parts: bool = True):
     """The taxel chain with the whole-pad channel sum fused in (issue 16): one thread per (episode, taxel) as in
     `chain`, the episode's taxels padded to whole groups (CUDA: warps of 32 lanes; padding lanes rerun the last
     taxel and add nothing), and per step each group's conductance and stress sums (float64, fixed order) kept as
     one partial per (episode, group, step), written `group` steps at a time; `sum_parts` adds a row's partials in
     group order. No per-taxel
     conductance is written, and strain / stress only when asked (write_strain / write_stress). `depth` drive
-    samples are loaded ahead of their step (0: at the step), so a thread has loads in flight while it computes."""
+    samples are loaded ahead of their step (0: at the step), so a thread has loads in flight while it computes.
+    shuffle / parts = False leave out the group sums / the partials' stores: wrong sums, for timing only
+    (bench/fused_variants.py)."""
     k = taxel_kernels(n_prony, n_play)
     Params, vec_p, vec_k, invariants_f, core_f = k["Params"], k["vec_p"], k["vec_k"], k["invariants"], k["core"]
     vec_d = wp.types.vector(length=max(depth, 1), dtype=wp.float32)
@@ -249,8 +251,9 @@ def taxel_sum_kernel(n_prony: int, n_play: int, depth: int = PREFETCH):
                 out_stress[idx] = sig
             gs = wp.where(active, wp.float64(g), wp.float64(0.0))
             fs = wp.where(active, wp.float64(sig), wp.float64(0.0))
-            gs = group_sum_f64(gs)
-            fs = group_sum_f64(fs)
+            if wp.static(shuffle):
+                gs = group_sum_f64(gs)
+                fs = group_sum_f64(fs)
             # lane j keeps the sums of step k0 + j; every `group` steps the group writes them at once, one
             # coalesced store of `group` consecutive float64 per array (single 8-byte stores per step from one
             # lane left partly written sectors and ran ~3x slower on the H100, bench/results/logs/transduction-h100-s7-first.log)
@@ -258,10 +261,11 @@ def taxel_sum_kernel(n_prony: int, n_play: int, depth: int = PREFETCH):
             if lane == j:
                 mine_g = gs
                 mine_f = fs
-            if j == group - 1 or kk == n_steps - 1:
-                if lane <= j:
-                    part_g[prow + kk - j + lane] = mine_g
-                    part_f[prow + kk - j + lane] = mine_f
+            if wp.static(parts):
+                if j == group - 1 or kk == n_steps - 1:
+                    if lane <= j:
+                        part_g[prow + kk - j + lane] = mine_g
+                        part_f[prow + kk - j + lane] = mine_f
         if active:
             st_strain[sid] = e
             st_phi[sid] = phi
@@ -270,7 +274,7 @@ def taxel_sum_kernel(n_prony: int, n_play: int, depth: int = PREFETCH):
             st_play[sid] = z
             st_damage[sid] = dmg
 
-    chain_sum.__name__ = chain_sum.__qualname__ = f"taxel_chain_sum_p{n_prony}_k{n_play}_d{depth}"
+    chain_sum.__name__ = chain_sum.__qualname__ = f"taxel_chain_sum_p{n_prony}_k{n_play}_d{depth}_s{int(shuffle)}{int(parts)}"
     return wp.kernel(chain_sum, module="unique", enable_backward=False)
 
 
