@@ -33,4 +33,8 @@ R)  # registers / spills of the taxel kernels, then the transduction chain again
     cp bench/results/transduction-h100-s7.json $OUT/ ;;
 V)  # variants of the fused kernel: where its per-taxel stores lose time
     python3 bench/fused_variants.py --out $OUT/fused-variants-h100-s7.json 2>&1 | tee $OUT/fused-variants-h100-s7.log ;;
+T)  # the fused kernel's variants, then the transduction chain (kernel and memory pool as now)
+    python3 bench/fused_variants.py --out $OUT/fused-variants-h100-s7.json 2>&1 | tee $OUT/fused-variants-h100-s7.log
+    python3 bench/bench_transduction.py --cuda-only --gpu-episodes 256 --tag h100-s7 2>&1 | tee $OUT/transduction-h100-s7.log | tail -4
+    cp bench/results/transduction-h100-s7.json $OUT/ ;;
 esac

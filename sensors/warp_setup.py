@@ -13,6 +13,14 @@ import warp as wp
 
 _done = False
 
+# Freed device memory each process's CUDA pool keeps for its next allocations instead of handing it back to the
+# driver at every synchronize (CUDA's default threshold is 0): the sensor chain allocates its outputs per call,
+# and re-mapping 2 GB of fresh pages cost ~20 ms per call of the fused chain on the H100 (bench/results/logs/
+# transduction-h100-s7-*.log against fused-variants-h100-s7.log, the same kernel with its buffers kept).
+# estimate: 8 GiB, 10 % of an 80 GB GPU, so the feed's driver and its two physics processes together hold back
+# at most ~a third of it; capped at a quarter of a smaller device's memory.
+MEMPOOL_KEEP_BYTES = 8 * 1024**3
+
 
 NO_DRIVER_WARNING = "Could not find or load the NVIDIA CUDA driver"
 
@@ -27,6 +35,9 @@ def init_warp() -> None:
         wp.config.log_level = logging.WARNING
         _init_without_driver_warning()
         _done = True
+        for dev in wp.get_cuda_devices():
+            if wp.is_mempool_supported(dev):
+                wp.set_mempool_release_threshold(dev, int(min(MEMPOOL_KEEP_BYTES, dev.total_memory // 4)))
 
 
 def _init_without_driver_warning() -> None:

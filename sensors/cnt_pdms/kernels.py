@@ -143,28 +143,28 @@ def taxel_kernels(n_prony: int, n_play: int):
     return {"chain": k_chain, "Params": Params, "vec_p": vec_p, "vec_k": vec_k, "invariants": invariants_f, "core": core_f}
 
 
-# Sum of a float64 over the 32 lanes of a CUDA warp, every lane getting the same sum (butterfly: xor-shuffles by
-# 16, 8, 4, 2, 1; a + b == b + a in IEEE arithmetic, so all lanes hold the same bits, in a fixed tree order): no
-# shared memory and no block barrier, so the taxel loop keeps its memory parallelism. On the CPU a "group" is
-# one thread and the sum is the value itself.
+# Sum over the 32 lanes of a CUDA warp of float32 values in float64, every lane getting the same sum (butterfly:
+# xor-shuffles by 16, 8, 4, 2, 1; the first level shuffles the float32 and adds in float64, the same bits as
+# converting first; a + b == b + a in IEEE arithmetic, so all lanes hold the same bits, in a fixed tree order):
+# no shared memory and no block barrier, so the taxel loop keeps its memory parallelism. On the CPU a "group"
+# is one thread and the sum is the value itself.
 WARP_LANES = 32
 _group_sum_snippet = """
 #if defined(__CUDA_ARCH__)
-    double v = x;
-    v += __shfl_xor_sync(0xffffffffu, v, 16);
+    double v = (double)x + (double)__shfl_xor_sync(0xffffffffu, x, 16);
     v += __shfl_xor_sync(0xffffffffu, v, 8);
     v += __shfl_xor_sync(0xffffffffu, v, 4);
     v += __shfl_xor_sync(0xffffffffu, v, 2);
     v += __shfl_xor_sync(0xffffffffu, v, 1);
     return v;
 #else
-    return x;
+    return (double)x;
 #endif
 """
 
 
 @wp.func_native(_group_sum_snippet)
-def group_sum_f64(x: wp.float64) -> wp.float64: ...
+def group_sum_f64(x: wp.float32) -> wp.float64: ...
 
 
 PREFETCH = 2  # drive samples loaded ahead of the step that uses them (fused kernel; measured on the H100, bench_transduction)
@@ -228,6 +228,7 @@ def taxel_sum_kernel(n_prony: int, n_play: int, depth: int = PREFETCH, shuffle: 
         buf = vec_d()
         mine_g = wp.float64(0.0)
         mine_f = wp.float64(0.0)
+        j = int(0)
         if wp.static(depth > 0):
             if n_steps > 0:
                 for i in range(depth):
@@ -249,23 +250,25 @@ def taxel_sum_kernel(n_prony: int, n_play: int, depth: int = PREFETCH, shuffle: 
                 out_strain[idx] = e
             if write_stress != 0:
                 out_stress[idx] = sig
-            gs = wp.where(active, wp.float64(g), wp.float64(0.0))
-            fs = wp.where(active, wp.float64(sig), wp.float64(0.0))
+            g32 = wp.where(active, g, 0.0)
+            f32 = wp.where(active, sig, 0.0)
+            gs = wp.float64(g32)
+            fs = wp.float64(f32)
             if wp.static(shuffle):
-                gs = group_sum_f64(gs)
-                fs = group_sum_f64(fs)
-            # lane j keeps the sums of step k0 + j; every `group` steps the group writes them at once, one
-            # coalesced store of `group` consecutive float64 per array (single 8-byte stores per step from one
-            # lane left partly written sectors and ran ~3x slower on the H100, bench/results/logs/transduction-h100-s7-first.log)
-            j = kk - (kk // group) * group
-            if lane == j:
-                mine_g = gs
-                mine_f = fs
+                gs = group_sum_f64(g32)
+                fs = group_sum_f64(f32)
+            # lane j keeps the sums of step k0 + j (a select, no branch); every `group` steps the group writes
+            # them at once, one coalesced store of `group` consecutive float64 per array; j counts up (no division)
+            mine_g = wp.where(lane == j, gs, mine_g)
+            mine_f = wp.where(lane == j, fs, mine_f)
             if wp.static(parts):
                 if j == group - 1 or kk == n_steps - 1:
                     if lane <= j:
                         part_g[prow + kk - j + lane] = mine_g
                         part_f[prow + kk - j + lane] = mine_f
+            j += 1
+            if j == group:
+                j = 0
         if active:
             st_strain[sid] = e
             st_phi[sid] = phi
