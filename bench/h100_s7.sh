@@ -37,4 +37,8 @@ T)  # the fused kernel's variants, then the transduction chain (kernel and memor
     python3 bench/fused_variants.py --out $OUT/fused-variants-h100-s7.json 2>&1 | tee $OUT/fused-variants-h100-s7.log
     python3 bench/bench_transduction.py --cuda-only --gpu-episodes 256 --tag h100-s7 2>&1 | tee $OUT/transduction-h100-s7.log | tail -4
     cp bench/results/transduction-h100-s7.json $OUT/ ;;
+M)  # what a fresh device array costs, then the transduction chain (fused outputs in reused buffers)
+    python3 bench/alloc_cost.py --out $OUT/alloc-cost-h100-s7.json 2>&1 | tee $OUT/alloc-cost-h100-s7.log
+    python3 bench/bench_transduction.py --cuda-only --gpu-episodes 256 --tag h100-s7 2>&1 | tee $OUT/transduction-h100-s7.log | tail -4
+    cp bench/results/transduction-h100-s7.json $OUT/ ;;
 esac

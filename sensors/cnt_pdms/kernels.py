@@ -365,11 +365,12 @@ class TaxelChainWarp:
         return out
 
     def run_pad_device(self, drive: wp.array, n_steps: int, mode: int, area_m2: float, write_strain: bool = True,
-                       write_stress: bool = True, group: int | None = None, depth: int = PREFETCH):
+                       write_stress: bool = True, group: int | None = None, depth: int = PREFETCH, outs: list | None = None):
         """The chain with the whole-pad channel sum fused in (`taxel_sum_kernel`) on a flat device array [E*T*N]:
         returns (strain or None, stress or None, pad conductance [E*T] float64, force [E*T] float64 = sum of the
         stress x area). group: lanes per partial sum (default 32 on CUDA, 1 on the CPU, where it is the plain
-        per-row sum in taxel order)."""
+        per-row sum in taxel order). outs: [strain, stress, part_g, part_f] device buffers to reuse (sizes E*T*N
+        float32 where written, E * n_parts * T float64), as `run_device`'s outs."""
         E, N, T, d = self.E, self.N, n_steps, self.device
         if group is None:
             group = WARP_LANES if wp.get_device(d).is_cuda else 1
@@ -379,10 +380,14 @@ class TaxelChainWarp:
         n_parts = n_pad // group
         size = E * T * N
         empty = wp.empty(0, dtype=wp.float32, device=d)
-        strain = wp.empty(size, dtype=wp.float32, device=d) if write_strain else empty
-        stress = wp.empty(size, dtype=wp.float32, device=d) if write_stress else empty
-        part_g = wp.empty(E * n_parts * T, dtype=wp.float64, device=d)
-        part_f = wp.empty(E * n_parts * T, dtype=wp.float64, device=d)
+        if outs is not None:
+            strain, stress, part_g, part_f = outs
+            strain, stress = (strain if write_strain else empty), (stress if write_stress else empty)
+        else:
+            strain = wp.empty(size, dtype=wp.float32, device=d) if write_strain else empty
+            stress = wp.empty(size, dtype=wp.float32, device=d) if write_stress else empty
+            part_g = wp.empty(E * n_parts * T, dtype=wp.float64, device=d)
+            part_f = wp.empty(E * n_parts * T, dtype=wp.float64, device=d)
         wp.launch(
             taxel_sum_kernel(self.p.n_prony, self.p.n_play, depth), dim=E * n_pad,
             inputs=[drive, T, N, n_pad, group, int(mode), self.params, *self._state_args(), int(write_strain),
