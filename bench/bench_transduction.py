@@ -178,6 +178,7 @@ def bench_cuda_chain(cfg, E, T, N, device="cuda:0", repeats=5, depths=(0, 1, 2, 
         t_f = t_depth[depth]
         t_f0 = _best(lambda: fused(depth, False), sync, repeats, rs)
         t_fresh = _best(lambda: fused(depth, True, True), sync, repeats, rs)  # fresh device arrays per call
+        t_plain_fresh = _best(lambda: chain.run_device(drive, T, 0), sync, repeats, rs)  # the plain kernel, fresh arrays
         t_fa = _best(lambda: (fused(depth), readout(True)), sync, repeats, rs)
         t_fa0 = _best(lambda: (fused(depth, False), readout(True)), sync, repeats, rs)
         # equivalence on these inputs: the fused sums against the tiled pass (float64 sums of float32 values)
@@ -191,7 +192,7 @@ def bench_cuda_chain(cfg, E, T, N, device="cuda:0", repeats=5, depths=(0, 1, 2, 
                           "fused taxel kernel + row sums (nothing per taxel written)": t_f0,
                           "parallel readout + copies back": t_ar},
         "no_per_taxel_outputs": {"taxel_steps_per_s_chain": n / t_fa0, "chain_seconds": t_fa0},
-        "fused_kernel_fresh_arrays_seconds": t_fresh,
+        "fused_kernel_fresh_arrays_seconds": t_fresh, "plain_kernel_fresh_arrays_seconds": t_plain_fresh,
         "g_max_rel_diff_vs_tiled_sum": float(np.max(np.abs(g_f - g_t) / np.abs(g_t))),
         "g_equal_fraction": float(np.mean(g_f == g_t)),
         "force_max_abs_diff_n": float(np.max(np.abs(f_f - f_t))), "force_max_n": float(np.max(np.abs(f_t))),
@@ -378,7 +379,8 @@ def main() -> None:
               f"{fz['no_per_taxel_outputs']['taxel_steps_per_s_chain']:.3g}; "
               + ", ".join(f"{s} {1e3 * v:.2f} ms" for s, v in fz["stage_seconds"].items())
               + "; by prefetch depth: " + ", ".join(f"{d}: {1e3 * v:.2f} ms" for d, v in fz["seconds_by_prefetch_depth"].items())
-              + f"; fused kernel with fresh arrays per call {1e3 * fz['fused_kernel_fresh_arrays_seconds']:.2f} ms"
+              + f"; fresh arrays per call: fused kernel {1e3 * fz['fused_kernel_fresh_arrays_seconds']:.2f} ms, "
+              f"plain kernel {1e3 * fz['plain_kernel_fresh_arrays_seconds']:.2f} ms"
               + f"; g vs tiled sum: max rel diff {fz['g_max_rel_diff_vs_tiled_sum']:.2g}, equal {fz['g_equal_fraction']:.4f}")
         for k in ("before", "after"):
             print(f"  chain {k}: {c[k]['taxel_steps_per_s_chain']:.3g} taxel-steps/s ({1e3 * c[k]['chain_seconds']:.2f} ms); "

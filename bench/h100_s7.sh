@@ -41,4 +41,17 @@ M)  # what a fresh device array costs, then the transduction chain (fused output
     python3 bench/alloc_cost.py --out $OUT/alloc-cost-h100-s7.json 2>&1 | tee $OUT/alloc-cost-h100-s7.log
     python3 bench/bench_transduction.py --cuda-only --gpu-episodes 256 --tag h100-s7 2>&1 | tee $OUT/transduction-h100-s7.log | tail -4
     cp bench/results/transduction-h100-s7.json $OUT/ ;;
+F1) # final code: the transduction chain, then pytest -m gpu
+    python3 bench/bench_transduction.py --cuda-only --gpu-episodes 256 --tag h100-s7 2>&1 | tee $OUT/transduction-h100-s7.log | tail -4
+    cp bench/results/transduction-h100-s7.json $OUT/
+    timeout 300 python3 -m pytest -q -m gpu -p no:cacheprovider 2>&1 | tee $OUT/pytest-gpu-h100-s7.log | tail -8
+    echo "pytest rc $?" | tee -a $OUT/pytest-gpu-h100-s7.log ;;
+F2) # final code: the plain CLI, cnt_pdms (64 episodes to compile the kernels, then 4096 warm)
+    python3 bench/bench_user_cli.py --families cnt_pdms --episodes 64 --tag h100-s7-cnt-first64 --timeout 250 2>&1 | tail -2
+    python3 bench/bench_user_cli.py --families cnt_pdms --episodes 4096 --tag h100-s7-cnt --timeout 250 2>&1 | tee $OUT/user-cli-h100-s7-cnt.log | tail -4
+    cp bench/results/user-cli-h100-s7-cnt.json bench/results/user-cli-h100-s7-cnt-first64.json $OUT/ ;;
+F3) # final code: compact 6 x 6 mixed 0.1-2 Hz end to end (as -s6-mix)
+    timeout 290 python3 bench/bench_gpu_pipeline.py --parts e2e --workers 8 --shards-per-worker 2 \
+        --override "protocol.frequencies_hz=[0.1,0.5,1.0,2.0]" --tag h100-s7-mix-final 2>&1 | tee $OUT/gpu-pipeline-h100-s7-mix-final.log | tail -3
+    cp bench/results/gpu-pipeline-h100-s7-mix-final.json $OUT/ ;;
 esac

@@ -4,6 +4,7 @@ results back from the GPU (`to_host`, into reused page-locked buffers inside `ho
 from __future__ import annotations
 
 import logging
+import threading
 from contextlib import contextmanager
 from contextvars import ContextVar
 from typing import Iterator
@@ -122,3 +123,25 @@ def to_host(arr: wp.array, site: str) -> np.ndarray:
     wp.copy(buf, arr)
     wp.synchronize_device(arr.device)  # a copy into page-locked memory is asynchronous
     return buf.numpy()
+
+
+# Device buffers reused across calls: the sensor chain's per-taxel outputs on CUDA. The taxel kernel's strided
+# stores into arrays freshly allocated per call ran ~3x slower on the H100 than into buffers kept from an
+# earlier call (fused chain 35.0 vs 10.2 ms, bench/results/logs/transduction-h100-s7-fifth.log), while a plain
+# sequential fill of fresh arrays costs no more than of kept ones (alloc-cost-h100-s7.json). One grow-only
+# buffer per (thread, device, name); a smaller request gets a view of it. Only for results that are copied off
+# the device before the same thread asks for the same name again.
+_SCRATCH: dict[tuple, wp.array] = {}
+
+
+def scratch(name: str, n: int, dtype, device: str) -> wp.array:
+    """A flat device array of n elements for `name`, reused across calls on a CUDA device (fresh on the CPU)."""
+    dev = wp.get_device(device)
+    if not dev.is_cuda:
+        return wp.empty(n, dtype=dtype, device=device)
+    key = (threading.get_ident(), str(dev), name)
+    buf = _SCRATCH.get(key)
+    if buf is None or buf.shape[0] < n or buf.dtype != dtype:
+        _SCRATCH.pop(key, None)  # freed before the larger one is made
+        buf = _SCRATCH[key] = wp.empty(max(n, 1), dtype=dtype, device=device)
+    return buf[:n]

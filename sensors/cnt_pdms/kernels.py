@@ -429,8 +429,8 @@ def _scaled(x: wp.array(dtype=wp.float32), scale: wp.float32, out: wp.array(dtyp
     out[i] = x[i] * scale
 
 
-def scaled_on_device(x: wp.array, scale: float) -> wp.array:
+def scaled_on_device(x: wp.array, scale: float, out: wp.array | None = None) -> wp.array:
     """x * float32(scale) for a flat float32 device array (numpy's x * np.float32(scale), bit for bit)."""
-    out = wp.empty_like(x)
+    out = wp.empty_like(x) if out is None else out
     wp.launch(_scaled, dim=x.shape[0], inputs=[x, wp.float32(scale), out], device=x.device)
     return out
