@@ -54,4 +54,10 @@ F3) # final code: compact 6 x 6 mixed 0.1-2 Hz end to end (as -s6-mix)
     timeout 290 python3 bench/bench_gpu_pipeline.py --parts e2e --workers 8 --shards-per-worker 2 \
         --override "protocol.frequencies_hz=[0.1,0.5,1.0,2.0]" --tag h100-s7-mix-final 2>&1 | tee $OUT/gpu-pipeline-h100-s7-mix-final.log | tail -3
     cp bench/results/gpu-pipeline-h100-s7-mix-final.json $OUT/ ;;
+P)  # final code (prefetch 1): pytest -m gpu, then the plain CLI cnt_pdms again (run-to-run spread of F2)
+    timeout 300 python3 -m pytest -q -m gpu -p no:cacheprovider 2>&1 | tee $OUT/pytest-gpu-h100-s7-final.log | tail -8
+    echo "pytest rc $?" | tee -a $OUT/pytest-gpu-h100-s7-final.log
+    python3 bench/bench_user_cli.py --families cnt_pdms --episodes 64 --tag h100-s7-cnt-first64 --timeout 200 2>&1 | tail -1
+    python3 bench/bench_user_cli.py --families cnt_pdms --episodes 4096 --tag h100-s7-cnt-b --timeout 200 2>&1 | tee $OUT/user-cli-h100-s7-cnt-b.log | tail -4
+    cp bench/results/user-cli-h100-s7-cnt-b.json $OUT/ ;;
 esac

@@ -167,7 +167,7 @@ _group_sum_snippet = """
 def group_sum_f64(x: wp.float32) -> wp.float64: ...
 
 
-PREFETCH = 2  # drive samples loaded ahead of the step that uses them (fused kernel; measured on the H100, bench_transduction)
+PREFETCH = 1  # drive samples loaded ahead of the step that uses them in the fused kernel: 1 was the fastest of 0/1/2/4 on the H100 (10.1 vs 11.1 / 10.5 / 11.8 ms, bench/results/transduction-h100-s7.json)
 
 
 @functools.cache
