@@ -45,7 +45,8 @@ GPU_E2E = "gpu-pipeline-h100-s5-single.json"  # the single-frequency bench confi
 GPU_E2E_MIX = "gpu-pipeline-h100-s7-mix-final.json"  # the compact 6 x 6 record with the preset's mixed frequencies (was -s6-mix, -s5-mix)
 USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w12.json", "user-cli-h100-cnt-lz4.json",
             "user-cli-h100-s6.json", "user-cli-h100-s6-fabric-w8.json", "user-cli-h100-s6-cnt-cold.json",
-            "user-cli-h100-s6-cnt.json", "user-cli-h100-s6-cnt-handon.json", "user-cli-h100-s7-cnt.json"]
+            "user-cli-h100-s6-cnt.json", "user-cli-h100-s6-cnt-handon.json", "user-cli-h100-s7-cnt.json",
+            "user-cli-h100-s7-cnt-b.json"]
 TRANSDUCTION_GPU = "transduction-h100-s7.json"  # chain with the fused pad sum (session 7; s6: the parallel readout)
 FUSED_VARIANTS = "fused-variants-h100-s7.json"  # where the fused kernel's time goes (variants with parts left out)
 GPU_PHYSICS = "gpu-pipeline-h100-physics.json"
@@ -195,7 +196,8 @@ def bench_user_cli() -> str:
            "(`-w12`: `--workers 12`, `-lz4`: `--set generation.compression=lz4`, `-w8`: `--workers 8`; `-s6`: session 6's "
            "defaults, lz4 and up to 12 writers / worker processes; `-cold`: a fresh machine, Warp's kernel cache empty, "
            "so MuJoCo Warp's kernels compile inside the run; `user-cli-h100-s6.json`'s cnt_pdms run was cold too; "
-           "`-handon`: each shard handed to the writers as soon as its episodes are packed, each length group in 4 slices); "
+           "`-handon`: each shard handed to the writers as soon as its episodes are packed, each length group in 4 slices; "
+           "`-s7-cnt`, `-s7-cnt-b`: session 7's code, two warm runs on one machine); "
            "raw = a plain file of the same bytes "
            "on the same disk right after (issue 16's target: >= 50 % of it, or >= 1e6 samples/s):\n",
            table(["family", "episodes", "file", "engine (the CLI's line)", "s", "samples/s", "MB/s", "of raw MB/s"], rows)]
