@@ -15,11 +15,11 @@ import warp as wp
 _done = False
 
 # Freed device memory each process's CUDA pool keeps for its next allocations instead of handing it back to the
-# driver at every synchronize (CUDA's default threshold is 0): the sensor chain allocates its outputs per call,
-# and re-mapping 2 GB of fresh pages cost ~20 ms per call of the fused chain on the H100 (bench/results/logs/
-# transduction-h100-s7-*.log against fused-variants-h100-s7.log, the same kernel with its buffers kept).
-# estimate: 8 GiB, 10 % of an 80 GB GPU, so the feed's driver and its two physics processes together hold back
-# at most ~a third of it; capped at a quarter of a smaller device's memory.
+# driver at every synchronize (CUDA's default threshold is 0): the sensor chain allocates its smaller arrays per
+# call. Set in session 7 while looking for the fused chain's slowdown, which it did not remove (that was the
+# stores into per-call arrays: `scratch` below); all of that session's H100 figures ran with it, no gain of its
+# own is claimed. estimate: 8 GiB, 10 % of an 80 GB GPU, so the feed's driver and its two physics processes
+# together hold back at most ~a third of it; capped at a quarter of a smaller device's memory.
 MEMPOOL_KEEP_BYTES = 8 * 1024**3
 
 
@@ -127,8 +127,8 @@ def to_host(arr: wp.array, site: str) -> np.ndarray:
 
 # Device buffers reused across calls: the sensor chain's per-taxel outputs on CUDA. The taxel kernel's strided
 # stores into arrays freshly allocated per call ran ~3x slower on the H100 than into buffers kept from an
-# earlier call (fused chain 35.0 vs 10.2 ms, bench/results/logs/transduction-h100-s7-fifth.log), while a plain
-# sequential fill of fresh arrays costs no more than of kept ones (alloc-cost-h100-s7.json). One grow-only
+# earlier call (fused kernel 27.7 vs 10.1 ms, plain kernel 34.0 vs 8.7 ms, bench/results/transduction-h100-s7.json),
+# while a plain sequential fill of fresh arrays costs no more than of kept ones (alloc-cost-h100-s7.json). One grow-only
 # buffer per (thread, device, name); a smaller request gets a view of it. Only for results that are copied off
 # the device before the same thread asks for the same name again.
 _SCRATCH: dict[tuple, wp.array] = {}
