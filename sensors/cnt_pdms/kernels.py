@@ -12,6 +12,9 @@ chain): the per-step block synchronisation costs more than re-reading the arrays
 were measured slower on the H100 in session 6 (256 x 4096 x 1000, bench/results/logs/transduction-h100-s6-*):
 tile sums per step in blocks of 32-256 taxels (33-36 ms against 13.0 ms for this kernel + the tiled sum), and
 4-16 taxels per thread with per-thread partial sums, no sync (36-40 ms): both lose the memory parallelism.
+Session 7 (`taxel_sum_kernel`, CUDA's pad path): one taxel per thread as here, warp shuffles instead of block
+sums, partials stored 32 steps at a time: 10.1 ms for kernel + row sums against 13.0 ms for this kernel + the
+tiled sum, with the outputs in kept buffers (bench/README.md, session 7).
 """
 
 # no `from __future__ import annotations`: Warp must see the closure types as real objects
