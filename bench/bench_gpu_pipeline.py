@@ -350,6 +350,13 @@ def end_to_end(device: str, per_shard: int, workers: int, shards_per_worker: int
          "driver_seconds": dict(LAST_RUN_SECONDS) if "feed" in mode else None, "episodes": episodes, "shards": -(-episodes // per_shard), "seconds": dt, "sync_seconds": t_sync,
          "samples_per_s": samples / dt, "disk_MB_per_s": nbytes / dt / 1e6, "raw_write_MB_per_s_same_bytes": raw,
          "fraction_of_raw_write": nbytes / dt / 1e6 / raw, "bytes": nbytes}
+    if "feed" in mode:
+        from simulate.generation import feed
+
+        fw = feed.feed_worlds(cfg)
+        r["feed_batches_episodes"] = [sum(min(per_shard, episodes - s * per_shard) for s in g)
+                                      for g in feed._groups(cfg, list(range(r["shards"])), fw)]
+        r["feed_worlds_per_batch"] = fw
     print(f"end to end, {workers} worker(s), {mode}, {episodes} episodes ({per_shard} per shard): {samples / dt:.3g} samples/s, "
           f"{nbytes / dt / 1e6:.0f} MB/s on disk = {r['fraction_of_raw_write']:.0%} of raw write ({raw:.0f} MB/s), incl. start-up; "
           f"generate: {', '.join(f'{k} {v:.1f} s' for k, v in LAST_GENERATE_SECONDS.items())}, sync {t_sync:.1f} s"
@@ -367,6 +374,8 @@ def main() -> None:
     ap.add_argument("--workers", default="1,2,4")
     ap.add_argument("--shards-per-worker", type=int, default=1)
     ap.add_argument("--physics-processes", type=int, default=None, help="e2e: the GPU feed's physics processes")
+    ap.add_argument("--ramp-batches", type=int, default=None, help="e2e: the GPU feed's RAMP_BATCHES (default: the module's)")
+    ap.add_argument("--batch-ram-fraction", type=float, default=None, help="e2e: the GPU feed's BATCH_RAM_FRACTION")
     ap.add_argument("--override", action="append", default=[], help="e2e: a scene override on top of the bench scene")
     ap.add_argument("--parts", default="physics,equivalence,stages,e2e")
     ap.add_argument("--tag", default="", help="result file name: gpu-pipeline-<tag>.json")
@@ -403,7 +412,12 @@ def main() -> None:
 
         if a.physics_processes:
             feed.PHYSICS_PROCESSES = a.physics_processes
+        if a.ramp_batches is not None:
+            feed.RAMP_BATCHES = a.ramp_batches
+        if a.batch_ram_fraction is not None:
+            feed.BATCH_RAM_FRACTION = a.batch_ram_fraction
         res["physics_processes"], res["e2e_overrides"] = feed.PHYSICS_PROCESSES, a.override
+        res["ramp_batches"], res["batch_ram_fraction"] = feed.RAMP_BATCHES, feed.BATCH_RAM_FRACTION
         res["end_to_end"] = [end_to_end(a.device, a.shard_episodes, int(w), a.shards_per_worker, a.override) for w in a.workers.split(",")]
         r1 = res["end_to_end"][0]
         for r in res["end_to_end"]:

@@ -121,12 +121,13 @@ def _best(fn, sync, repeats, setup=None):
     return best
 
 
-def bench_cuda_chain(cfg, E, T, N, device="cuda:0", repeats=5):
+def bench_cuda_chain(cfg, E, T, N, device="cuda:0", repeats=5, depths=(0, 1, 2, 4)):
     """The whole cnt_pdms chain on CUDA as CntPdmsSensor.run does it on a whole-pad readout (issue 16): taxel
     kernel, tiled channel sum, readout with the noise drawn in the kernel, the readout's outputs copied to
     page-locked host buffers (as the GPU feed does, int16 codes); "before" with the serial readout (one thread
     per episode and channel), "after" with the time-parallel one (sensors/electronics.py), same inputs, same
-    run. Stages alone are synchronised one by one; the taxel state is reset (an upload) outside the timed
+    run; "fused" with the pad's channel sum inside the taxel kernel (the CUDA default since session 7). Stages
+    alone are synchronised one by one; the taxel state is reset (an upload) outside the timed
     region; best of `repeats`."""
     import warp as wp
 
@@ -162,7 +163,40 @@ def bench_cuda_chain(cfg, E, T, N, device="cuda:0", repeats=5):
         t_ar0 = _best(lambda: readout(True, keep=set()), sync, repeats, rs)
         t_ar = _best(lambda: readout(True), sync, repeats, rs)
         t_a = _best(lambda: (kernels(), readout(True)), sync, repeats, rs)
+        # the channel sum fused into the taxel kernel (warp partial sums + a row pass, sensors/cnt_pdms/kernels.py):
+        # prefetch depths, then the whole chain as CntPdmsSensor.run does it on CUDA for the default record
+        # (strain and stress written per taxel) and for a record of channel outputs only (nothing per taxel)
+        n_parts = N // 32 if wp.get_device(device).is_cuda else N
+        bufs = outs3[:2] + [wp.empty(E * n_parts * T, dtype=wp.float64, device=device) for _ in range(2)]
+
+        def fused(depth, per_taxel=True, fresh=False):  # outputs in reused buffers, as the plain kernel's outs3
+            _, _, box["g"], box["f"] = chain.run_pad_device(drive, T, 0, tp.taxel_area_m2, write_strain=per_taxel,
+                                                            write_stress=per_taxel, depth=depth, outs=None if fresh else bufs)
+
+        t_depth = {d: _best(lambda d=d: fused(d), sync, repeats, rs) for d in depths}
+        depth = min(t_depth, key=t_depth.get)
+        t_f = t_depth[depth]
+        t_f0 = _best(lambda: fused(depth, False), sync, repeats, rs)
+        t_fresh = _best(lambda: fused(depth, True, True), sync, repeats, rs)  # fresh device arrays per call
+        t_plain_fresh = _best(lambda: chain.run_device(drive, T, 0), sync, repeats, rs)  # the plain kernel, fresh arrays
+        t_fa = _best(lambda: (fused(depth), readout(True)), sync, repeats, rs)
+        t_fa0 = _best(lambda: (fused(depth, False), readout(True)), sync, repeats, rs)
+        # equivalence on these inputs: the fused sums against the tiled pass (float64 sums of float32 values)
+        rs(); fused(depth); g_f, f_f = box["g"].numpy(), box["f"].numpy()
+        rs(); kernels(); g_t, f_t = box["g"].numpy(), box["f"].numpy()
     n = E * T * N
+    res["fused"] = {
+        "taxel_steps_per_s_chain": n / t_fa, "chain_seconds": t_fa, "prefetch_depth": depth,
+        "seconds_by_prefetch_depth": {str(d): t for d, t in t_depth.items()},
+        "stage_seconds": {"fused taxel kernel + row sums (strain, stress written)": t_f,
+                          "fused taxel kernel + row sums (nothing per taxel written)": t_f0,
+                          "parallel readout + copies back": t_ar},
+        "no_per_taxel_outputs": {"taxel_steps_per_s_chain": n / t_fa0, "chain_seconds": t_fa0},
+        "fused_kernel_fresh_arrays_seconds": t_fresh, "plain_kernel_fresh_arrays_seconds": t_plain_fresh,
+        "g_max_rel_diff_vs_tiled_sum": float(np.max(np.abs(g_f - g_t) / np.abs(g_t))),
+        "g_equal_fraction": float(np.mean(g_f == g_t)),
+        "force_max_abs_diff_n": float(np.max(np.abs(f_f - f_t))), "force_max_n": float(np.max(np.abs(f_t))),
+    }
     res["before"] = {"taxel_steps_per_s_chain": n / t_b, "chain_seconds": t_b,
                      "stage_seconds": {"taxel kernel + channel sums": t_k, "serial readout + copies back": t_br}}
     res["after"] = {"taxel_steps_per_s_chain": n / t_a, "chain_seconds": t_a,
@@ -339,6 +373,15 @@ def main() -> None:
         print(f"  ratio cuda / warp-cpu: {g['chain'] / w['chain']:.0f}x; cuda / numpy: {g['chain'] / res['numpy_ref']['taxel_steps_per_s']:.0f}x")
         c = bench_cuda_chain(cfg, a.gpu_episodes, a.steps, N)
         res["warp_cuda_chain"] = c
+        fz = c["fused"]
+        print(f"  chain fused (prefetch {fz['prefetch_depth']}): {fz['taxel_steps_per_s_chain']:.3g} taxel-steps/s "
+              f"({1e3 * fz['chain_seconds']:.2f} ms); nothing per taxel written: "
+              f"{fz['no_per_taxel_outputs']['taxel_steps_per_s_chain']:.3g}; "
+              + ", ".join(f"{s} {1e3 * v:.2f} ms" for s, v in fz["stage_seconds"].items())
+              + "; by prefetch depth: " + ", ".join(f"{d}: {1e3 * v:.2f} ms" for d, v in fz["seconds_by_prefetch_depth"].items())
+              + f"; fresh arrays per call: fused kernel {1e3 * fz['fused_kernel_fresh_arrays_seconds']:.2f} ms, "
+              f"plain kernel {1e3 * fz['plain_kernel_fresh_arrays_seconds']:.2f} ms"
+              + f"; g vs tiled sum: max rel diff {fz['g_max_rel_diff_vs_tiled_sum']:.2g}, equal {fz['g_equal_fraction']:.4f}")
         for k in ("before", "after"):
             print(f"  chain {k}: {c[k]['taxel_steps_per_s_chain']:.3g} taxel-steps/s ({1e3 * c[k]['chain_seconds']:.2f} ms); "
                   + ", ".join(f"{s} {1e3 * v:.2f} ms" for s, v in c[k]["stage_seconds"].items()))

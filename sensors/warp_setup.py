@@ -4,6 +4,7 @@ results back from the GPU (`to_host`, into reused page-locked buffers inside `ho
 from __future__ import annotations
 
 import logging
+import threading
 from contextlib import contextmanager
 from contextvars import ContextVar
 from typing import Iterator
@@ -12,6 +13,14 @@ import numpy as np
 import warp as wp
 
 _done = False
+
+# Freed device memory each process's CUDA pool keeps for its next allocations instead of handing it back to the
+# driver at every synchronize (CUDA's default threshold is 0): the sensor chain allocates its smaller arrays per
+# call. Set in session 7 while looking for the fused chain's slowdown, which it did not remove (that was the
+# stores into per-call arrays: `scratch` below); all of that session's H100 figures ran with it, no gain of its
+# own is claimed. estimate: 8 GiB, 10 % of an 80 GB GPU, so the feed's driver and its two physics processes
+# together hold back at most ~a third of it; capped at a quarter of a smaller device's memory.
+MEMPOOL_KEEP_BYTES = 8 * 1024**3
 
 
 NO_DRIVER_WARNING = "Could not find or load the NVIDIA CUDA driver"
@@ -27,6 +36,9 @@ def init_warp() -> None:
         wp.config.log_level = logging.WARNING
         _init_without_driver_warning()
         _done = True
+        for dev in wp.get_cuda_devices():
+            if wp.is_mempool_supported(dev):
+                wp.set_mempool_release_threshold(dev, int(min(MEMPOOL_KEEP_BYTES, dev.total_memory // 4)))
 
 
 def _init_without_driver_warning() -> None:
@@ -111,3 +123,25 @@ def to_host(arr: wp.array, site: str) -> np.ndarray:
     wp.copy(buf, arr)
     wp.synchronize_device(arr.device)  # a copy into page-locked memory is asynchronous
     return buf.numpy()
+
+
+# Device buffers reused across calls: the sensor chain's per-taxel outputs on CUDA. The taxel kernel's strided
+# stores into arrays freshly allocated per call ran ~3x slower on the H100 than into buffers kept from an
+# earlier call (fused kernel 27.7 vs 10.1 ms, plain kernel 34.0 vs 8.7 ms, bench/results/transduction-h100-s7.json),
+# while a plain sequential fill of fresh arrays costs no more than of kept ones (alloc-cost-h100-s7.json). One grow-only
+# buffer per (thread, device, name); a smaller request gets a view of it. Only for results that are copied off
+# the device before the same thread asks for the same name again.
+_SCRATCH: dict[tuple, wp.array] = {}
+
+
+def scratch(name: str, n: int, dtype, device: str) -> wp.array:
+    """A flat device array of n elements for `name`, reused across calls on a CUDA device (fresh on the CPU)."""
+    dev = wp.get_device(device)
+    if not dev.is_cuda:
+        return wp.empty(n, dtype=dtype, device=device)
+    key = (threading.get_ident(), str(dev), name)
+    buf = _SCRATCH.get(key)
+    if buf is None or buf.shape[0] < n or buf.dtype != dtype:
+        _SCRATCH.pop(key, None)  # freed before the larger one is made
+        buf = _SCRATCH[key] = wp.empty(max(n, 1), dtype=dtype, device=device)
+    return buf[:n]

@@ -45,6 +45,41 @@ def test_full_chain_cuda_equals_cpu(gpu_device):
         np.testing.assert_array_equal(c1[k], c2[k])
 
 
+def test_fused_pad_sum_cuda(gpu_device):
+    """The pad's channel sum fused into the taxel kernel on the device (warp partial sums; 300 taxels = 9.4 warps,
+    so padding lanes too) against the plain kernel + per-row sum on the CPU: strain and stress as the kernel test,
+    conductance and force within float64 rounding of their sums; deterministic run to run."""
+    import warp as wp
+
+    from sensors import electronics as el
+
+    cfg = load_scene("cnt_pdms")
+    tp = taxel_params(cfg)
+    E, T, N = 4, 400, 300
+    drive = np.random.default_rng(2).uniform(0, 0.04, (E, T, N)).astype(np.float32)
+    dc = wp.array(drive.reshape(-1), dtype=wp.float32, device="cpu")
+    s, st, c = TaxelChainWarp(tp, E, N, "cpu").run_device(dc, T, MODE_DISPLACEMENT)
+    g, f = (x.numpy() for x in el.sum_channels_warp(c, st, np.zeros(N, np.int32), 1, tp.taxel_area_m2, (E, T, N), "cpu"))
+    dg = wp.array(drive.reshape(-1), dtype=wp.float32, device=gpu_device)
+    runs = [TaxelChainWarp(tp, E, N, gpu_device).run_pad_device(dg, T, MODE_DISPLACEMENT, tp.taxel_area_m2) for _ in range(2)]
+    s2, st2, g2, f2 = (x.numpy() for x in runs[0])
+    for a, b in ((s.numpy(), s2), (st.numpy(), st2)):
+        np.testing.assert_allclose(b, a, rtol=1e-5, atol=1e-7 * float(np.abs(a).max()))
+    np.testing.assert_allclose(g2, g, rtol=1e-5)
+    np.testing.assert_allclose(f2, f, rtol=1e-5, atol=1e-7 * float(np.abs(f).max()))
+    for x, y in zip(runs[0], runs[1]):
+        np.testing.assert_array_equal(x.numpy(), y.numpy())
+    # the sensor takes the fused path on CUDA for a record without per-taxel fields: same outputs as on the CPU
+    cfg2 = load_scene("cnt_pdms", ["generation.record=[force,resistance,adc]"])
+    d = drive[:2, :, : cfg2.pad.n_taxels]
+    a = CntPdmsSensor(cfg2, device="cpu").run(d, [1, 2])
+    b = CntPdmsSensor(cfg2, device=gpu_device).run(d, [1, 2])
+    assert set(a) == set(b) == {"force", "resistance", "adc"}
+    for k in ("force", "resistance"):
+        np.testing.assert_allclose(b[k], a[k], rtol=1e-5, atol=1e-6 * float(np.abs(a[k]).max()), err_msg=k)
+    assert np.abs(b["adc"].astype(int) - a["adc"].astype(int)).max() <= 1
+
+
 def test_parallel_readout_cuda_equals_serial_cpu(gpu_device):
     """The time-parallel readout on the device (its default there) against the serial kernel on the cpu."""
     import warp as wp

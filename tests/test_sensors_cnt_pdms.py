@@ -212,6 +212,39 @@ def test_warp_matches_numpy_reference(cfg, tp):
             np.testing.assert_allclose(b, a, rtol=2e-5, atol=1e-6 * np.abs(a).max())
 
 
+def test_fused_pad_sum_equals_chain_then_sum(cfg, tp):
+    """The taxel kernel with the pad's channel sum fused in (CUDA's path; on the CPU one lane per partial sum):
+    strain, stress, pad conductance, force and the carried state equal the plain kernel + per-row sum bit for
+    bit, at every prefetch depth, in two pieces as in one, and with nothing per taxel written."""
+    import warp as wp
+
+    from sensors import electronics as el
+
+    rng = np.random.default_rng(11)
+    E, T, N = 2, 90, 13
+    drive = rng.uniform(0, 0.04, (E, T, N)).astype(np.float32)
+    for mode, scale in ((MODE_DISPLACEMENT, 1.0), (MODE_FORCE, 2.0e6)):
+        dv = wp.array((drive * scale).reshape(-1), dtype=wp.float32, device="cpu")
+        ref = TaxelChainWarp(tp, E, N, "cpu")
+        s, st, c = (x.numpy() for x in ref.run_device(dv, T, mode))
+        g, f = (x.numpy() for x in el.sum_channels_warp(wp.array(c, device="cpu"), wp.array(st, device="cpu"),
+                                                         np.zeros(N, np.int32), 1, tp.taxel_area_m2, (E, T, N), "cpu"))
+        for depth in (0, 1, 3):
+            ch = TaxelChainWarp(tp, E, N, "cpu")
+            s2, st2, g2, f2 = (x.numpy() for x in ch.run_pad_device(dv, T, mode, tp.taxel_area_m2, depth=depth))
+            for a, b in ((s, s2), (st, st2), (g, g2), (f, f2)):
+                np.testing.assert_array_equal(b, a)
+            for a, b in zip(vars(ref.state()).values(), vars(ch.state()).values()):
+                np.testing.assert_array_equal(b, a)
+        ch = TaxelChainWarp(tp, E, N, "cpu")  # two pieces, nothing per taxel written
+        half = [wp.array((drive[:, a:b] * scale).reshape(-1), dtype=wp.float32, device="cpu") for a, b in ((0, 40), (40, T))]
+        p1, p2 = ch.run_pad_device(half[0], 40, mode, tp.taxel_area_m2, False, False), \
+            ch.run_pad_device(half[1], T - 40, mode, tp.taxel_area_m2, False, False)
+        assert p1[0] is None and p1[1] is None
+        np.testing.assert_array_equal(np.concatenate([p1[2].numpy().reshape(E, -1), p2[2].numpy().reshape(E, -1)], 1),
+                                      g.reshape(E, T))
+
+
 def test_warp_streaming_equals_one_piece(cfg, tp):
     rng = np.random.default_rng(4)
     drive = rng.uniform(0, 0.03, (2, 300, 5)).astype(np.float32)

@@ -12,6 +12,9 @@ chain): the per-step block synchronisation costs more than re-reading the arrays
 were measured slower on the H100 in session 6 (256 x 4096 x 1000, bench/results/logs/transduction-h100-s6-*):
 tile sums per step in blocks of 32-256 taxels (33-36 ms against 13.0 ms for this kernel + the tiled sum), and
 4-16 taxels per thread with per-thread partial sums, no sync (36-40 ms): both lose the memory parallelism.
+Session 7 (`taxel_sum_kernel`, CUDA's pad path): one taxel per thread as here, warp shuffles instead of block
+sums, partials stored 32 steps at a time: 10.1 ms for kernel + row sums against 13.0 ms for this kernel + the
+tiled sum, with the outputs in kept buffers (bench/README.md, session 7).
 """
 
 # no `from __future__ import annotations`: Warp must see the closure types as real objects
@@ -46,7 +49,8 @@ def taxel_kernels(n_prony: int, n_play: int):
         g0: float
         net: NetworkWp
 
-    def step(p: Params, mode: int, d: float, e: float, phi: float, h: vec_p, s: float, z: vec_k, dmg: float):
+    def invariants(p: Params):
+        # the step's constants (the same float32 operations as before; the fused kernel hoists them out of its loop)
         e_max = strain_frac * p.e_lock
         eb_sum = float(0.0)
         w_sum = float(0.0)
@@ -54,11 +58,18 @@ def taxel_kernels(n_prony: int, n_play: int):
             eb_sum += p.prony_eb[i]
         for j in range(n_play):
             w_sum += p.play_w[j]
+        phi_max = e_max / (1.0 - e_max / p.e_lock)
+        return e_max, eb_sum, w_sum, phi_max
+
+    invariants.__name__ = invariants.__qualname__ = f"taxel_invariants_p{n_prony}_k{n_play}"
+    invariants_f = wp.func(invariants)
+
+    def core(p: Params, e_max: float, eb_sum: float, w_sum: float, phi_max: float, mode: int, d: float, e: float,
+             phi: float, h: vec_p, s: float, z: vec_k, dmg: float):
         e_new = float(0.0)
         phi_new = float(0.0)
         m = 1.0 - p.softening * dmg
         if mode == 1:
-            phi_max = e_max / (1.0 - e_max / p.e_lock)
             phi_new = wp.clamp((d / m - wp.dot(p.prony_decay, h) + eb_sum * phi) / (p.e_inf + eb_sum), 0.0, phi_max)
             e_new = phi_new / (1.0 + phi_new / p.e_lock)
         else:
@@ -80,6 +91,13 @@ def taxel_kernels(n_prony: int, n_play: int):
             e_net += p.play_w[j] * zj
         g = p.g0 * conductance_ratio_wp(p.net, e_net, dmg_new)
         return e_new, phi_new, h_new, s_new, z_new, dmg_new, sig, g
+
+    core.__name__ = core.__qualname__ = f"taxel_core_p{n_prony}_k{n_play}"
+    core_f = wp.func(core)
+
+    def step(p: Params, mode: int, d: float, e: float, phi: float, h: vec_p, s: float, z: vec_k, dmg: float):
+        e_max, eb_sum, w_sum, phi_max = invariants_f(p)
+        return core_f(p, e_max, eb_sum, w_sum, phi_max, mode, d, e, phi, h, s, z, dmg)
 
     step.__name__ = step.__qualname__ = f"taxel_step_p{n_prony}_k{n_play}"
     step_f = wp.func(step)
@@ -125,7 +143,168 @@ def taxel_kernels(n_prony: int, n_play: int):
 
     chain.__name__ = chain.__qualname__ = f"taxel_chain_p{n_prony}_k{n_play}"
     k_chain = wp.kernel(chain, module="unique", enable_backward=False)
-    return {"chain": k_chain, "Params": Params, "vec_p": vec_p, "vec_k": vec_k}
+    return {"chain": k_chain, "Params": Params, "vec_p": vec_p, "vec_k": vec_k, "invariants": invariants_f, "core": core_f}
+
+
+# Sum over the 32 lanes of a CUDA warp of float32 values in float64, every lane getting the same sum (butterfly:
+# xor-shuffles by 16, 8, 4, 2, 1; the first level shuffles the float32 and adds in float64, the same bits as
+# converting first; a + b == b + a in IEEE arithmetic, so all lanes hold the same bits, in a fixed tree order):
+# no shared memory and no block barrier, so the taxel loop keeps its memory parallelism. On the CPU a "group"
+# is one thread and the sum is the value itself.
+WARP_LANES = 32
+_group_sum_snippet = """
+#if defined(__CUDA_ARCH__)
+    double v = (double)x + (double)__shfl_xor_sync(0xffffffffu, x, 16);
+    v += __shfl_xor_sync(0xffffffffu, v, 8);
+    v += __shfl_xor_sync(0xffffffffu, v, 4);
+    v += __shfl_xor_sync(0xffffffffu, v, 2);
+    v += __shfl_xor_sync(0xffffffffu, v, 1);
+    return v;
+#else
+    return (double)x;
+#endif
+"""
+
+
+@wp.func_native(_group_sum_snippet)
+def group_sum_f64(x: wp.float32) -> wp.float64: ...
+
+
+PREFETCH = 1  # drive samples loaded ahead of the step that uses them in the fused kernel: 1 was the fastest of 0/1/2/4 on the H100 (10.1 vs 11.1 / 10.5 / 11.8 ms, bench/results/transduction-h100-s7.json)
+
+
+@functools.cache
+def taxel_sum_kernel(n_prony: int, n_play: int, depth: int = PREFETCH, shuffle: bool = True, parts: bool = True):
+    """The taxel chain with the whole-pad channel sum fused in (issue 16): one thread per (episode, taxel) as in
+    `chain`, the episode's taxels padded to whole groups (CUDA: warps of 32 lanes; padding lanes rerun the last
+    taxel and add nothing), and per step each group's conductance and stress sums (float64, fixed order) kept as
+    one partial per (episode, group, step), written `group` steps at a time; `sum_parts` adds a row's partials in
+    group order. No per-taxel
+    conductance is written, and strain / stress only when asked (write_strain / write_stress). `depth` drive
+    samples are loaded ahead of their step (0: at the step), so a thread has loads in flight while it computes.
+    shuffle / parts = False leave out the group sums / the partials' stores: wrong sums, for timing only
+    (bench/fused_variants.py)."""
+    k = taxel_kernels(n_prony, n_play)
+    Params, vec_p, vec_k, invariants_f, core_f = k["Params"], k["vec_p"], k["vec_k"], k["invariants"], k["core"]
+    vec_d = wp.types.vector(length=max(depth, 1), dtype=wp.float32)
+
+    def chain_sum(
+        drive: wp.array(dtype=wp.float32),  # [E*T*N]
+        n_steps: int,
+        n_taxels: int,
+        n_pad: int,  # threads per episode: n_taxels rounded up to whole groups
+        group: int,  # lanes per partial sum: 32 on CUDA (a warp), 1 on the CPU
+        mode: int,
+        p: Params,
+        st_strain: wp.array(dtype=wp.float32),  # [E*N] in/out
+        st_phi: wp.array(dtype=wp.float32),
+        st_prony: wp.array(dtype=vec_p),
+        st_gap: wp.array(dtype=wp.float32),
+        st_play: wp.array(dtype=vec_k),
+        st_damage: wp.array(dtype=wp.float32),
+        write_strain: int,
+        write_stress: int,
+        out_strain: wp.array(dtype=wp.float32),  # [E*T*N] (empty unless written)
+        out_stress: wp.array(dtype=wp.float32),
+        part_g: wp.array(dtype=wp.float64),  # [E * n_parts * T], n_parts = n_pad / group
+        part_f: wp.array(dtype=wp.float64),
+    ):
+        tid = wp.tid()
+        ep = tid // n_pad
+        n = tid - ep * n_pad
+        active = n < n_taxels
+        nc = wp.min(n, n_taxels - 1)  # padding lanes load (and recompute) the episode's last taxel
+        sid = ep * n_taxels + nc
+        e = st_strain[sid]
+        phi = st_phi[sid]
+        h = st_prony[sid]
+        s = st_gap[sid]
+        z = st_play[sid]
+        dmg = st_damage[sid]
+        e_max, eb_sum, w_sum, phi_max = invariants_f(p)
+        n_parts = n_pad // group
+        w = n // group
+        lane = n - w * group
+        prow = (ep * n_parts + w) * n_steps
+        base = ep * n_steps * n_taxels + nc
+        last = wp.max(n_steps - 1, 0)
+        buf = vec_d()
+        mine_g = wp.float64(0.0)
+        mine_f = wp.float64(0.0)
+        j = int(0)
+        if wp.static(depth > 0):
+            if n_steps > 0:
+                for i in range(depth):
+                    buf[i] = drive[base + wp.min(i, last) * n_taxels]
+        for kk in range(n_steps):
+            idx = base + kk * n_taxels
+            d = float(0.0)
+            if wp.static(depth > 0):
+                d = buf[0]
+                for i in range(depth - 1):
+                    buf[i] = buf[i + 1]
+                buf[depth - 1] = drive[base + wp.min(kk + depth, last) * n_taxels]
+            else:
+                d = drive[idx]
+            e, phi, h, s, z, dmg, sig, g = core_f(p, e_max, eb_sum, w_sum, phi_max, mode, d, e, phi, h, s, z, dmg)
+            # no branch on `active` before the shuffles: a padding lane computes the last taxel bit for bit, so
+            # its stores repeat that taxel's values; it adds zero to the sums
+            if write_strain != 0:
+                out_strain[idx] = e
+            if write_stress != 0:
+                out_stress[idx] = sig
+            g32 = wp.where(active, g, 0.0)
+            f32 = wp.where(active, sig, 0.0)
+            gs = wp.float64(g32)
+            fs = wp.float64(f32)
+            if wp.static(shuffle):
+                gs = group_sum_f64(g32)
+                fs = group_sum_f64(f32)
+            # lane j keeps the sums of step k0 + j (a select, no branch); every `group` steps the group writes
+            # them at once, one coalesced store of `group` consecutive float64 per array; j counts up (no division)
+            mine_g = wp.where(lane == j, gs, mine_g)
+            mine_f = wp.where(lane == j, fs, mine_f)
+            if wp.static(parts):
+                if j == group - 1 or kk == n_steps - 1:
+                    if lane <= j:
+                        part_g[prow + kk - j + lane] = mine_g
+                        part_f[prow + kk - j + lane] = mine_f
+            j += 1
+            if j == group:
+                j = 0
+        if active:
+            st_strain[sid] = e
+            st_phi[sid] = phi
+            st_prony[sid] = h
+            st_gap[sid] = s
+            st_play[sid] = z
+            st_damage[sid] = dmg
+
+    chain_sum.__name__ = chain_sum.__qualname__ = f"taxel_chain_sum_p{n_prony}_k{n_play}_d{depth}_s{int(shuffle)}{int(parts)}"
+    return wp.kernel(chain_sum, module="unique", enable_backward=False)
+
+
+@wp.kernel
+def sum_parts(
+    part_g: wp.array(dtype=wp.float64),  # [E * n_parts * T]
+    part_f: wp.array(dtype=wp.float64),
+    n_parts: int,
+    n_steps: int,
+    area: float,
+    g_out: wp.array(dtype=wp.float64),  # [E*T]: the pad's conductance (one channel)
+    force_out: wp.array(dtype=wp.float64),  # [E*T]
+):
+    r = wp.tid()  # (episode, step); neighbouring threads read neighbouring steps (coalesced)
+    ep = r // n_steps
+    k = r - ep * n_steps
+    g = wp.float64(0.0)
+    f = wp.float64(0.0)
+    for j in range(n_parts):
+        q = (ep * n_parts + j) * n_steps + k
+        g += part_g[q]
+        f += part_f[q]
+    g_out[r] = g
+    force_out[r] = f * wp.float64(area)
 
 
 class TaxelChainWarp:
@@ -188,6 +367,41 @@ class TaxelChainWarp:
         )
         return out
 
+    def run_pad_device(self, drive: wp.array, n_steps: int, mode: int, area_m2: float, write_strain: bool = True,
+                       write_stress: bool = True, group: int | None = None, depth: int = PREFETCH, outs: list | None = None):
+        """The chain with the whole-pad channel sum fused in (`taxel_sum_kernel`) on a flat device array [E*T*N]:
+        returns (strain or None, stress or None, pad conductance [E*T] float64, force [E*T] float64 = sum of the
+        stress x area). group: lanes per partial sum (default 32 on CUDA, 1 on the CPU, where it is the plain
+        per-row sum in taxel order). outs: [strain, stress, part_g, part_f] device buffers to reuse (sizes E*T*N
+        float32 where written, E * n_parts * T float64), as `run_device`'s outs."""
+        E, N, T, d = self.E, self.N, n_steps, self.device
+        if group is None:
+            group = WARP_LANES if wp.get_device(d).is_cuda else 1
+        if wp.get_device(d).is_cuda and group != WARP_LANES:
+            raise ValueError(f"on CUDA the partial sums are over warps of {WARP_LANES} lanes")
+        n_pad = -(-N // group) * group
+        n_parts = n_pad // group
+        size = E * T * N
+        empty = wp.empty(0, dtype=wp.float32, device=d)
+        if outs is not None:
+            strain, stress, part_g, part_f = outs
+            strain, stress = (strain if write_strain else empty), (stress if write_stress else empty)
+        else:
+            strain = wp.empty(size, dtype=wp.float32, device=d) if write_strain else empty
+            stress = wp.empty(size, dtype=wp.float32, device=d) if write_stress else empty
+            part_g = wp.empty(E * n_parts * T, dtype=wp.float64, device=d)
+            part_f = wp.empty(E * n_parts * T, dtype=wp.float64, device=d)
+        wp.launch(
+            taxel_sum_kernel(self.p.n_prony, self.p.n_play, depth), dim=E * n_pad,
+            inputs=[drive, T, N, n_pad, group, int(mode), self.params, *self._state_args(), int(write_strain),
+                    int(write_stress), strain, stress, part_g, part_f],
+            device=d,
+        )
+        g = wp.empty(E * T, dtype=wp.float64, device=d)
+        force = wp.empty(E * T, dtype=wp.float64, device=d)
+        wp.launch(sum_parts, dim=E * T, inputs=[part_g, part_f, n_parts, T, float(area_m2), g, force], device=d)
+        return (strain if write_strain else None, stress if write_stress else None, g, force)
+
     def run(self, drive: np.ndarray, mode: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """drive [E, T, N] -> strain, stress_pa, conductance_s, each [E, T, N] numpy float32."""
         E, T, N = drive.shape
@@ -218,8 +432,8 @@ def _scaled(x: wp.array(dtype=wp.float32), scale: wp.float32, out: wp.array(dtyp
     out[i] = x[i] * scale
 
 
-def scaled_on_device(x: wp.array, scale: float) -> wp.array:
+def scaled_on_device(x: wp.array, scale: float, out: wp.array | None = None) -> wp.array:
     """x * float32(scale) for a flat float32 device array (numpy's x * np.float32(scale), bit for bit)."""
-    out = wp.empty_like(x)
+    out = wp.empty_like(x) if out is None else out
     wp.launch(_scaled, dim=x.shape[0], inputs=[x, wp.float32(scale), out], device=x.device)
     return out

@@ -33,6 +33,13 @@ OUTPUTS: dict[str, ChannelSpec] = {
 }
 
 
+# The pad's channel sum fused into the taxel kernel on CUDA (sensors/cnt_pdms/kernels.py: taxel_sum_kernel), also
+# where the record keeps per-taxel fields: with its outputs in reused buffers (sensors.warp_setup.scratch) the
+# fused chain ran 11.1 ms against 14.2 ms for the plain kernel + tiled sum (H100, 256 x 4096 x 1000,
+# bench/results/logs/transduction-h100-s7-fifth.log). False: only records without per-taxel fields.
+FUSED_WITH_PER_TAXEL = True
+
+
 class CntPdmsSensor:
     """Batched CNT-PDMS sensor. Shapes: E episodes, T samples, N taxels, C channels: 1 (whole pad,
     sensor.readout = "pad") or N (one per taxel, "taxel")."""
@@ -96,15 +103,29 @@ class CntPdmsSensor:
         else:
             import warp as wp
 
-            from sensors.cnt_pdms.kernels import TaxelChainWarp, scaled_on_device
-            from sensors.warp_setup import to_host
+            from sensors.cnt_pdms.kernels import WARP_LANES, TaxelChainWarp, scaled_on_device
+            from sensors.warp_setup import scratch, to_host
 
             chain = TaxelChainWarp(self.tp, E, N, self.device)
             d = drive if isinstance(drive, wp.array) else wp.array(np.ascontiguousarray(drive, np.float32).reshape(-1), dtype=wp.float32, device=self.device)
-            s_d, st_d, c_d = chain.run_device(d, T, self.mode)
-            g_d, f_d = el.sum_channels_warp(
-                c_d, st_d, self.taxel_channel, self.n_channels, self.tp.taxel_area_m2, (E, T, N), self.device
-            )
+            per_taxel = bool(want & {"strain", "force_taxel"})
+            dev = self.device
+            size = E * T * N
+            if self.n_channels == 1 and wp.get_device(dev).is_cuda and (FUSED_WITH_PER_TAXEL or not per_taxel):
+                # whole pad on CUDA: the channel sum fused into the taxel kernel (warp partial sums), and only
+                # the per-taxel fields the record keeps are written (issue 16)
+                n_parts = -(-N // WARP_LANES) * E * T
+                bufs = [scratch("cnt_pdms strain", size, wp.float32, dev), scratch("cnt_pdms stress", size, wp.float32, dev),
+                        scratch("cnt_pdms part_g", n_parts, wp.float64, dev), scratch("cnt_pdms part_f", n_parts, wp.float64, dev)]
+                s_d, st_d, g_d, f_d = chain.run_pad_device(d, T, self.mode, self.tp.taxel_area_m2,
+                                                           write_strain="strain" in want, write_stress="force_taxel" in want,
+                                                           outs=bufs)
+            else:
+                bufs = [scratch(f"cnt_pdms {n}", size, wp.float32, dev) for n in ("strain", "stress", "cond")]
+                s_d, st_d, c_d = chain.run_device(d, T, self.mode, bufs)
+                g_d, f_d = el.sum_channels_warp(
+                    c_d, st_d, self.taxel_channel, self.n_channels, self.tp.taxel_area_m2, (E, T, N), self.device
+                )
             keep_ro = {ro_names[k] for k in want if k in ro_names}
             if self.ep.offline_sos is not None and keep_ro & {"filtered_v", "resistance_measured"}:
                 keep_ro |= {"filtered_v"}  # the zero-phase pass filters the ADC voltage on the host
@@ -117,7 +138,8 @@ class CntPdmsSensor:
             strain = to_host(s_d, "cnt_pdms strain").reshape(E, T, N) if "strain" in want else None
             stress = None
             if "force_taxel" in want:  # stress x area on the device: one float32 multiply, as in numpy
-                force_taxel = to_host(scaled_on_device(st_d, self.tp.taxel_area_m2), "cnt_pdms force_taxel").reshape(E, T, N)
+                ft = scaled_on_device(st_d, self.tp.taxel_area_m2, scratch("cnt_pdms force_taxel", size, wp.float32, self.device))
+                force_taxel = to_host(ft, "cnt_pdms force_taxel").reshape(E, T, N)
         make = {
             "strain": lambda: strain,
             "force_taxel": lambda: force_taxel if stress is None else (stress * np.float32(self.tp.taxel_area_m2)).astype(np.float32),
