@@ -7,6 +7,7 @@ fit       the velostat film model's parameters to a real recording, writes the f
 
 from __future__ import annotations
 
+import math
 import json
 from pathlib import Path
 from typing import Annotated, Optional
@@ -195,6 +196,8 @@ def sim2real(
     pretrain_epochs: Annotated[Optional[int], typer.Option(help="Pre-training epoch cap (default 40).")] = None,
     n_boot: Annotated[Optional[int], typer.Option(help="Bootstrap replicates of the fit (default 16).")] = None,
     seed: Annotated[int, typer.Option(help="Root seed (split, fit bootstrap, generation, training).")] = 0,
+    rated_force_n: Annotated[Optional[float], typer.Option("--rated-force-n", help="The sensor's / rig's rated force (N), "
+                             "as the user knows it (never the test runs' maximum): the simulated presses span it.")] = None,
 ) -> None:
     """Real -> sim -> real: fit the chain, generate randomized data around it, pre-train, fine-tune, report."""
     from learn.sim2real import S2R_BUDGET, run_sim2real
@@ -209,6 +212,10 @@ def sim2real(
             if v < 1:
                 fail(f"--{k.replace('_', '-')} must be >= 1 (got {v})")
             b[k] = v
+    if rated_force_n is not None:
+        if not (math.isfinite(rated_force_n) and 0 < rated_force_n < 1e6):
+            fail(f"--rated-force-n must be a positive finite force in N (got {rated_force_n})")
+        b["rated_force_n"] = float(rated_force_n)
     try:
         import shlex
         import sys

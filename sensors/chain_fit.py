@@ -615,11 +615,29 @@ def press_slope_spread(fit: ChainFit, runs: Seq[RealRun], seed: int = 0) -> dict
             "slope_sd_chain": float(np.sqrt(chain)), **out}
 
 
-def randomization_from_fit(fit: ChainFit, runs: Seq[RealRun], press_slope: bool = False):
+RATED_LOW_FRAC = 0.05  # estimate: a force sensor's rated range is quoted from ~5 % of its full scale up (below it
+# the reading barely leaves its unloaded level); the shape over the range is not given, log-uniform kept
+
+
+def peak_force_dist(peaks: Seq[float], rated_force_n: float | None = None):
+    """Peak-force distribution of the simulated presses: log-uniform from half the smallest to 1.2 x the largest
+    real training peak; with the sensor's rated force (what the user knows of the rig / sensor, never the test
+    runs) it spans at least [RATED_LOW_FRAC, 1] x rated, so pre-training covers what the few real runs do not
+    (the point of a simulator; Tobin et al. 2017, domain randomization over the deployment range)."""
+    from scenes.randomize import Dist
+
+    lo, hi = 0.5 * float(min(peaks)), 1.2 * float(max(peaks))
+    if rated_force_n is not None and np.isfinite(rated_force_n) and rated_force_n > 0:
+        lo, hi = min(lo, RATED_LOW_FRAC * float(rated_force_n)), max(hi, float(rated_force_n))
+    return Dist(kind="loguniform", low=lo, high=hi)
+
+
+def randomization_from_fit(fit: ChainFit, runs: Seq[RealRun], press_slope: bool = False,
+                           rated_force_n: float | None = None):
     """The Randomization `fit` writes: joint bootstrap replicates of the chain, the gain (bootstrap spread of
     ln r0), the board's full scale (run-to-run spread), the noise, and press protocols spanning the real
-    presses (peak force log-uniform from half the smallest to 1.2 x the largest peak; times uniform over
-    their 5-95 % range)."""
+    presses (peak force log-uniform from half the smallest to 1.2 x the largest peak, widened to the rated
+    range when given: peak_force_dist; times uniform over their 5-95 % range)."""
     from scenes.randomize import Dist, Randomization
 
     p = fit.params
@@ -629,7 +647,7 @@ def randomization_from_fit(fit: ChainFit, runs: Seq[RealRun], press_slope: bool 
         if len(v) < 2:
             continue
         if k == "peak_force_n":
-            press[k] = Dist(kind="loguniform", low=0.5 * min(v), high=1.2 * max(v))
+            press[k] = peak_force_dist(v, rated_force_n)
         else:
             press[k] = Dist(kind="uniform", low=float(np.percentile(v, 5)), high=float(np.percentile(v, 95)))
     # joint replicates, r0 with them (it trades off against the exponent: drawing the exponent of one

@@ -261,3 +261,27 @@ def test_press_slope_spread_recovers_known_sensitivity_variation():
     r1 = CF.randomization_from_fit(fit, runs, press_slope=True)
     assert r1.episode["slope_press_sd"].value == pytest.approx(sp["slope_press_sd"])
     assert "slope_press_sd" not in CF.randomization_from_fit(fit, runs).episode
+
+
+def test_rated_force_widens_the_simulated_presses_to_the_rating_only():
+    """The simulated peak forces span the sensor's rated force when the user gives it (the presses the real
+    training runs lack), keep the training range where it already covers the rating, and are drawn inside it."""
+    from scenes.randomize import draw_one
+    from simulate.generation.chain_gen import press_protocol
+    from scenes.randomize import Randomization
+
+    peaks = [20.6, 21.0, 22.5]  # pike2-like training presses (N)
+    d0 = CF.peak_force_dist(peaks)
+    assert (d0.low, d0.high) == pytest.approx((10.3, 27.0))
+    d = CF.peak_force_dist(peaks, rated_force_n=40.0)
+    assert (d.low, d.high) == pytest.approx((CF.RATED_LOW_FRAC * 40.0, 40.0))
+    wide = CF.peak_force_dist([0.25, 10.0, 44.5], rated_force_n=40.0)  # pike1-like: already spans the rating
+    assert (wide.low, wide.high) == pytest.approx((0.125, 53.4))
+    assert CF.peak_force_dist(peaks, rated_force_n=float("nan")).high == pytest.approx(27.0)
+    rng = np.random.default_rng(3)
+    x = np.log([draw_one(d, rng) for _ in range(4000)])
+    # log-uniform: the share above every training press is ln(40 / 22.5) / ln(40 / 2) = 0.19 (none before)
+    assert np.mean(x > np.log(max(peaks))) == pytest.approx(np.log(40 / 22.5) / np.log(20), abs=0.02)
+    assert x.min() >= np.log(d.low) and x.max() <= np.log(d.high)
+    f, pid = press_protocol(Randomization(press={"peak_force_n": d}), np.random.default_rng(0), 600.0, 0.05)
+    assert f.max() > 1.2 * max(peaks) and f.max() < 40.0 * 1.1  # the rig's small hold drift on top

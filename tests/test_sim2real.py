@@ -73,3 +73,19 @@ def test_curve_order_keeps_the_earlier_budgets_and_adds_the_former_valid_runs():
     order = curve_order(seqs, "test*", 0)
     assert order[: len(old.order)] == old.order and len(old.valid) >= 2
     assert sorted(order) == sorted(f"run{i}" for i in range(10))
+
+
+def test_cli_refuses_a_rated_force_that_is_not_a_force(tmp_path):
+    """`sim2real --rated-force-n` takes a positive finite force in N; anything else stops before any step runs."""
+    import h5py
+    from typer.testing import CliRunner
+
+    from piezotwin.cli import app
+
+    rec = tmp_path / "r.h5"
+    h5py.File(rec, "w").close()
+    for bad in ("0", "-5", "nan", "inf", "1e30"):
+        res = CliRunner().invoke(app, ["sim2real", "velostat", str(rec), "--test-episodes", "*x*", "-o", str(tmp_path / "o"),
+                                       "--rated-force-n", bad])
+        assert res.exit_code != 0 and "rated-force-n" in res.output, (bad, res.output)
+        assert not (tmp_path / "o" / "state.json").exists()

@@ -411,7 +411,8 @@ def sim2real_results() -> str:
                         tm.get("torch_threads", "–"), " / ".join(f"{v:.1f}" for v in tm.get("load_average_at_end", []))])
         b = m.get("budget", {})
         budgets[name] = (f"{b.get('n_episodes')} episodes of {b.get('episode_s')} s at {b.get('fit_rate_hz')} Hz, "
-                         f"<= {b.get('pretrain_epochs')} pre-training epochs, {b.get('n_train_seeds', 1)} training seed(s)")
+                         f"<= {b.get('pretrain_epochs')} pre-training epochs, {b.get('n_train_seeds', 1)} training seed(s)"
+                         + (f", presses over the rated {num(b['rated_force_n'])} N" if b.get("rated_force_n") else ""))
     kinds = sorted(set(budgets.values()))
     bud = "; ".join(f"{v} ({', '.join(k for k in budgets if budgets[k] == v)})" for v in kinds)
     out = ("Recorded `piezotwin sim2real` runs (`bench/results/experiments/sim2real-*.json`, each the run's "
@@ -531,6 +532,28 @@ def sim2real_results() -> str:
                 "not used:\n\n"
                 + table(["split", "press slope", "drawn coef / sd", "pre-train sim valid (N)", "pre-trained on training runs (N)",
                          "fine-tuned validation (N)", "test fine-tuned by budget (N)", "training side helps"], prow))
+    rr = sorted(RESULTS.glob("s2r-rated-range-*.json"))
+    if rr:
+        rrow = []
+        for f in rr:
+            d = json.loads(f.read_text())
+            for side in ("without", "rated"):
+                v = d[side]
+                pk = v.get("simulated_peak_force_n") or {}
+                rrow.append([f.stem.removeprefix("s2r-rated-range-"), num(v.get("rated_force_n")),
+                             f"{num(pk.get('low'))} – {num(pk.get('high'))}" if pk else "–",
+                             num(v["pretrain_sim_valid_rmse"]), num(v["zero_shot_training_runs_rmse"]),
+                             num(v["finetuned_valid_rmse_mean"]),
+                             "; ".join(f"{c['n_runs']}: {num(c['test_finetuned_rmse'])}" for c in v["curve"]),
+                             f"{v['test_finetuned_pct_fs']:.1f} %", f"{v['test_two_point_pct_fs']:.1f} %",
+                             "yes" if d["training_side_not_worse"] else "no"])
+        out += ("\n\nSimulated presses over the sensor's rated force (`sim2real --rated-force-n`, set by the user; "
+                "`bench/bench_s2r_rated_range.py`, `bench/results/s2r-rated-range-*.json`): chosen on the training side only, "
+                "adopted if the fine-tuned RMSE on the training runs' validation tails (mean over budgets and seeds, N) does "
+                "not get worse in both Lupasic directions; the test numbers are reported, not used:\n\n"
+                + table(["split", "rated force (N)", "simulated peaks (N)", "pre-train sim valid (N)",
+                         "pre-trained on training runs (N)", "fine-tuned validation (N)", "test fine-tuned by budget (N)",
+                         "test fine-tuned, all runs (% FS)", "two-point (% FS)", "training side not worse"], rrow))
     abl = sorted(RESULTS.glob("s2r-ablation-*.json"))
     if abl:
         arows = []
