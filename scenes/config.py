@@ -68,7 +68,7 @@ class ProtocolConfig(Strict):
     kind = "element_loads" (force control, the ntype paper's experiment, sect. 3.2): every frame, each array
     element carries its own static 3-D force, components on [amplitude_min, amplitude_max], drawn per
     `force_distribution`: "uniform" (the paper's task default) or "beta" (amplitude_min + (max - min) x
-    Beta(force_beta_a, force_beta_b), a draw skewed to small forces) (simulate/protocols/element_loads.py;
+    Beta(force_beta_alpha, force_beta_beta), a draw skewed to small forces) (simulate/protocols/element_loads.py;
     scenes/ntype_config.py PAPER_PROTOCOL).
     """
 
@@ -97,12 +97,12 @@ class ProtocolConfig(Strict):
     # for kind="element_loads": how each force component is drawn on [amplitude_min, amplitude_max]. "uniform":
     # estimate, the paper (ntype sect. 3.2) states only the range [0, 4.8] N; its eq. 14 (relative error over every
     # component, divided by the true F) and Table 2 / Figs. 6-8 fit it (simulate/protocols/element_loads.py).
-    force_distribution: Literal["uniform", "beta"] = "uniform"
-    # "beta" shape: estimate, a = 1, b = 7 gives a component mean of (max - min) / 8 = 0.6 N on [0, 4.8] N, the
+    force_distribution: Literal["uniform", "beta"] = "uniform"  # element_loads: uniform (ntype eq. 14 / Table 2 fit it; estimate) or beta
+    # "beta" shape: estimate, alpha = 1, beta = 7 gives a component mean of (max - min) / 8 = 0.6 N on [0, 4.8] N, the
     # ntype paper's Table 2 MAE / Figs. 6-8 relative error (0.0203 N / 3.40 % = 0.60 N F_x, 0.0108 / 1.96 % =
     # 0.55 N F_z) read as an arithmetic mean (a reading the paper's numbers do not support: element_loads.py)
-    force_beta_a: Between(0.05, 100.0) = 1.0
-    force_beta_b: Between(0.05, 100.0) = 7.0
+    force_beta_alpha: Between(0.05, 100.0) = 1.0  # element_loads "beta": shape alpha; estimate, mean 0.6 N on [0, 4.8] N (ntype Table 2 / Figs. 6-8 as an arithmetic mean)
+    force_beta_beta: Between(0.05, 100.0) = 7.0  # element_loads "beta": shape beta; estimate (with alpha = 1: mean = range / 8)
     # velostat kinds (compression testing machine, force control; velostat sects. 3.1, 4.1, 5.4):
     hold_min_s: Pos(3600.0) = 5.0  # velostat: holds of 5-30 s
     hold_max_s: Pos(3600.0) = 30.0

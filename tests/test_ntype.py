@@ -261,7 +261,7 @@ def test_paper_protocol_labels_and_sample_count():
 
 
 @pytest.mark.parametrize("dist, extra, mean_n", [("uniform", [], 2.4), ("beta", [], 0.6),
-                                                 ("beta", ["protocol.force_beta_a=2", "protocol.force_beta_b=2"], 2.4)])
+                                                 ("beta", ["protocol.force_beta_alpha=2", "protocol.force_beta_beta=2"], 2.4)])
 def test_element_loads_force_distribution(dist, extra, mean_n):
     """protocol.force_distribution: the drawn components keep to [amplitude_min, amplitude_max], their mean and
     spread are the stated distribution's (uniform: mean 2.4 N, sd 4.8 / sqrt 12; beta(a, b) x 4.8 N: mean
@@ -279,7 +279,7 @@ def test_element_loads_force_distribution(dist, extra, mean_n):
     for k in range(3):  # each component on its own: 5760 draws, mean within 4 standard errors
         assert abs(f[..., k].mean() - mean_n) < 4 * se
     p = c.protocol
-    a, b = (1.0, 1.0) if dist == "uniform" else (p.force_beta_a, p.force_beta_b)
+    a, b = (1.0, 1.0) if dist == "uniform" else (p.force_beta_alpha, p.force_beta_beta)
     sd = 4.8 * np.sqrt(a * b / ((a + b) ** 2 * (a + b + 1)))
     assert f.std() == pytest.approx(sd, rel=0.05)
     np.testing.assert_array_equal(make_episode_protocol(c, 3).params["forces_n"], f[60:80])  # same seed, same draw

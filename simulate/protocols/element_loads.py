@@ -19,8 +19,8 @@ How each component is drawn on the range (protocol.force_distribution):
              Table 2's absolute errors the ratio falls in 0.16-1.21 N (5-95 %, median 0.72 N), the paper's
              three inside; a draw whose arithmetic mean is 0.6 N (Beta(1, 7) x 4.8 N) gives 0.02-0.20 N, none
              inside (learn/experiments/ntype.py implied_force_band, in the experiment's findings).
-  "beta"     amplitude_min + (amplitude_max - amplitude_min) x Beta(force_beta_a, force_beta_b): components
-             skewed to small forces (mean a / (a + b) of the range; the defaults a = 1, b = 7 put it at 0.6 N on
+  "beta"     amplitude_min + (amplitude_max - amplitude_min) x Beta(force_beta_alpha, force_beta_beta): components
+             skewed to small forces (mean alpha / (alpha + beta) of the range; the defaults alpha = 1, beta = 7 put it at 0.6 N on
              [0, 4.8] N, the paper's ratio read as an arithmetic mean). Kept available, not the default.
 """
 
@@ -40,7 +40,7 @@ def draw_components(p, rng: np.random.Generator, shape: tuple[int, ...]) -> np.n
     if kind == "uniform":
         return rng.uniform(lo, hi, size=shape)
     if kind == "beta":
-        return lo + (hi - lo) * rng.beta(float(p.force_beta_a), float(p.force_beta_b), size=shape)
+        return lo + (hi - lo) * rng.beta(float(p.force_beta_alpha), float(p.force_beta_beta), size=shape)
     raise ValueError(f"protocol.force_distribution: unknown {kind!r} (uniform, beta)")
 
 
@@ -48,7 +48,7 @@ def component_mean_n(p) -> float:
     """Expected value (N) of one drawn component under p.force_distribution."""
     lo, hi = float(p.amplitude_min), float(p.amplitude_max)
     if getattr(p, "force_distribution", "uniform") == "beta":
-        a, b = float(p.force_beta_a), float(p.force_beta_b)
+        a, b = float(p.force_beta_alpha), float(p.force_beta_beta)
         return lo + (hi - lo) * a / (a + b)
     return 0.5 * (lo + hi)
 
