@@ -66,8 +66,10 @@ class ProtocolConfig(Strict):
     in a random direction to a target shear force of U[0, shear_ratio_max] x friction x normal force
     (Coulomb stick-slip; above 1 it slips), holds, then releases (ntype).
     kind = "element_loads" (force control, the ntype paper's experiment, sect. 3.2): every frame, each array
-    element carries its own static 3-D force, components U[amplitude_min, amplitude_max]
-    (simulate/protocols/element_loads.py; scenes/ntype_config.py PAPER_PROTOCOL).
+    element carries its own static 3-D force, components on [amplitude_min, amplitude_max], drawn per
+    `force_distribution`: "uniform" (the paper's task default) or "beta" (amplitude_min + (max - min) x
+    Beta(force_beta_alpha, force_beta_beta), a draw skewed to small forces) (simulate/protocols/element_loads.py;
+    scenes/ntype_config.py PAPER_PROTOCOL).
     """
 
     kind: Literal[
@@ -92,6 +94,15 @@ class ProtocolConfig(Strict):
     stroke_s: Pos(3600.0) = 0.5  # for kind="press_stroke": duration of the tangential stroke; estimate
     shear_ratio_max: NonNeg(10.0) = 1.2  # for kind="press_stroke": target shear / (friction x normal force); estimate
     active_probability: Fraction = 0.7  # for kind="press_stroke": chance that each extra indenter presses; estimate
+    # for kind="element_loads": how each force component is drawn on [amplitude_min, amplitude_max]. "uniform":
+    # estimate, the paper (ntype sect. 3.2) states only the range [0, 4.8] N; its eq. 14 (relative error over every
+    # component, divided by the true F) and Table 2 / Figs. 6-8 fit it (simulate/protocols/element_loads.py).
+    force_distribution: Literal["uniform", "beta"] = "uniform"  # element_loads: uniform (ntype eq. 14 / Table 2 fit it; estimate) or beta
+    # "beta" shape: estimate, alpha = 1, beta = 7 gives a component mean of (max - min) / 8 = 0.6 N on [0, 4.8] N, the
+    # ntype paper's Table 2 MAE / Figs. 6-8 relative error (0.0203 N / 3.40 % = 0.60 N F_x, 0.0108 / 1.96 % =
+    # 0.55 N F_z) read as an arithmetic mean (a reading the paper's numbers do not support: element_loads.py)
+    force_beta_alpha: Between(0.05, 100.0) = 1.0  # element_loads "beta": shape alpha; estimate, mean 0.6 N on [0, 4.8] N (ntype Table 2 / Figs. 6-8 as an arithmetic mean)
+    force_beta_beta: Between(0.05, 100.0) = 7.0  # element_loads "beta": shape beta; estimate (with alpha = 1: mean = range / 8)
     # velostat kinds (compression testing machine, force control; velostat sects. 3.1, 4.1, 5.4):
     hold_min_s: Pos(3600.0) = 5.0  # velostat: holds of 5-30 s
     hold_max_s: Pos(3600.0) = 30.0

@@ -135,10 +135,13 @@ class NtypeSensorConfig(Strict):
 
 
 # The paper's experiment (protocol kind "element_loads", ntype sect. 3.2): every element carries its own static
-# 3-D force, each component in [0, 4.8] N; 150 episodes x 20 frames = 3000 samples. One frame a second:
+# 3-D force, each component in [0, 4.8] N, drawn uniformly (estimate: the paper gives the range only; its eq. 14,
+# Table 2 and Figs. 6-8 fit a uniform draw and not one skewed to ~0.6 N, simulate/protocols/element_loads.py);
+# 150 episodes x 20 frames = 3000 samples. One frame a second:
 # estimate, long beside the 0.3 s lag so that each sample is a settled reading (the paper's are static).
 # (frequencies_hz is unused by this kind; set below the 1 Hz rate's limit.)
 PAPER_PROTOCOL = [
     "protocol.kind=element_loads", "protocol.amplitude_min=0", "protocol.amplitude_max=4.8",
+    "protocol.force_distribution=uniform",
     "protocol.settle_s=0", "protocol.duration_s=20", "sampling.sample_rate_hz=1", "protocol.frequencies_hz=[0.05]",
 ]

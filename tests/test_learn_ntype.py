@@ -145,6 +145,25 @@ def test_paper_scaling_folds_and_errors():
     e = component_errors(ref, est, 0.5)
     assert e["E_Fx"] == pytest.approx(10.0) and e["E_Fy"] == pytest.approx(50.0) and e["E_Fz"] == pytest.approx(50.0)
     assert e["n_Fx"] == 1 and e["MAE_Fx"] == pytest.approx((0.1 + 8.9) / 2)
+    # eq. 14 as printed: every nonzero component over its own F (Fx: 10 % and 8.9 / 0.1 = 8900 %)
+    e = component_errors(ref, est, 0.5, literal=True)
+    assert e["E_all_Fx"] == pytest.approx((10.0 + 8900.0) / 2) and e["n_all_Fx"] == 2 and e["n_all_Fz"] == 1
+    assert e["E_all_Fy"] == pytest.approx(50.0) and e["E_all_Fz"] == pytest.approx(50.0)  # zeros left out
+
+
+def test_paper_ratio_fits_a_uniform_draw_not_a_skewed_one():
+    """ntype Table 2 / Figs. 6-8: MAE / E = 0.60 / 1.11 / 0.55 N. With Table 2's absolute errors independent of F
+    (their spread is 0.8x their mean; the relative errors' is 2-10x), 180 components of U[0, 4.8] N put all three
+    inside the 5-95 % band of the ratio; a draw skewed to the same 0.6 N arithmetic mean (Beta(1, 7)) puts none."""
+    from learn.experiments.ntype import PAPER_IMPLIED_FORCE_N, implied_force_band
+
+    assert PAPER_IMPLIED_FORCE_N == pytest.approx((0.597, 1.106, 0.551), abs=2e-3)
+    u, b = implied_force_band("uniform", trials=1000), implied_force_band("beta", 1.0, 7.0, trials=1000)
+    assert u["component_mean_n"] == pytest.approx(2.4) and b["component_mean_n"] == pytest.approx(0.6)
+    for c in ("Fx", "Fy", "Fz"):
+        assert u[c]["paper_inside_5_95"] and not b[c]["paper_inside_5_95"]
+        assert 0.5 < u[c]["ratio_n_p5_p50_p95"][1] < 1.0 and b[c]["ratio_n_p5_p50_p95"][2] < 0.3
+    assert implied_force_band("uniform", trials=200, seed=1) == implied_force_band("uniform", trials=200, seed=1)
 
 
 def test_experiment_ntype_tiny(tmp_path):
@@ -166,6 +185,8 @@ def test_experiment_ntype_tiny(tmp_path):
     f = m["findings"]
     assert {"table1_best_spread", "table1_interior_optimum", "window5_beats_no_window", "best_paper_model",
             "map_cnn_beats_best_paper_model", "elem_mlp_beats_best_paper_model"} <= set(f)
+    assert {"table1_best_spread_eq14_all", "implied_force_n_at_spread7_eq14_all", "implied_force_band"} <= set(f)
+    assert "E_all_Fz" in m["models"]["rbf_col"]["7.0"] and "E_all_Fz" not in m["tasks"]["press_stroke"]["models"]["mean"]
     g = f["nearest_centre_median"]  # the report's reason for a best spread at the sweep's end
     assert set(g) == {"rbf_col_Fx", "rbf_col_Fy", "rbf_col_Fz", "rbf_w1", "rbf_w5"} and min(g.values()) > 0
     assert g["rbf_w5"] > g["rbf_w1"]  # 15 inputs that vary independently leave the centres farther apart than 3

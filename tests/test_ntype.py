@@ -258,3 +258,29 @@ def test_paper_protocol_labels_and_sample_count():
     assert lab.shape == (3, 20, 36, 3)
     rz = out["resistance"][..., RZ] / 1e3
     assert rz.min() > 15.0 and rz.max() <= 25.0  # ntype sect. 3.2: R_z in [16, 25] kOhm
+
+
+@pytest.mark.parametrize("dist, extra, mean_n", [("uniform", [], 2.4), ("beta", [], 0.6),
+                                                 ("beta", ["protocol.force_beta_alpha=2", "protocol.force_beta_beta=2"], 2.4)])
+def test_element_loads_force_distribution(dist, extra, mean_n):
+    """protocol.force_distribution: the drawn components keep to [amplitude_min, amplitude_max], their mean and
+    spread are the stated distribution's (uniform: mean 2.4 N, sd 4.8 / sqrt 12; beta(a, b) x 4.8 N: mean
+    4.8 a / (a + b)), the draw is a function of the seed, and the uniform draw is the paper task's default."""
+    from scenes.ntype_config import PAPER_PROTOCOL
+    from simulate.protocols.element_loads import component_mean_n
+    from simulate.protocols.indenter import make_episode_protocol
+
+    c = load_scene("ntype", [*PAPER_PROTOCOL, f"protocol.force_distribution={dist}", *extra])
+    assert load_scene("ntype", PAPER_PROTOCOL).protocol.force_distribution == "uniform"
+    f = np.concatenate([make_episode_protocol(c, s).params["forces_n"] for s in range(8)])  # 8 x 20 x 36 x 3
+    assert f.min() >= 0.0 and f.max() <= 4.8 and f.shape == (160, 36, 3)
+    assert component_mean_n(c.protocol) == pytest.approx(mean_n)
+    se = f.std() / np.sqrt(f[..., 0].size)
+    for k in range(3):  # each component on its own: 5760 draws, mean within 4 standard errors
+        assert abs(f[..., k].mean() - mean_n) < 4 * se
+    p = c.protocol
+    a, b = (1.0, 1.0) if dist == "uniform" else (p.force_beta_alpha, p.force_beta_beta)
+    sd = 4.8 * np.sqrt(a * b / ((a + b) ** 2 * (a + b + 1)))
+    assert f.std() == pytest.approx(sd, rel=0.05)
+    np.testing.assert_array_equal(make_episode_protocol(c, 3).params["forces_n"], f[60:80])  # same seed, same draw
+    assert not np.array_equal(make_episode_protocol(c, 4).params["forces_n"], f[60:80])
