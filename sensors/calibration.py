@@ -7,6 +7,7 @@ FAMILY` prints targets beside results and, with --write, writes the fitted field
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 
@@ -29,3 +30,16 @@ class CalibrationResult:
     rows: list[TargetRow] = field(default_factory=list)
     preset_fields: dict[str, dict[str, float]] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+
+
+def root_in_bracket(f: Callable[[float], float], lo: float, hi: float, xtol: float) -> float:
+    """Where a rising f crosses zero in [lo, hi] (Brent's method), or the bracket's end when f has one sign there:
+    the fitted parameter of a calibration whose target figure grows with it."""
+    from scipy.optimize import brentq
+
+    if f(lo) >= 0:
+        return lo
+    if f(hi) <= 0:
+        return hi
+    return float(brentq(f, lo, hi, xtol=xtol))
+

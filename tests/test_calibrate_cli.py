@@ -69,3 +69,11 @@ def test_velostat_calibration_pulls_perturbed_creep_back_and_preset_is_its_fit()
     a = fit_creep_amplitude(bad)
     assert staircase_error(_with_amplitude(cfg, a)) == pytest.approx(PAPER_CREEP_ERROR_N, abs=0.05)
     assert a == pytest.approx(a0, rel=0.02)
+
+
+def test_root_in_bracket_crosses_zero_or_clamps_to_the_bracket():
+    from sensors.calibration import root_in_bracket
+
+    assert abs(root_in_bracket(lambda x: x ** 3 - 0.027, 0.0, 1.0, xtol=1e-9) - 0.3) < 1e-8
+    assert root_in_bracket(lambda x: x + 1.0, 0.0, 1.0, xtol=1e-6) == 0.0  # the target lies below the bracket
+    assert root_in_bracket(lambda x: x - 5.0, 0.0, 1.0, xtol=1e-6) == 1.0  # above it

@@ -20,6 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from sensors.calibration import root_in_bracket
+
 if TYPE_CHECKING:
     from sensors.calibration import CalibrationResult
 
@@ -169,19 +171,12 @@ def repeat_hysteresis(cfg, seeds: list[int] = MEAN_REPEAT_SEEDS) -> dict:
 
 def fit_set_fraction(cfg, target_pct: float) -> float:
     """sensor.press.set_fraction_mean that gives target_pct (paper's definition) on the mean loop of repeats."""
-    from scipy.optimize import brentq
-
     def h(v):
         c = cfg.model_copy(deep=True)
         c.sensor.press.set_fraction_mean = float(v)
         return repeat_hysteresis(c)["hysteresis_of_max_pct"] - target_pct
 
-    lo, hi = 0.0, 1.0
-    if h(lo) >= 0:
-        return lo
-    if h(hi) <= 0:
-        return hi
-    return float(brentq(h, lo, hi, xtol=1e-5))
+    return root_in_bracket(h, 0.0, 1.0, xtol=1e-5)
 
 
 def calibrate(cfg) -> dict:

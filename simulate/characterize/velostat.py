@@ -22,6 +22,7 @@ import numpy as np
 
 from scenes import SceneConfig
 from sensors.base import LoadBatch
+from sensors.calibration import root_in_bracket
 from sensors.registry import make_sensor
 from simulate.protocols.indenter import EpisodeProtocol, target_waveform
 from simulate.characterize.report import Report, fmt
@@ -327,17 +328,10 @@ def staircase_error(cfg: SceneConfig) -> float:
 
 def fit_creep_amplitude(cfg: SceneConfig, target_n: float = PAPER_CREEP_ERROR_N) -> float:
     """sensor.creep.amplitude that puts the staircase creep error at target_n (brentq; the error rises with it)."""
-    from scipy.optimize import brentq
-
     def g(a):
         return staircase_error(_with_amplitude(cfg, a)) - target_n
 
-    lo, hi = 0.02, 3.0
-    if g(lo) >= 0:
-        return lo
-    if g(hi) <= 0:
-        return hi
-    return float(brentq(g, lo, hi, xtol=1e-3))
+    return root_in_bracket(g, 0.02, 3.0, xtol=1e-3)
 
 
 def calibrate(cfg: SceneConfig | None = None, parts: list[int] = PARTS) -> "CalibrationResult":
