@@ -4,13 +4,22 @@ Deterministic for a given seed on CPU: the weights are initialised under ``torch
 (the caller builds the net inside `seeded`), the batch order comes from a private generator, and the
 best epoch's weights are restored at the end. Inputs and targets arrive already z-scored; the
 statistics live with the compensator (learn.models.base), not here.
+
+Device: training runs where `TrainConfig.device` says, else where the innermost `training_device(...)` block
+says (the CLI's `--train-device`), else on the CPU. On a CUDA device the net and the examples are moved there
+for the epochs and the net comes back to the CPU with its best weights, so prediction, streaming and
+checkpoints are unchanged; the batch order is drawn on the CPU either way. CUDA kernels sum in another order
+than the CPU's, so a CUDA run is reproducible on its own device (same seed, same GPU) but not bit-equal to the
+CPU run; the history records the device (`TrainHistory.device`).
 """
 
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import copy
 import math
+import re
 import time
 from dataclasses import asdict, dataclass, field
 from typing import Any, Callable, Iterator
@@ -18,7 +27,45 @@ from typing import Any, Callable, Iterator
 import torch
 from torch import nn
 
-__all__ = ["TrainConfig", "TrainHistory", "train_model", "seeded"]
+__all__ = ["TrainConfig", "TrainHistory", "train_model", "seeded", "training_device", "resolve_device", "current_device"]
+
+TRAIN_DEVICES = ("cpu", "cuda", "auto")  # what --train-device accepts (also "cuda:N")
+_DEVICE: contextvars.ContextVar[str] = contextvars.ContextVar("piezotwin_train_device", default="cpu")
+
+
+def resolve_device(name: str) -> str:
+    """"cpu", "cuda", "cuda:N" or "auto" (CUDA when torch sees a device, else the CPU) -> a concrete torch device
+    string; ValueError naming the allowed values, or saying that torch sees no CUDA device."""
+    name = str(name).strip().lower()
+    if name == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    if name == "cpu":
+        return "cpu"
+    if name == "cuda" or re.fullmatch(r"cuda:\d+", name):
+        if not torch.cuda.is_available():
+            raise ValueError(f"train device '{name}': this torch ({torch.__version__}) sees no CUDA device "
+                             "(use cpu or auto)")
+        idx = int(name.split(":")[1]) if ":" in name else 0
+        if idx >= torch.cuda.device_count():
+            raise ValueError(f"train device '{name}': torch sees {torch.cuda.device_count()} CUDA device(s)")
+        return name
+    raise ValueError(f"train device must be one of {', '.join(TRAIN_DEVICES)} or cuda:N (got '{name}')")
+
+
+def current_device() -> str:
+    """The device the innermost `training_device` block chose ("cpu" outside any)."""
+    return _DEVICE.get()
+
+
+@contextlib.contextmanager
+def training_device(name: str) -> Iterator[str]:
+    """Train every `train_model` call inside the block on ``name`` (see `resolve_device`); yields the concrete
+    device."""
+    token = _DEVICE.set(resolve_device(name))
+    try:
+        yield _DEVICE.get()
+    finally:
+        _DEVICE.reset(token)
 
 
 @dataclass
@@ -32,6 +79,7 @@ class TrainConfig:
     grad_clip: float | None = 1.0
     max_batches_per_epoch: int | None = None  # a random subset of batches each epoch (quick runs)
     seed: int = 0
+    device: str | None = None  # None: the innermost training_device block's (the CPU outside any)
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -45,6 +93,7 @@ class TrainHistory:
     best_loss: float = math.inf
     stopped_early: bool = False
     seconds: float = 0.0
+    device: str = "cpu"  # where the epochs ran
 
     @property
     def epochs(self) -> int:
@@ -53,7 +102,7 @@ class TrainHistory:
     def to_json(self) -> dict[str, Any]:
         return {
             "epochs": self.epochs, "best_epoch": self.best_epoch, "best_loss": self.best_loss,
-            "stopped_early": self.stopped_early, "seconds": self.seconds,
+            "stopped_early": self.stopped_early, "seconds": self.seconds, "device": self.device,
             "train_loss": self.train_loss, "valid_loss": self.valid_loss,
         }
 
@@ -80,9 +129,10 @@ def evaluate(net: nn.Module, x: torch.Tensor, y: torch.Tensor, bs: int = 1024,
              loss_fn: Callable | None = None) -> float:
     loss_fn = loss_fn or nn.functional.mse_loss
     net.eval()
+    dev = next((p.device for p in net.parameters()), torch.device("cpu"))
     tot, n = 0.0, 0
     for i in range(0, len(x), bs):
-        xb, yb = x[i : i + bs], y[i : i + bs]
+        xb, yb = x[i : i + bs].to(dev), y[i : i + bs].to(dev)
         tot += float(loss_fn(net(xb), yb, reduction="sum"))
         n += yb.numel()
     return tot / max(n, 1)
@@ -109,10 +159,14 @@ def train_model(
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    xt, yt = train
+    dev = torch.device(resolve_device(cfg.device) if cfg.device is not None else current_device())
+    xt, yt = (t.to(dev) for t in train)
+    if valid is not None:
+        valid = (valid[0].to(dev), valid[1].to(dev))
+    net.to(dev)  # before the optimiser sees the parameters
     gen = torch.Generator().manual_seed(int(cfg.seed))
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
-    hist = TrainHistory()
+    hist = TrainHistory(device=str(dev))
     best_state = copy.deepcopy(net.state_dict())
     bad = 0
     if keep_initial and valid is not None:
@@ -126,6 +180,7 @@ def train_model(
             net.train()
             tot, n = 0.0, 0
             for idx in _batches(len(xt), cfg.batch_size, gen, cfg.max_batches_per_epoch):
+                idx = idx.to(dev)
                 xb, yb = xt[idx], yt[idx]
                 opt.zero_grad(set_to_none=True)
                 loss = nn.functional.mse_loss(net(xb), yb)
@@ -148,6 +203,9 @@ def train_model(
                 hist.stopped_early = True
                 break
     net.load_state_dict(best_state)
+    net.to("cpu")  # prediction, streaming and checkpoints work on the CPU
     net.eval()
+    if dev.type == "cuda":
+        torch.cuda.synchronize(dev)
     hist.seconds = time.perf_counter() - t0
     return hist

@@ -25,14 +25,22 @@ def experiment(
     models: Annotated[Optional[str], typer.Option(help="Comma-separated subset of models (the trivial 'mean' always runs).")] = None,
     seed: Annotated[int, typer.Option(help="Seed of the data, the split and the training.")] = 0,
     mode: Annotated[Optional[str], typer.Option(hidden=True, help="full | quick | tiny (overrides --quick).")] = None,
+    train_device: Annotated[str, typer.Option(
+        "--train-device", help="Where the gradient-trained nets train: cpu (default: bit-reproducible), cuda, cuda:N "
+        "or auto (CUDA when torch sees one). Closed-form and Levenberg-Marquardt fits stay on the CPU.")] = "cpu",
 ) -> None:
     """Generate (or reuse) data, train the paper's compensators and ours, write report.md + metrics.json + plots."""
     from learn.experiments import EXPERIMENTS, get_experiment
+    from learn.train import resolve_device, training_device
 
     keys = sorted(EXPERIMENTS) if key == "all" else [key]
     for k in keys:
         if k not in EXPERIMENTS:
             fail(f"unknown experiment '{k}' (known: {', '.join(sorted(EXPERIMENTS))}, all)")
+    try:
+        resolve_device(train_device)
+    except ValueError as exc:
+        fail(f"--train-device: {exc}")
     run_mode = mode or ("quick" if quick else "full")
     sel = [m.strip() for m in models.split(",") if m.strip()] if models else None
     for k in keys:
@@ -48,7 +56,8 @@ def experiment(
         dest = dest or Path("runs") / (f"experiment-{k}" + ("" if run_mode == "full" else f"-{run_mode}"))
         _check_writable(dest)
         try:
-            exp.run(dest, mode=run_mode, data_dir=data, overrides=list(set_ or []), models=sel, seed=seed,
-                    progress=err.is_terminal, log=lambda s: console.print(s, highlight=False))
+            with training_device(train_device):
+                exp.run(dest, mode=run_mode, data_dir=data, overrides=list(set_ or []), models=sel, seed=seed,
+                        progress=err.is_terminal, log=lambda s: console.print(s, highlight=False))
         except ValueError as exc:
             fail(str(exc))
