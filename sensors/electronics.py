@@ -294,6 +294,51 @@ def _normal_wp(key: wp.uint64, k: int) -> wp.float64:
     return wp.sqrt(wp.float64(-2.0) * wp.log(u1)) * wp.cos(wp.float64(TWO_PI) * u2)
 
 
+@wp.func
+def _noise_v_wp(key_white: wp.uint64, key_pink: wp.uint64, k: int, b: vec_pink, white_v: wp.float64,
+                pink_scale: wp.float64, pink_a: vec_pink_ar, pink_c: vec_pink_ar, pink_d: wp.float64,
+                pink_e: wp.float64):
+    """One sample of readout noise (V) at absolute step k: the pink AR bank advanced by one step plus white;
+    returns (the advanced pink state, the noise). Shared by the serial and the chunked readout kernels."""
+    w = _normal_wp(key_pink, k)
+    for i in range(6):
+        b[i] = pink_a[i] * b[i] + w * pink_c[i]
+    pink = b[0] + b[1] + b[2] + b[3] + b[4] + b[5] + b[6] + w * pink_e
+    b[6] = w * pink_d
+    return b, white_v * _normal_wp(key_white, k) + pink_scale * pink
+
+
+@wp.func
+def _bridge_adc_wp(g: wp.float64, nv: wp.float64, v_ex: wp.float64, r_b: wp.float64, gain: wp.float64,
+                   offset: wp.float64, lsb: wp.float64, code_min: wp.float64, code_max: wp.float64):
+    """Conductance (S) -> (resistance ohm, bridge voltage V, ADC code, ADC voltage V) with noise nv (V) added
+    before the converter."""
+    r_s = wp.float64(1.0) / g
+    vb = v_ex * (r_s / (r_s + r_b) - wp.float64(0.5))
+    v = gain * vb + offset + nv
+    code = wp.min(wp.max(wp.round(v / lsb), code_min), code_max)
+    return r_s, vb, code, code * lsb
+
+
+@wp.func
+def _sos_wp(x: wp.float64, z: vec_zi, sos: vec_sos, n_sections: int):
+    """One sample through the Butterworth cascade (transposed direct form II per section); returns (state, y)."""
+    for i in range(MAX_SECTIONS):
+        if i < n_sections:
+            y = sos[6 * i + 0] * x + z[2 * i + 0]
+            z[2 * i + 0] = sos[6 * i + 1] * x - sos[6 * i + 4] * y + z[2 * i + 1]
+            z[2 * i + 1] = sos[6 * i + 2] * x - sos[6 * i + 5] * y
+            x = y
+    return z, x
+
+
+@wp.func
+def _measured_r_wp(x: wp.float64, offset: wp.float64, gain: wp.float64, v_ex: wp.float64, r_b: wp.float64) -> wp.float64:
+    """The resistance the host computes back from the (filtered) ADC voltage, ohm."""
+    ratio = (x - offset) / gain / v_ex + wp.float64(0.5)
+    return r_b * ratio / (wp.float64(1.0) - ratio)
+
+
 @wp.kernel
 def readout_kernel(
     g: wp.array(dtype=wp.float64),  # [E*T*C]
@@ -335,8 +380,6 @@ def readout_kernel(
     z = st_filt[tid]
     primed = st_primed[tid]
     b = st_pink[tid]
-    half = wp.float64(0.5)
-    one = wp.float64(1.0)
     key_white = wp.uint64(0)
     key_pink = wp.uint64(0)
     if seeded != 0:
@@ -352,35 +395,20 @@ def readout_kernel(
         idx = (ep * n_steps + k) * n_channels + c
         nv = wp.float64(0.0)
         if seeded != 0:
-            w = _normal_wp(key_pink, t0 + k)
-            for i in range(6):
-                b[i] = pink_a[i] * b[i] + w * pink_c[i]
-            pink = b[0] + b[1] + b[2] + b[3] + b[4] + b[5] + b[6] + w * pink_e
-            b[6] = w * pink_d
-            nv = white_v * _normal_wp(key_white, t0 + k) + pink_scale * pink
+            b, nv = _noise_v_wp(key_white, key_pink, t0 + k, b, white_v, pink_scale, pink_a, pink_c, pink_d, pink_e)
         else:
             nv = noise[idx]
-        r_s = one / g[idx]
-        vb = v_ex * (r_s / (r_s + r_b) - half)
-        v = gain * vb + offset + nv
-        code = wp.min(wp.max(wp.round(v / lsb), code_min), code_max)
-        x = code * lsb
+        r_s, vb, code, x = _bridge_adc_wp(g[idx], nv, v_ex, r_b, gain, offset, lsb, code_min, code_max)
         if primed == 0:
             for j in range(2 * MAX_SECTIONS):
                 z[j] = zi_unit[j] * x
             primed = 1
-        for i in range(MAX_SECTIONS):
-            if i < n_sections:
-                y = sos[6 * i + 0] * x + z[2 * i + 0]
-                z[2 * i + 0] = sos[6 * i + 1] * x - sos[6 * i + 4] * y + z[2 * i + 1]
-                z[2 * i + 1] = sos[6 * i + 2] * x - sos[6 * i + 5] * y
-                x = y
-        ratio = (x - offset) / gain / v_ex + half
+        z, x = _sos_wp(x, z, sos, n_sections)
         out_r[idx] = r_s
         out_vb[idx] = vb
         out_code[idx] = int(code)
         out_vf[idx] = x
-        out_rm[idx] = r_b * ratio / (one - ratio)
+        out_rm[idx] = _measured_r_wp(x, offset, gain, v_ex, r_b)
     st_filt[tid] = z
     st_primed[tid] = primed
     st_pink[tid] = b
@@ -493,8 +521,6 @@ def readout_chunk_kernel(
     j = tid - row * n_chunks
     ep = row // n_channels
     c = row - ep * n_channels
-    half = wp.float64(0.5)
-    one = wp.float64(1.0)
     key_white = wp.uint64(0)
     key_pink = wp.uint64(0)
     b = vec_pink()
@@ -507,26 +533,16 @@ def readout_chunk_kernel(
         idx = (ep * n_steps + k) * n_channels + c
         nv = wp.float64(0.0)
         if seeded != 0:
-            w = _normal_wp(key_pink, t0 + k)
-            for i in range(6):
-                b[i] = pink_a[i] * b[i] + w * pink_c[i]
-            pink = b[0] + b[1] + b[2] + b[3] + b[4] + b[5] + b[6] + w * pink_e
-            b[6] = w * pink_d
-            nv = white_v * _normal_wp(key_white, t0 + k) + pink_scale * pink
+            b, nv = _noise_v_wp(key_white, key_pink, t0 + k, b, white_v, pink_scale, pink_a, pink_c, pink_d, pink_e)
         else:
             nv = noise[idx]
-        r_s = one / g[idx]
-        vb = v_ex * (r_s / (r_s + r_b) - half)
-        v = gain * vb + offset + nv
-        code = wp.min(wp.max(wp.round(v / lsb), code_min), code_max)
-        x = code * lsb
+        r_s, vb, code, x = _bridge_adc_wp(g[idx], nv, v_ex, r_b, gain, offset, lsb, code_min, code_max)
         out_r[idx] = r_s
         out_vb[idx] = vb
         out_code[idx] = int(code)
         out_vf[idx] = x
         if filtered == 0:
-            ratio = (x - offset) / gain / v_ex + half
-            out_rm[idx] = r_b * ratio / (one - ratio)
+            out_rm[idx] = _measured_r_wp(x, offset, gain, v_ex, r_b)
 
 
 @wp.kernel
@@ -542,8 +558,6 @@ def readout_filter_kernel(
     c = tid - ep * n_channels
     z = st_filt[tid]
     primed = st_primed[tid]
-    half = wp.float64(0.5)
-    one = wp.float64(1.0)
     for k in range(n_steps):
         idx = (ep * n_steps + k) * n_channels + c
         x = out_vf[idx]
@@ -551,15 +565,9 @@ def readout_filter_kernel(
             for j in range(2 * MAX_SECTIONS):
                 z[j] = zi_unit[j] * x
             primed = 1
-        for i in range(MAX_SECTIONS):
-            if i < n_sections:
-                y = sos[6 * i + 0] * x + z[2 * i + 0]
-                z[2 * i + 0] = sos[6 * i + 1] * x - sos[6 * i + 4] * y + z[2 * i + 1]
-                z[2 * i + 1] = sos[6 * i + 2] * x - sos[6 * i + 5] * y
-                x = y
-        ratio = (x - offset) / gain / v_ex + half
+        z, x = _sos_wp(x, z, sos, n_sections)
         out_vf[idx] = x
-        out_rm[idx] = r_b * ratio / (one - ratio)
+        out_rm[idx] = _measured_r_wp(x, offset, gain, v_ex, r_b)
     st_filt[tid] = z
     st_primed[tid] = primed
 
