@@ -1087,6 +1087,22 @@ def cli() -> str:
     return re.sub(r"\n{3,}", "\n\n", md)
 
 
+def train_device() -> str:
+    """The nets trained on the GPU beside the CPU (`--train-device`), from train-device-*.json."""
+    files = sorted(RESULTS.glob("train-device-*.json"))
+    if not files:
+        return missing("The training-device comparison", "Run `piezotwin experiment cnt_pdms --quick --train-device cuda` and cpu on a GPU machine.")
+    d = load(files[-1]) or {}
+    rows = []
+    for k, v in d.get("models", {}).items():
+        c, g = v["cpu"], v["cuda"]
+        rows.append([k, num(c["seconds_per_epoch"]), num(g["seconds_per_epoch"]), f"{num(v['epoch_speedup'])}x",
+                     f"{c['epochs']} / {g['epochs']}", f"{num(c['test_rmse_n'])} / {num(g['test_rmse_n'])}"])
+    return "\n".join([f"{d.get('what', '')} (`{files[-1].name}`, {d.get('gpu', '')}; {d.get('host', '')}):\n",
+                      table(["model", "s / epoch, CPU", "s / epoch, CUDA", "per epoch", "epochs CPU / CUDA",
+                             "test RMSE N, CPU / CUDA"], rows)])
+
+
 # ----------------------------------------------------------------------------------------------- all outputs
 def outputs() -> dict[Path, Callable[[], str]]:
     """Every generated file -> the function that writes its text (the README block is handled apart)."""
@@ -1099,6 +1115,7 @@ def outputs() -> dict[Path, Callable[[], str]]:
         GEN / "channels-common.md": channels_common,
         GEN / "cli.md": cli,
         GEN / "sim2real.md": sim2real_results,
+        GEN / "train-device.md": train_device,
     }
     for fam, presets in presets_by_family().items():
         outs[GEN / f"channels-{fam}.md"] = (lambda f=fam: channels(f))
