@@ -198,6 +198,8 @@ def sim2real(
     seed: Annotated[int, typer.Option(help="Root seed (split, fit bootstrap, generation, training).")] = 0,
     rated_force_n: Annotated[Optional[float], typer.Option("--rated-force-n", help="The sensor's / rig's rated force (N), "
                              "as the user knows it (never the test runs' maximum): the simulated presses span it.")] = None,
+    run_level: Annotated[bool, typer.Option("--run-level", help="Draw each simulated run's ln gain from the fitted "
+                         "run-level sd of the press levels (hierarchical levels) instead of the std of the run means.")] = False,
 ) -> None:
     """Real -> sim -> real: fit the chain, generate randomized data around it, pre-train, fine-tune, report."""
     from learn.sim2real import S2R_BUDGET, run_sim2real
@@ -216,6 +218,8 @@ def sim2real(
         if not (math.isfinite(rated_force_n) and 0 < rated_force_n < 1e6):
             fail(f"--rated-force-n must be a positive finite force in N (got {rated_force_n})")
         b["rated_force_n"] = float(rated_force_n)
+    if run_level:
+        b["run_level"] = True
     try:
         import shlex
         import sys

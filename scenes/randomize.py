@@ -8,7 +8,8 @@ is ``sensors.data.manifest.episode_seed(root_seed, k)``, stream 0x5A9D kept apar
 streams). `piezotwin fit` writes one around the fitted chain (bootstrap spread of the parameters, the press
 placement spread, the board's rest level, noise); `simulate/generation/chain_gen.py` uses it.
 Quantities (all optional; units in the names):
-  gain_log            offset of ln r0 per episode (board gain / film part), normal
+  gain_log            offset of ln r0 per episode (board gain / film part; with sim2real run_level the run's own
+                      level u_run of the hierarchical press levels, sensors.chain_fit.run_level_sd), normal
   level_log_sd        press-to-press placement spread over the film (std of ln level per press)
   miss_prob           share of presses that miss the active area (no response)
   tip_area_scale      tip area relative to the fitted one (r0 ~ 1/A, F_c ~ A)

@@ -29,8 +29,10 @@ through the inverse divider), each press's level l_j profiled out (its mean log 
 the press levels, level_log_sd = their std (the press-to-press spread is a parameter of the model, drawn
 per press when generating, not subtracted), miss_prob = share of loaded presses that stay at the rest
 level. Ranges: bootstrap over presses (resample presses with replacement, refit), 5-95 % per parameter;
-the predictive 90 % band of a new press's level is mean +- 1.645 sqrt(sd^2 + se^2), se^2 = between-run
-variance / runs + within-run variance / presses (at the point fit's shape; see fit_chain).
+the levels are hierarchical, l_{run,j} = mu + u_run + e_j (run_level_sd: within-run and run-level sd, the latter
+with a prior where there are few runs), and the predictive 90 % band of a press of a new run is
+mean +- 1.645 sqrt(sd_w^2 + sd_run^2 + se^2), se^2 = sd_run^2 / runs + sd_w^2 / presses (at the point fit's
+shape; see fit_chain and new_run_band90).
 Hysteresis: the creep bank is the chain's (rate-dependent) hysteresis; no rate-independent (play) bank is
 fitted (the velostat model has none).
 """
@@ -62,6 +64,7 @@ class ChainParams:
     n_creep: int = 4
     creep_law: str = "force"  # "force": c adds to F; "aging": c multiplies the conductance by e^c (see module doc)
     level_log_sd: float = 0.0  # press-to-press std of ln level (placement)
+    level_run_log_sd: float = 0.0  # run-to-run std of ln level (mounting / conditioning of a run: run_level_sd)
     miss_prob: float = 0.0
     r_series_ohm: float = 0.0
     r_leak_ohm: float = 1.0e12
@@ -370,6 +373,53 @@ def leak_from_unloaded(runs: Seq[RealRun], p: ChainParams) -> float:
     return float(np.median(vals)) if vals else 1e12
 
 
+RUN_LEVEL_PRIOR_SD = 0.15  # estimate: run-to-run (re-mount, conditioning) spread of a thin-film piezoresistor's
+# ln level at one force: FSR makers quote +-5 to +-25 % force accuracy for one part, set by the consistency of the
+# actuation and mounting (Interlink Electronics, FSR Integration Guide, p. 8) and condition each part before
+# use because its response shifts over the first loadings (Tekscan, FlexiForce user manual rev. G,
+# "Repeatability"); +-25 % as a 90 % range in force is ~0.15 ln at a force exponent near 1 (Lupasic fit 0.98)
+RUN_LEVEL_PRIOR_DOF = 2.0  # estimate: the prior weighs as two runs' worth of between-run information (it decides
+# the value only where the training runs give fewer than ~2 degrees of freedom: one or two runs)
+
+
+def run_level_sd(levels: np.ndarray, run_of: np.ndarray, prior_sd: float = RUN_LEVEL_PRIOR_SD,
+                 prior_dof: float = RUN_LEVEL_PRIOR_DOF) -> dict[str, float]:
+    """Hierarchical press levels l_{r,j} = mu + u_r + e_{r,j}, u_r ~ N(0, sd_run^2) per run (its mounting and
+    contact conditioning), e ~ N(0, sd_w^2) per press (placement). One-way random-effects ANOVA (moment estimates
+    for unbalanced runs; Searle, Casella & McCulloch, Variance Components 1992, sect. 3.5): sd_w^2 = MSW,
+    sd_run^2 = max(MSB - MSW, 0) / n0, n0 = (N - sum n_r^2 / N) / (k - 1); then the conjugate scaled-inverse-chi^2
+    update with a prior of prior_dof runs at prior_sd (Gelman et al., Bayesian Data Analysis 3rd ed., sect. 3.3):
+    sd_run^2 = ((k - 1) sd_anova^2 + prior_dof prior_sd^2) / (k - 1 + prior_dof); one run: the prior."""
+    lev = np.asarray(levels, np.float64)
+    run_of = np.asarray(run_of)
+    runs, inv = np.unique(run_of, return_inverse=True)
+    k, n = len(runs), len(lev)
+    cnt = np.bincount(inv, minlength=k).astype(float)
+    means = np.bincount(inv, lev, minlength=k) / np.maximum(cnt, 1)
+    ssw = float(np.sum((lev - means[inv]) ** 2))
+    msw = ssw / (n - k) if n > k else 0.0
+    if k > 1:
+        msb = float(np.sum(cnt * (means - lev.mean()) ** 2)) / (k - 1)
+        n0 = (n - float(np.sum(cnt ** 2)) / n) / (k - 1)
+        s2 = max(msb - msw, 0.0) / max(n0, 1e-12)
+    else:
+        s2 = 0.0
+    post = ((k - 1) * s2 + prior_dof * prior_sd ** 2) / max(k - 1 + prior_dof, 1e-12)
+    return {"level_within_run_sd": float(np.sqrt(msw)), "level_run_sd_anova": float(np.sqrt(s2)),
+            "level_run_sd": float(np.sqrt(post)), "n_runs": int(k), "n_presses": int(n)}
+
+
+def new_run_band90(within_sd: float, run_sd: float, n_runs: int, n_presses: int) -> float:
+    """Half width of the predictive 90 % band of the ln level of a press of a NEW run (a held-out run or series:
+    its own u_run) under the hierarchical levels (run_level_sd): 1.645 sqrt(sd_w^2 + sd_run^2 + se^2), se^2 =
+    sd_run^2 / runs + sd_w^2 / presses (the fitted mean's uncertainty)."""
+    var = within_sd ** 2 + run_sd ** 2 + run_sd ** 2 / max(n_runs, 1) + within_sd ** 2 / max(n_presses, 1)
+    return float(1.645 * np.sqrt(var))
+
+
+N_RUN_BOOT = 200  # replicates of the run bootstrap of level_run_sd (no refit: cheap)
+
+
 def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = None, n_boot: int = 16,
               min_force_frac: float = 0.1, min_force_n: float = 0.05, max_nfev: int = 60, seed: int = 0,
               progress=None, level_prior: bool = False) -> ChainFit:
@@ -420,8 +470,26 @@ def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = 
     n_runs = len({data.presses[j].run for j in idx})
     sd = fin["p"].level_log_sd
     se2 = fin["level_between_run_sd"] ** 2 / n_runs + fin["level_within_run_sd"] ** 2 / len(idx)
-    half = 1.645 * float(np.sqrt(sd ** 2 + se2))
+    half_pooled = 1.645 * float(np.sqrt(sd ** 2 + se2))  # rounds 2-5: one level distribution (recorded beside)
+    # the band of a press of a NEW run (held-out runs and series are that case, fixed before scoring, sixth round):
+    # its run's own level u_run as well as the press's placement (hierarchical levels, run_level_sd)
+    half = new_run_band90(fin["level_within_run_sd"], fin["level_run_sd"], n_runs, len(idx))
+    # the run-level sd's range: a bootstrap over runs (clusters) of the point fit's press levels, with the prior
+    rb = np.random.default_rng([seed, 0x5D])
+    run_of = fin["run_of"]
+    ur = np.unique(run_of)
+    rs = []
+    for _ in range(N_RUN_BOOT):
+        pick = rb.choice(ur, len(ur))
+        sel = np.concatenate([np.flatnonzero(run_of == r) for r in pick])
+        lab = np.concatenate([np.full(int(np.sum(run_of == r)), i) for i, r in enumerate(pick)])
+        rs.append(run_level_sd(lev[sel], lab)["level_run_sd"])
+    ranges["level_run_sd_run_bootstrap"] = [float(np.percentile(rs, q)) for q in (5, 50, 95)]
     err = within_press_error(fin["p"], data, idx)
+    err["level_band90_pooled_log"] = [-half_pooled, half_pooled]
+    err["level_run_sd"] = {"point": fin["level_run_sd"], "anova": fin["level_run_sd_anova"],
+                           "within_run_sd": fin["level_within_run_sd"], "n_runs": int(n_runs),
+                           "prior_sd": RUN_LEVEL_PRIOR_SD, "prior_dof": RUN_LEVEL_PRIOR_DOF}
     err["n_presses"] = int(len(idx))
     err["n_missed_presses"] = int(sum(data.missed))
     return ChainFit(fin["p"], ranges, [-half, half], boot, err, [float(x) for x in lev - np.log(fin["p"].r0_ohm)],
@@ -443,13 +511,16 @@ def _finish(q: ChainParams, data: _Data, idx: np.ndarray, runs: Seq[RealRun]) ->
     dof = max(len(lev) - len(means), 1)
     w_sd = float(np.sqrt(np.sum(np.square(within)) / dof)) if len(lev) > len(means) else 0.0
     b_sd = float(np.std(means, ddof=1)) if len(means) > 1 else 0.0
+    hier = run_level_sd(lev, run_of)
+    p.level_run_log_sd = hier["level_run_sd"]
     sig = [r.noise_sd for r in runs if r.noise_sd > 0]
     p.noise_sd = float(np.median(sig)) if sig else 0.0
     fs = np.array([r.fs for r in runs])
     if p.divider == "high" and len(fs) > 1 and not any("adc_full_scale" in r.attrs for r in runs):
         p.full_scale = float(np.exp(np.mean(np.log(fs))))
         p.full_scale_log_sd = float(np.std(np.log(fs), ddof=1))
-    return {"p": p, "levels": lev, "level_within_run_sd": w_sd, "level_between_run_sd": b_sd}
+    return {"p": p, "levels": lev, "level_within_run_sd": w_sd, "level_between_run_sd": b_sd,
+            "level_run_sd": hier["level_run_sd"], "level_run_sd_anova": hier["level_run_sd_anova"], "run_of": run_of}
 
 
 def _summary(f: dict[str, Any]) -> dict[str, float]:
@@ -457,7 +528,8 @@ def _summary(f: dict[str, Any]) -> dict[str, float]:
     return {"exponent": p.exponent, "r0_ohm": p.r0_ohm, "threshold_force_n": p.threshold_force_n, "creep_amplitude": p.creep_amplitude,
             "creep_force_n": p.creep_force_n, "tau_min_s": p.tau_min_s, "tau_max_s": p.tau_max_s,
             "level_log_sd": p.level_log_sd, "r_series_ohm": p.r_series_ohm,
-            "level_within_run_sd": f["level_within_run_sd"], "level_between_run_sd": f["level_between_run_sd"]}
+            "level_within_run_sd": f["level_within_run_sd"], "level_between_run_sd": f["level_between_run_sd"],
+            "level_run_sd": f["level_run_sd"], "level_run_sd_anova": f["level_run_sd_anova"]}
 
 
 def within_press_error(p: ChainParams, data: _Data, idx: np.ndarray) -> dict[str, Any]:
@@ -633,11 +705,14 @@ def peak_force_dist(peaks: Seq[float], rated_force_n: float | None = None):
 
 
 def randomization_from_fit(fit: ChainFit, runs: Seq[RealRun], press_slope: bool = False,
-                           rated_force_n: float | None = None):
+                           rated_force_n: float | None = None, run_level: bool = False):
     """The Randomization `fit` writes: joint bootstrap replicates of the chain, the gain (bootstrap spread of
     ln r0), the board's full scale (run-to-run spread), the noise, and press protocols spanning the real
     presses (peak force log-uniform from half the smallest to 1.2 x the largest peak, widened to the rated
-    range when given: peak_force_dist; times uniform over their 5-95 % range)."""
+    range when given: peak_force_dist; times uniform over their 5-95 % range). run_level: the episode's (one
+    simulated run's) ln gain u_run ~ N(0, level_run_log_sd^2), the hierarchical run-level sd (run_level_sd);
+    off: the median over the replicates of the std of the run means (rounds 2-5; it holds the within-run spread
+    over each run's few presses as well, and the run-level prior does not reach it)."""
     from scenes.randomize import Dist, Randomization
 
     p = fit.params
@@ -662,6 +737,8 @@ def randomization_from_fit(fit: ChainFit, runs: Seq[RealRun], press_slope: bool 
             d["level_log_sd"] = float(b["level_within_run_sd"])
         boot.append(d)
     sd_gain = float(np.median([b["level_between_run_sd"] for b in fit.boot])) if fit.boot and "level_between_run_sd" in fit.boot[0] else 0.1
+    if run_level:
+        sd_gain = float(p.level_run_log_sd)
     episode = {"gain_log": Dist(kind="normal", mean=0.0, sd=max(sd_gain, 0.05)),  # estimate: floor 5 %
                "noise_scale": Dist(kind="loguniform", low=0.5, high=2.0)}  # estimate
     if p.full_scale_log_sd > 0:

@@ -285,3 +285,74 @@ def test_rated_force_widens_the_simulated_presses_to_the_rating_only():
     assert x.min() >= np.log(d.low) and x.max() <= np.log(d.high)
     f, pid = press_protocol(Randomization(press={"peak_force_n": d}), np.random.default_rng(0), 600.0, 0.05)
     assert f.max() > 1.2 * max(peaks) and f.max() < 40.0 * 1.1  # the rig's small hold drift on top
+
+
+def _hier_levels(rng, n_runs, n_press, sd_run, sd_w):
+    u = rng.normal(0.0, sd_run, n_runs)
+    run_of = np.repeat(np.arange(n_runs), n_press)
+    return u[run_of] + rng.normal(0.0, sd_w, len(run_of)), run_of
+
+
+def test_run_level_sd_recovers_a_known_run_spread_and_falls_back_to_the_prior():
+    """Hierarchical press levels l = mu + u_run + e: the run-level sd is recovered from the runs' presses (not the
+    std of the run means, which also holds sd_w / sqrt(n)); one run gives the stated prior."""
+    rng = np.random.default_rng(11)
+    est, means_sd, within = [], [], []
+    for _ in range(20):
+        lev, run_of = _hier_levels(rng, 14, 15, 0.3, 0.55)  # pike1-like: 14 runs of ~15 presses
+        h = CF.run_level_sd(lev, run_of, prior_dof=0.0)
+        est.append(h["level_run_sd"])
+        means_sd.append(np.std([lev[run_of == r].mean() for r in range(14)], ddof=1))
+        within.append(h["level_within_run_sd"])
+    assert abs(np.mean(within) - 0.55) < 0.02
+    assert abs(np.mean(est) - 0.3) < 0.04, np.mean(est)
+    # the variance of the run means holds the within-run part too: 0.3^2 + 0.55^2 / 15 = 0.110
+    assert np.mean(np.square(means_sd)) - np.mean(np.square(est)) > 0.01
+    lev, run_of = _hier_levels(rng, 14, 15, 0.0, 0.55)
+    assert CF.run_level_sd(lev, run_of, prior_dof=0.0)["level_run_sd"] < 0.1
+    # with the prior: 13 degrees of freedom outweigh it, one run is the prior, two runs lie between
+    one = CF.run_level_sd(rng.normal(0, 0.5, 16), np.zeros(16, int))
+    assert one["level_run_sd"] == pytest.approx(CF.RUN_LEVEL_PRIOR_SD) and one["n_runs"] == 1
+    two = CF.run_level_sd(np.r_[np.full(8, -1.0), np.full(8, 1.0)] + rng.normal(0, 0.01, 16), np.repeat([0, 1], 8))
+    assert CF.RUN_LEVEL_PRIOR_SD < two["level_run_sd"] < two["level_run_sd_anova"]
+
+
+def test_new_run_band_covers_presses_of_new_runs():
+    """The band of a press of a NEW run holds ~90 % of new runs' presses when runs differ; without its run term
+    (a press of a run already seen) it holds far fewer. Fitted on 14 runs, scored on 400 new runs."""
+    rng = np.random.default_rng(5)
+    cov_new, cov_same = [], []
+    for _ in range(10):
+        lev, run_of = _hier_levels(rng, 14, 15, 0.5, 0.3)
+        h = CF.run_level_sd(lev, run_of, prior_dof=0.0)
+        half = CF.new_run_band90(h["level_within_run_sd"], h["level_run_sd"], 14, len(lev))
+        half_same = CF.new_run_band90(h["level_within_run_sd"], 0.0, 14, len(lev))
+        new, _ = _hier_levels(rng, 400, 15, 0.5, 0.3)
+        new = new - lev.mean()
+        cov_new.append(np.mean(np.abs(new) <= half))
+        cov_same.append(np.mean(np.abs(new) <= half_same))
+    assert 0.84 <= np.mean(cov_new) <= 0.95, np.mean(cov_new)
+    assert np.mean(cov_same) < 0.7, np.mean(cov_same)
+
+
+def test_chain_fit_records_the_run_level_and_draws_it_per_simulated_run():
+    """fit_chain on runs made with a known run-level spread: the fitted preset records sd_run (and its run
+    bootstrap range), the band is the new-run band, and run_level=True draws each episode's gain with it."""
+    true = CF.ChainParams(exponent=1.2, r0_ohm=3000.0, creep_amplitude=2.0, creep_force_n=4.0, tau_min_s=0.1,
+                          tau_max_s=5.0, n_creep=4, level_log_sd=0.2, r_ref_ohm=1e4, full_scale=1000.0, noise_sd=0.0)
+    rng = np.random.default_rng(2)
+    runs = _synthetic_runs(true, n_runs=8, seed=4)
+    u = rng.normal(0.0, 0.6, len(runs))
+    for r, uk in zip(runs, u):  # the run's own level: the reading of its film resistance scaled by e^u
+        R = CF.resistance_from_reading(r.reading, true, r.fs)
+        r.reading = np.where(np.isfinite(R), CF.reading_from_resistance(R * np.exp(uk), true, r.fs), r.reading)
+    fit = CF.fit_chain(runs, CF.ChainParams(r_ref_ohm=1e4, full_scale=1000.0, n_creep=4), n_boot=0)
+    h = fit.error["level_run_sd"]
+    assert abs(fit.params.exponent - 1.2) < 0.05
+    assert abs(h["anova"] - np.std(u, ddof=1)) < 0.15, (h, np.std(u, ddof=1))
+    assert abs(h["within_run_sd"] - 0.2) < 0.06
+    assert fit.params.level_run_log_sd == pytest.approx(h["point"])
+    lo, mid, hi = fit.ranges["level_run_sd_run_bootstrap"]
+    assert lo <= h["point"] * 1.01 and lo < mid < hi
+    assert fit.level_band90[1] == pytest.approx(CF.new_run_band90(h["within_run_sd"], h["point"], 8, fit.error["n_presses"]))
+    assert CF.randomization_from_fit(fit, runs, run_level=True).episode["gain_log"].sd == pytest.approx(h["point"])

@@ -401,8 +401,18 @@ def sim2real_results() -> str:
         held = (m.get("steps", {}).get("fit", {}) or {}).get("held_out", {})
         if held:
             pdrop = held.get("plateau_drop", {})
+            rl = m.get("run_level") or {}
+            lr = (rl.get("fit") or {}).get("level_run_sd") or {}
+            rb = rl.get("level_run_sd_run_bootstrap_p5_p50_p95")
+            band, bpool = rl.get("level_band90_log"), (rl.get("fit") or {}).get("level_band90_pooled_log")
             cal.append([name, num(held.get("rms_log_reading_within_press")), pct(held.get("level_in_band90")),
-                        num(held.get("level_sd_log")), num(pdrop.get("real_median")), num(pdrop.get("sim_median"))])
+                        num(held.get("level_mean_log_vs_fit"), 2), num(held.get("level_sd_log")),
+                        (f"{num(lr.get('within_run_sd'), 3)} / {num(lr.get('point'), 3)} ({num(lr.get('anova'), 3)}; "
+                         f"{num(rb[0], 3)} – {num(rb[2], 3)}), {lr.get('n_runs')} runs") if lr and rb else "–",
+                        f"±{num(band[1], 2)} / ±{num(bpool[1], 2)}" if band and bpool else "–",
+                        num(rl.get("episode_gain_log_sd"), 3) + (" (run-level)" if rl.get("drawn_from_run_level_sd") else "")
+                        if rl else "–",
+                        num(pdrop.get("real_median")), num(pdrop.get("sim_median"))])
         tm = m.get("timing") or {}
         if tm:
             st = tm.get("steps", {})
@@ -442,9 +452,14 @@ def sim2real_results() -> str:
                          "film level shift (ln)", "zero-shot after calibration (% FS)"], two))
     if cal:
         out += ("\n\nFit on the held-out runs (levels of each press removed for the within-press error; band: the "
-                "share of held-out press levels inside the fitted 90 % band, target 80-95 %):\n\n"
-                + table(["split", "within-press rms ln reading", "levels in 90 % band", "held-out level sd (ln)",
-                         "plateau drop, real", "plateau drop, sim"], cal))
+                "share of held-out press levels inside the fitted 90 % band, target 80-95 %; where recorded, the band is "
+                "that of a press of a new run under hierarchical levels, l = mu + u_run + e, `sensors.chain_fit.run_level_sd`: "
+                "the training presses' within-run sd / the run-level sd (its ANOVA estimate before the prior; 5-95 % of "
+                "a bootstrap over runs), the band's half width for a new run / the pooled form of rounds 2-5, and the sd "
+                "of the simulated runs' ln gain):\n\n"
+                + table(["split", "within-press rms ln reading", "levels in 90 % band", "held-out level mean (ln)",
+                         "held-out level sd (ln)", "within / run-level sd (ln)", "band half width, new run / pooled",
+                         "simulated run gain sd", "plateau drop, real", "plateau drop, sim"], cal))
     diag = sorted(RESULTS.glob("s2r-diagnosis-*.json"))
     if diag:
         drows, irows = [], []
@@ -554,6 +569,26 @@ def sim2real_results() -> str:
                 + table(["split", "rated force (N)", "simulated peaks (N)", "pre-train sim valid (N)",
                          "pre-trained on training runs (N)", "fine-tuned validation (N)", "test fine-tuned by budget (N)",
                          "test fine-tuned, all runs (% FS)", "two-point (% FS)", "training side not worse"], rrow))
+    rlv = sorted(RESULTS.glob("s2r-run-level-*.json"))
+    if rlv:
+        lrow = []
+        for f in rlv:
+            d = json.loads(f.read_text())
+            for side in ("without", "run_level"):
+                v = d[side]
+                lrow.append([f.stem.removeprefix("s2r-run-level-"), "yes" if v.get("run_level") else "no",
+                             num(v["episode_gain_log_sd"], 3), num(v["pretrain_sim_valid_rmse"]),
+                             num(v["zero_shot_training_runs_rmse"]), num(v["finetuned_valid_rmse_mean"]),
+                             "; ".join(f"{c['n_runs']}: {num(c['test_finetuned_rmse'])}" for c in v["curve"]),
+                             f"{v['test_finetuned_pct_fs']:.1f} %", f"{v['test_two_point_pct_fs']:.1f} %",
+                             "yes" if d["training_side_not_worse"] else "no"])
+        out += ("\n\nEach simulated run's ln gain from the hierarchical run-level sd or not (`sim2real --run-level`; "
+                "`bench/bench_s2r_run_level.py`, `bench/results/s2r-run-level-*.json`): adopted if the fine-tuned RMSE on "
+                "the training runs' validation tails (mean over budgets and seeds, N) does not get worse in both Lupasic "
+                "directions; the test numbers are reported, not used:\n\n"
+                + table(["split", "run-level draw", "simulated run gain sd (ln)", "pre-train sim valid (N)",
+                         "pre-trained on training runs (N)", "fine-tuned validation (N)", "test fine-tuned by budget (N)",
+                         "test fine-tuned, all runs (% FS)", "two-point (% FS)", "training side not worse"], lrow))
     abl = sorted(RESULTS.glob("s2r-ablation-*.json"))
     if abl:
         arows = []
