@@ -21,10 +21,11 @@ from simulate.protocols.compression_tester import KINDS as _VELOSTAT_KINDS
 # (protocol kind, control) whose MuJoCo Warp path is checked against C MuJoCo (contact force within 2e-3 of full
 # scale, measured <= 3e-5 on Warp's CPU device): the position-controlled box press of cnt_pdms
 # (tests/test_contact_mjw.py), the force-controlled staircases of fabric and the compression-tester kinds of
-# velostat (tests/test_contact_mjw_force.py; marked gpu for CUDA, slow for Warp's CPU device). Kinds with their own
-# contact stage (press_stroke, element_loads) have none: their stage reads C MuJoCo's state at every step.
+# velostat (tests/test_contact_mjw_force.py; marked gpu for CUDA, slow for Warp's CPU device), and ntype's
+# press_stroke, whose contact stage runs its per-step stick-slip in a kernel after every MuJoCo Warp step
+# (simulate.contact.mujoco_warp.StickSlipWorlds, tests/test_press_stroke_mjw.py). element_loads has no MuJoCo stage.
 GPU_PROTOCOLS = {("sinusoid", "displacement"), ("hold", "displacement"), ("staircase", "force"),
-                 *((k, "force") for k in _VELOSTAT_KINDS)}
+                 *((k, "force") for k in _VELOSTAT_KINDS), ("press_stroke", "force")}
 GPU_PROTOCOL_KINDS = tuple(sorted({k for k, _ in GPU_PROTOCOLS}))
 GPU_CONTROLS = ("displacement", "force")
 # the physics step the GPU path takes where `auto` chose it and the user set none (--set sampling.physics_timestep_s),
@@ -84,7 +85,7 @@ def gpu_blocker(cfg: SceneConfig) -> str | None:
     from simulate.contact.load_field import CONTACT_STAGES
 
     p = cfg.protocol
-    if p.kind in CONTACT_STAGES:
+    if p.kind in CONTACT_STAGES and (p.kind, p.control) not in GPU_PROTOCOLS:
         return f"protocol '{p.kind}' has its own C MuJoCo contact stage, no MuJoCo Warp path"
     if (p.kind, p.control) not in GPU_PROTOCOLS:
         return f"MuJoCo Warp not validated for protocol '{p.kind}' ({p.control} control); force it with --physics mujoco_warp"
