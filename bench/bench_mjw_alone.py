@@ -5,8 +5,8 @@
 The scene, overrides and episodes are those of `piezotwin generate <family> --episodes N` with defaults (the
 `auto` choice made the same way, so the same physics step), batched as the GPU feed batches them
 (`simulate.generation.feed._groups`); each batch runs `step_worlds` (protocols, controls, MuJoCo Warp, sensordata
-into shared memory) in this one process, one batch after another, with nothing else on the GPU. A 64-episode
-batch first loads the kernels (compiled by the CLI run before, so the Warp cache is warm), not timed. Reported:
+into shared memory) in this one process, one batch after another, with nothing else on the GPU. A 64-world
+batch of two samples first loads the kernels (compiled by the CLI run before, so the Warp cache is warm), not timed. Reported:
 seconds per batch ("worlds": the MuJoCo Warp part, as the feed's timings name it; "wall": the whole task),
 samples/s and world-steps/s. Merged into bench/results/user-cli-<tag>.json under runs.<family>.mjw_alone when
 that file has the family's run (bench_user_cli.py writes it), else written to mjw-alone-<tag>-<family>.json.
@@ -47,8 +47,17 @@ def main() -> None:
     cfg = load_scene(a.family, base + chosen.overrides)
     print(chosen.line())
     groups = _groups(cfg, list(range(n_shards(cfg))), feed_worlds(cfg))
-    _, warm, _ = step_worlds(cfg, list(range(64)))
-    _free(warm)
+    # load the kernels (Warp's cache is warm from the CLI run): 64 worlds of the same model, two samples
+    import numpy as np
+
+    from simulate.contact.load_field import build_model, physics_engine
+    from simulate.contact.mujoco_warp import WarpWorlds
+
+    m = build_model(cfg)
+    sub = cfg.sampling.substeps
+    q0 = np.zeros((64, m.nq))
+    q0[:, 2] = cfg.indenter.start_gap_m
+    WarpWorlds(m, 64, physics_engine(cfg)[1]).run(q0, np.zeros((64, 2 * sub, m.nu)), np.zeros(m.nsensordata), sub, 3)
     batches = []
     samples = 0
     steps = 0
