@@ -3,7 +3,8 @@ MuJoCo stage (simulate.contact.press_stroke): the batched controls, the per-step
 reference, and the whole stage (slow on Warp's CPU device: MuJoCo Warp's kernels compile; gpu on CUDA).
 
 Measured on Warp's CPU device (6 default episodes, 3 indenters): contact force within 4.6e-5 of its maximum, shear
-field 6.5e-5, positions 3e-7 relative; checked here within 2e-3 of full scale (as for the other families)."""
+field 6.5e-5, positions 3e-7 relative; on the H100 (64 episodes): contact force 5.8e-5 of full scale, positions
+1.3e-8 m, fields 1.5e-5 of full scale per taxel; checked here within 2e-3 of full scale (as for the other families)."""
 
 import numpy as np
 import pytest
@@ -69,7 +70,12 @@ def _compare(device: str, n_episodes: int) -> None:
     assert a.contact_force_n[..., 2].max() > 0.5 * full and np.abs(a.contact_force_n[..., :2]).max() > 0.1  # pressed, sheared
     assert np.abs(a.contact_force_n - b.contact_force_n).max() < 2e-3 * full
     np.testing.assert_allclose(b.indenter_pos_m, a.indenter_pos_m, atol=1e-7)
-    np.testing.assert_array_equal(b.contact_points, a.contact_points)
+    # indenters in contact: the same but at a press's first touch, where a contact at distance ~0 (float32 vs
+    # float64) is found by one engine only; the H100 run of 64 episodes: 4 of 1280 samples, all at the second
+    # sample (onset), normal forces there equal within 1e-5 N. Loaded samples must agree
+    differ = a.contact_points != b.contact_points
+    assert differ.mean() < 0.01
+    assert (np.abs(a.contact_force_n[..., 2]) < 0.1 * full)[differ].all()
     area = a.taxel_area_m2
     for name in ("pressure_pa", "shear_pa"):  # the fields carry the same loads (N per taxel)
         assert np.abs(getattr(a, name) - getattr(b, name)).max() * area < 2e-3 * full, name

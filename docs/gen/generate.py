@@ -199,8 +199,8 @@ def bench_user_cli() -> str:
            "defaults, lz4 and up to 12 writers / worker processes; `-cold`: a fresh machine, Warp's kernel cache empty, "
            "so MuJoCo Warp's kernels compile inside the run; `user-cli-h100-s6.json`'s cnt_pdms run was cold too; "
            "`-handon`: each shard handed to the writers as soon as its episodes are packed, each length group in 4 slices; "
-           "`-s7-cnt`, `-s7-cnt-b`: session 7's code, two warm runs on one machine; `-s8-*`: session 8's code, fabric and "
-           "velostat on MuJoCo Warp, each after a 64-episode run of the same scene that compiled its kernels); "
+           "`-s7-cnt`, `-s7-cnt-b`: session 7's code, two warm runs on one machine; `-s8-*`: session 8's code, every family on "
+           "MuJoCo Warp, on one machine after `pytest -m gpu` had compiled MuJoCo Warp's kernels for each family's scene); "
            "raw = a plain file of the same bytes "
            "on the same disk right after (issue 16's target: >= 50 % of it, or >= 1e6 samples/s):\n",
            table(["family", "episodes", "file", "engine (the CLI's line)", "s", "samples/s", "MB/s", "of raw MB/s"], rows)]
@@ -220,10 +220,10 @@ def bench_user_cli() -> str:
                           num(a["seconds"]), num(a["samples_per_s"]), num(a["world_steps_per_s"]), num(r["seconds"]),
                           num(r.get("samples_per_s")), pct(r.get("samples_per_s", 0) / a["samples_per_s"])])
     if alone:
-        out += ["Physics-bound runs against MuJoCo Warp stepping the same worlds alone (`bench/bench_mjw_alone.py`: the "
+        out += ["The CLI runs against MuJoCo Warp stepping the same worlds alone (`bench/bench_mjw_alone.py`: the "
                 "same scene, physics step and episodes, batched as the feed batches them, stepped one batch after another "
-                "in one process with nothing else on the GPU; issue 16's target where the stepping is the bound: the CLI "
-                "run at >= 80 % of it):\n",
+                "in one process with nothing else on the GPU): the bound of a run where the stepping is what limits it; "
+                "issue 16's target for the slow quasi-static protocols: the CLI run at >= 80 % of it:\n",
                 table(["family", "episodes", "file", "physics step ms", "batches", "alone s", "alone samples/s",
                        "alone world-steps/s", "CLI s", "CLI samples/s", "CLI / alone"], alone)]
     return "\n".join(out)
