@@ -23,4 +23,11 @@ FV) # the plain CLI: fabric_1 (staircases, 5 ms), velostat (mix, 5 ms on the GPU
 NC) # the plain CLI: ntype (press_stroke: the stage runs in the driver, no separate physics), cnt_pdms again
     cli ntype ${2:-8192} h100-s8-ntype noalone
     cli cnt_pdms ${3:-4096} h100-s8-cnt ;;
+L)  # final code (the GPU feed keeps lzf for the narrow-frame families): kernels of fabric / velostat compiled by
+    # their CUDA tests, then the plain CLI of both again with MuJoCo Warp alone
+    timeout 200 python3 -m pytest -q -m gpu -p no:cacheprovider tests/test_contact_mjw_force.py 2>&1 | tail -2
+    cli fabric_1 ${2:-8192} h100-s8-fabric-lzf ;;
+L2) cli velostat ${2:-8192} h100-s8-velostat-lzf
+    timeout 300 python3 -m pytest -q -m gpu -p no:cacheprovider 2>&1 | grep -v "^Module" | tee $OUT/logs/pytest-gpu-h100-s8-final.log | tail -3
+    echo "pytest rc $?" | tee -a $OUT/logs/pytest-gpu-h100-s8-final.log ;;
 esac

@@ -47,7 +47,8 @@ USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w
             "user-cli-h100-s6.json", "user-cli-h100-s6-fabric-w8.json", "user-cli-h100-s6-cnt-cold.json",
             "user-cli-h100-s6-cnt.json", "user-cli-h100-s6-cnt-handon.json", "user-cli-h100-s7-cnt.json",
             "user-cli-h100-s7-cnt-b.json", "user-cli-h100-s8-cnt.json", "user-cli-h100-s8-fabric.json",
-            "user-cli-h100-s8-velostat.json", "user-cli-h100-s8-ntype.json"]
+            "user-cli-h100-s8-velostat.json", "user-cli-h100-s8-ntype.json", "user-cli-h100-s8-fabric-lzf.json",
+            "user-cli-h100-s8-velostat-lzf.json"]
 PHYSICS_STEP_FAMILIES = ["cnt_pdms", "fabric_1", "velostat", "ntype"]  # physics-step-<family>.json (bench_physics_step.py)
 TRANSDUCTION_GPU = "transduction-h100-s7.json"  # chain with the fused pad sum (session 7; s6: the parallel readout)
 FUSED_VARIANTS = "fused-variants-h100-s7.json"  # where the fused kernel's time goes (variants with parts left out)
@@ -200,7 +201,9 @@ def bench_user_cli() -> str:
            "so MuJoCo Warp's kernels compile inside the run; `user-cli-h100-s6.json`'s cnt_pdms run was cold too; "
            "`-handon`: each shard handed to the writers as soon as its episodes are packed, each length group in 4 slices; "
            "`-s7-cnt`, `-s7-cnt-b`: session 7's code, two warm runs on one machine; `-s8-*`: session 8's code, every family on "
-           "MuJoCo Warp, on one machine after `pytest -m gpu` had compiled MuJoCo Warp's kernels for each family's scene); "
+           "MuJoCo Warp, on one machine after `pytest -m gpu` had compiled MuJoCo Warp's kernels for each family's scene, "
+           "the feed's writers with lz4; `-s8-*-lzf`: the final code, whose feed keeps the scene's lzf for the "
+           "narrow-frame families, on a second machine after the family's CUDA tests compiled its kernels); "
            "raw = a plain file of the same bytes "
            "on the same disk right after (issue 16's target: >= 50 % of it, or >= 1e6 samples/s):\n",
            table(["family", "episodes", "file", "engine (the CLI's line)", "s", "samples/s", "MB/s", "of raw MB/s"], rows)]
