@@ -87,7 +87,8 @@ def generate(
     from simulate.generation.choice import choose
 
     try:
-        chosen = choose(cfg, physics, device, workers, backend)
+        chosen = choose(cfg, physics, device, workers, backend,
+                        step_asked=any(str(x).strip().startswith("sampling.physics_timestep_s") for x in (set_ or [])))
     except ValueError as exc:
         fail(str(exc))
     if chosen.overrides:

@@ -47,10 +47,31 @@ def test_user_choice_wins():
     assert c.overrides == ["generation.physics=mujoco"]  # "auto" in a scene file made concrete
 
 
-@pytest.mark.parametrize("preset, needle", [("ntype", "press_stroke"), ("fabric_1", "staircase"), ("velostat", "velostat_mix")])
-def test_scenes_without_a_validated_gpu_path_stay_on_c_mujoco(preset, needle):
-    c = choose(load_scene(preset), cuda=H100, mjw=True)
+@pytest.mark.parametrize("preset, extra, needle", [("ntype", ["protocol.kind=element_loads"], "element_loads"),
+                                                   ("fabric_1", ["protocol.kind=sinusoid"], "'sinusoid' (force control)")])
+def test_scenes_without_a_validated_gpu_path_stay_on_c_mujoco(preset, extra, needle):
+    c = choose(load_scene(preset, extra), cuda=H100, mjw=True)
     assert c.physics == "mujoco" and needle in c.reason
+
+
+@pytest.mark.parametrize("preset", ["fabric_1", "fabric_6", "velostat", "ntype"])
+def test_force_controlled_presets_take_the_gpu_with_their_physics_step(preset, monkeypatch):
+    """fabric staircases, velostat kinds and ntype's press_stroke have a checked MuJoCo Warp path
+    (tests/test_contact_mjw_force.py, tests/test_press_stroke_mjw.py);
+    auto takes it, with the protocol's GPU step where it is larger than the scene's, unless the user set one."""
+    cfg = load_scene(preset)
+    monkeypatch.setitem(choice.GPU_PHYSICS_STEP_S, cfg.protocol.kind, 0.01)
+    c = choose(cfg, cuda=H100, mjw=True)
+    assert c.physics == "mujoco_warp" and c.overrides[-1] == "sampling.physics_timestep_s=0.01"
+    assert not any("compression" in o for o in c.overrides)  # narrow frames: the scene's lzf (writer-codec-cpu.json)
+    assert "physics step 10 ms" in c.line()
+    assert load_scene(preset, c.overrides).sampling.substeps == 10  # 10 Hz samples, every preset here
+    assert choose(cfg, cuda=H100, mjw=True, step_asked=True).overrides[-1] != "sampling.physics_timestep_s=0.01"
+    assert not any("physics_timestep" in o for o in choose(cfg, physics="mujoco_warp", cuda=H100, mjw=True).overrides)
+    monkeypatch.setitem(choice.GPU_PHYSICS_STEP_S, cfg.protocol.kind, 0.003)  # does not divide 0.1 s: kept
+    assert choice.gpu_physics_step(cfg) is None
+    monkeypatch.setitem(choice.GPU_PHYSICS_STEP_S, cfg.protocol.kind, 0.001)  # smaller than the scene's: kept
+    assert choice.gpu_physics_step(cfg) is None
 
 
 def test_cli_default_is_auto_and_same_bytes_as_the_c_engine(tmp_path, monkeypatch):
@@ -91,9 +112,9 @@ def test_cpu_physics_with_gpu_sensors_takes_worker_processes(monkeypatch):
     import simulate.generation.choice as ch
 
     monkeypatch.setattr(ch.os, "cpu_count", lambda: 16)
-    c = choose(load_scene("fabric_1"), cuda=H100, mjw=True)
+    c = choose(load_scene("ntype", ["protocol.kind=element_loads"]), cuda=H100, mjw=True)
     assert (c.physics, c.device, c.workers) == ("mujoco", "cuda:0", 12)
     assert "12 worker process(es)" in c.line()
     monkeypatch.setattr(ch.os, "cpu_count", lambda: 2)
-    assert choose(load_scene("fabric_1"), cuda=H100, mjw=True).workers == 1
-    assert choose(load_scene("fabric_1"), cuda=(0, ""), mjw=True).workers == 1
+    assert choose(load_scene("ntype", ["protocol.kind=element_loads"]), cuda=H100, mjw=True).workers == 1
+    assert choose(load_scene("ntype", ["protocol.kind=element_loads"]), cuda=(0, ""), mjw=True).workers == 1

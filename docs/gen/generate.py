@@ -46,7 +46,10 @@ GPU_E2E_MIX = "gpu-pipeline-h100-s7-mix-final.json"  # the compact 6 x 6 record 
 USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w12.json", "user-cli-h100-cnt-lz4.json",
             "user-cli-h100-s6.json", "user-cli-h100-s6-fabric-w8.json", "user-cli-h100-s6-cnt-cold.json",
             "user-cli-h100-s6-cnt.json", "user-cli-h100-s6-cnt-handon.json", "user-cli-h100-s7-cnt.json",
-            "user-cli-h100-s7-cnt-b.json"]
+            "user-cli-h100-s7-cnt-b.json", "user-cli-h100-s8-cnt.json", "user-cli-h100-s8-fabric.json",
+            "user-cli-h100-s8-velostat.json", "user-cli-h100-s8-ntype.json", "user-cli-h100-s8-fabric-lzf.json",
+            "user-cli-h100-s8-velostat-lzf.json"]
+PHYSICS_STEP_FAMILIES = ["cnt_pdms", "fabric_1", "velostat", "ntype"]  # physics-step-<family>.json (bench_physics_step.py)
 TRANSDUCTION_GPU = "transduction-h100-s7.json"  # chain with the fused pad sum (session 7; s6: the parallel readout)
 FUSED_VARIANTS = "fused-variants-h100-s7.json"  # where the fused kernel's time goes (variants with parts left out)
 GPU_PHYSICS = "gpu-pipeline-h100-physics.json"
@@ -197,7 +200,10 @@ def bench_user_cli() -> str:
            "defaults, lz4 and up to 12 writers / worker processes; `-cold`: a fresh machine, Warp's kernel cache empty, "
            "so MuJoCo Warp's kernels compile inside the run; `user-cli-h100-s6.json`'s cnt_pdms run was cold too; "
            "`-handon`: each shard handed to the writers as soon as its episodes are packed, each length group in 4 slices; "
-           "`-s7-cnt`, `-s7-cnt-b`: session 7's code, two warm runs on one machine); "
+           "`-s7-cnt`, `-s7-cnt-b`: session 7's code, two warm runs on one machine; `-s8-*`: session 8's code, every family on "
+           "MuJoCo Warp, on one machine after `pytest -m gpu` had compiled MuJoCo Warp's kernels for each family's scene, "
+           "the feed's writers with lz4; `-s8-*-lzf`: the final code, whose feed keeps the scene's lzf for the "
+           "narrow-frame families, on a second machine after the family's CUDA tests compiled its kernels); "
            "raw = a plain file of the same bytes "
            "on the same disk right after (issue 16's target: >= 50 % of it, or >= 1e6 samples/s):\n",
            table(["family", "episodes", "file", "engine (the CLI's line)", "s", "samples/s", "MB/s", "of raw MB/s"], rows)]
@@ -207,11 +213,52 @@ def bench_user_cli() -> str:
                 "then for the last writes (`-handon`: the writers start during the 0.1 Hz group's slices):\n",
                 table(["file", "episodes", "wall s", "first physics batch s", "waiting for writers s", "manifest s",
                        "writer-seconds for episodes (all writers)"], fixed)]
+    alone = []
+    for name in USER_CLI:
+        for fam, r in (load(name) or {}).get("runs", {}).items():
+            a = r.get("mjw_alone")
+            if not a or "error" in r:
+                continue
+            alone.append([fam, r["episodes"], f"`{name}`", num(1e3 * a["physics_timestep_s"]), len(a["batches"]),
+                          num(a["seconds"]), num(a["samples_per_s"]), num(a["world_steps_per_s"]), num(r["seconds"]),
+                          num(r.get("samples_per_s")), pct(r.get("samples_per_s", 0) / a["samples_per_s"])])
+    if alone:
+        out += ["The CLI runs against MuJoCo Warp stepping the same worlds alone (`bench/bench_mjw_alone.py`: the "
+                "same scene, physics step and episodes, batched as the feed batches them, stepped one batch after another "
+                "in one process with nothing else on the GPU): the bound of a run where the stepping is what limits it; "
+                "issue 16's target for the slow quasi-static protocols: the CLI run at >= 80 % of it:\n",
+                table(["family", "episodes", "file", "physics step ms", "batches", "alone s", "alone samples/s",
+                       "alone world-steps/s", "CLI s", "CLI samples/s", "CLI / alone"], alone)]
     return "\n".join(out)
 
 
+def physics_step() -> str:
+    """The largest physics step per family within 0.5 % of full scale of a 1 ms reference (bench/bench_physics_step.py)."""
+    rows, detail = [], []
+    for fam in PHYSICS_STEP_FAMILIES:
+        d = load(f"physics-step-{fam}.json")
+        if not d:
+            continue
+        best = d["largest_step_within_tolerance_s"]
+        rows.append([fam, d["protocol_kind"], d["control"], d["episodes"], f"{num(d['full_scale_n'])} ({d['full_scale_is']})",
+                     num(1e3 * d["preset_physics_timestep_s"]), num(1e3 * best) if best else "–"])
+        cells = [f"{num(1e3 * r['physics_timestep_s'])} ms: {pct(r['max_error_of_full_scale'], 2)}" for r in d["steps"][1:7]]
+        detail.append([fam] + cells + ["–"] * (6 - len(cells)))
+    if not rows:
+        return ""
+    return "\n".join([
+        "Physics step per family (`bench/bench_physics_step.py`, C MuJoCo: the step is the model's, MuJoCo Warp runs the "
+        "same model): the default protocol's episodes (seeds 0..N-1) at each step that divides the sample period, "
+        "net contact force at the sample times against a 1 ms run; the largest step with max |F - F_1ms| <= 0.5 % of "
+        "full scale (issue 16) is the GPU path's step where larger than the preset's "
+        "(`simulate/generation/choice.py: GPU_PHYSICS_STEP_S`):\n",
+        table(["family", "protocol", "control", "episodes", "full scale N", "preset step ms", "largest step within 0.5 % ms"], rows),
+        "Max error of full scale at each step:\n",
+        table(["family"] + [f"step {i}" for i in range(1, 7)], detail)])
+
+
 def bench_gpu() -> str:
-    out = [u for u in [bench_user_cli()] if u]
+    out = [u for u in [bench_user_cli(), physics_step()] if u]
     tr = load(TRANSDUCTION_GPU) or load("transduction-gpu.json")
     if tr and "warp_cuda" in tr:
         c = tr["warp_cuda"]

@@ -65,6 +65,12 @@ class WarpWorlds:
 
         self.mjm, self.E, self.device = m, n_worlds, device
         self.mjd = mujoco.MjData(m)
+        m = copy.copy(m)
+        # box-box pairs through MuJoCo Warp's box-box primitive (a port of C MuJoCo's mjc_BoxBox, which the C
+        # path runs): its default for box-box is the general convex collider (GJK/EPA), which reports no contact
+        # for penetrations below ~1e-5 m (measured on Warp's CPU device, 10 mm boxes), where the force-controlled
+        # presses of fabric_1 and velostat sit (1-20 um); C MuJoCo's box-box ignores this flag
+        m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_NATIVECCD)
         quiet = copy.copy(m)  # the substeps between two records: same model, sensors off
         quiet.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
         self._buffers: tuple | None = None  # (chunk, substeps, seq, rec, rec_host, graph) of the last run, reused by the next
@@ -72,10 +78,16 @@ class WarpWorlds:
         with wp.ScopedDevice(device):
             self.m = mjw.put_model(m)
             self.m_quiet = self.m if sensors_every_step else mjw.put_model(quiet)
-            # one indenter-pad pair: a box-box contact has at most 8 points, 3 rows each (elliptic, condim 3),
-            # plus slack for the actuated joints' rows
-            self.d = mjw.put_data(m, self.mjd, nworld=n_worlds, nconmax=8, njmax=8 * 3 + 2 * m.nu)
+            # per indenter-pad pair (m.npair: one per indenter) a box-box contact has at most 8 points, 3 rows each
+            # (elliptic, condim 3), plus slack for the actuated joints' rows; njmax binds each world
+            pairs = max(1, m.npair)
+            self.d = mjw.put_data(m, self.mjd, nworld=n_worlds, nconmax=8 * pairs, njmax=8 * 3 * pairs + 2 * m.nu)
             self.counter = wp.zeros(2, dtype=wp.int32)
+
+    n_extra = 0  # recorded values per world after the sensordata (subclasses: state of their own per-step kernels)
+
+    def _reset_extra(self, qpos0: np.ndarray, sens0: np.ndarray) -> None:
+        """Reset the state of a subclass's per-step kernels at the start of a run (nothing here)."""
 
     def _step_sample(self, seq: wp.array3d, out: wp.array3d, substeps: int) -> None:
         import mujoco_warp as mjw
@@ -95,13 +107,13 @@ class WarpWorlds:
 
         ctrl: (E, nstep, nu) array, or a function (steps, episodes) of two slices returning those rows; the
         next chunk's controls are made on CONTROL_THREADS host threads (blocks of episodes; numpy releases the
-        GIL) while the device runs the current one. out: a (E, n_samples, nsensordata) float64 array to fill
-        (default a new one).
+        GIL) while the device runs the current one. out: a (E, n_samples, nsensordata + n_extra) float64 array to
+        fill (default a new one); sens0 has as many columns.
         """
         import mujoco_warp as mjw
         from concurrent.futures import ThreadPoolExecutor
 
-        E, nu, ns = self.E, self.mjm.nu, self.mjm.nsensordata
+        E, nu, ns = self.E, self.mjm.nu, self.mjm.nsensordata + self.n_extra
         ctrl_rows = ctrl if callable(ctrl) else (lambda sl, eps: ctrl[eps, sl])
         out = np.zeros((E, n_samples, ns)) if out is None else out
         out[:, 0] = sens0
@@ -142,6 +154,7 @@ class WarpWorlds:
                 self._loaded = True
             mjw.reset_data(self.m, self.d)
             self.d.qpos.assign(np.ascontiguousarray(qpos0, np.float32))
+            self._reset_extra(qpos0, sens0)
             for i, a in enumerate(starts):
                 k = min(chunk, n_samples - a)
                 seq.assign(nxt.result())
@@ -166,15 +179,85 @@ class WarpWorlds:
         return out
 
 
+@wp.kernel
+def _stick_slip_step(sensordata: wp.array2d(dtype=wp.float32), per: int, k_t: wp.float64, mu: wp.float64,
+                     anchor: wp.array2d(dtype=wp.float64), force: wp.array2d(dtype=wp.float32)):
+    """One physics step of `simulate.contact.press_stroke.stick_slip` for world w, indenter c (float64 state)."""
+    w, c = wp.tid()
+    x = wp.float64(sensordata[w, c * per + 0])
+    y = wp.float64(sensordata[w, c * per + 1])
+    cap = mu * wp.max(wp.float64(-sensordata[w, c * per + 6]), wp.float64(0.0))  # netforce z on the pad: -normal
+    ax = anchor[w, 2 * c + 0]
+    ay = anchor[w, 2 * c + 1]
+    if not (cap > wp.float64(0.0)):  # out of contact: the anchor follows the indenter
+        ax = x
+        ay = y
+    fx = k_t * (x - ax)
+    fy = k_t * (y - ay)
+    mag = wp.sqrt(fx * fx + fy * fy)
+    if mag > cap:  # slip: the force on the friction cone, the anchor dragged behind
+        sc = cap / mag
+        fx = fx * sc
+        fy = fy * sc
+        ax = x - fx / k_t
+        ay = y - fy / k_t
+    anchor[w, 2 * c + 0] = ax
+    anchor[w, 2 * c + 1] = ay
+    force[w, 2 * c + 0] = wp.float32(fx)
+    force[w, 2 * c + 1] = wp.float32(fy)
+
+
+@wp.kernel
+def _record_extra(extra: wp.array2d(dtype=wp.float32), counter: wp.array(dtype=wp.int32), offset: int,
+                  out: wp.array3d(dtype=wp.float32)):
+    w, j = wp.tid()
+    out[w, counter[1], offset + j] = extra[w, j]
+
+
+class StickSlipWorlds(WarpWorlds):
+    """Worlds of the "press_stroke" scene (simulate.contact.press_stroke): sensors at every step, and after each step
+    the Coulomb stick-slip shear of every indenter (`_stick_slip_step`, the numpy `stick_slip` per step, state in
+    float64) on the device; each recorded sample is the sensordata followed by the shear (x, y) per indenter."""
+
+    def __init__(self, m, n_worlds: int, device: str, per_indenter: int, count: int, k_t: float, mu: float):
+        super().__init__(m, n_worlds, device, sensors_every_step=True)
+        self.per, self.count, self.k_t, self.mu = per_indenter, count, float(k_t), float(mu)
+        self.n_extra = 2 * count
+        with wp.ScopedDevice(device):
+            self.anchor = wp.zeros((n_worlds, 2 * count), dtype=wp.float64)
+            self.force = wp.zeros((n_worlds, 2 * count), dtype=wp.float32)
+
+    def _reset_extra(self, qpos0: np.ndarray, sens0: np.ndarray) -> None:
+        xy = np.stack([sens0[:, c * self.per : c * self.per + 2] for c in range(self.count)], axis=1)  # (E, C, 2)
+        self.anchor.assign(np.ascontiguousarray(xy.reshape(self.E, -1), np.float64))
+        self.force.zero_()
+
+    def _step_sample(self, seq: wp.array3d, out: wp.array3d, substeps: int) -> None:
+        import mujoco_warp as mjw
+
+        E, nu, ns = self.E, self.mjm.nu, self.mjm.nsensordata
+        for _ in range(substeps):
+            wp.launch(_set_ctrl, dim=(E, nu), inputs=[seq, self.counter, self.d.ctrl])
+            mjw.step(self.m, self.d)
+            wp.launch(_stick_slip_step, dim=(E, self.count),
+                      inputs=[self.d.sensordata, self.per, wp.float64(self.k_t), wp.float64(self.mu), self.anchor, self.force])
+            wp.launch(_advance, dim=1, inputs=[self.counter, 0])
+        wp.launch(_record, dim=(E, ns), inputs=[self.d.sensordata, self.counter, out])
+        wp.launch(_record_extra, dim=(E, self.n_extra), inputs=[self.force, self.counter, ns, out])
+        wp.launch(_advance, dim=1, inputs=[self.counter, 1])
+
+
 _CACHED: dict = {}  # (MJCF, n_worlds, device) -> WarpWorlds: one set per process
 
 
-def worlds_for(m, mjcf: str, n_worlds: int, device: str) -> WarpWorlds:
+def worlds_for(m, mjcf: str, n_worlds: int, device: str, stick_slip: tuple | None = None) -> WarpWorlds:
     """The process's worlds for this scene and batch size, made once (put_model, put_data for n_worlds, the
     CUDA graph) and reused by the next batch of the same shape (the GPU feed's physics processes step one
-    batch after another); a different scene or size replaces them."""
-    key = (mjcf, n_worlds, device)
+    batch after another); a different scene or size replaces them. stick_slip: (per_indenter, count, k_t, mu)
+    for `StickSlipWorlds`."""
+    key = (mjcf, n_worlds, device, stick_slip)
     if key not in _CACHED:
         _CACHED.clear()  # free the old worlds' device memory before allocating new ones
-        _CACHED[key] = WarpWorlds(m, n_worlds, device)
+        _CACHED[key] = (WarpWorlds(m, n_worlds, device) if stick_slip is None
+                        else StickSlipWorlds(m, n_worlds, device, *stick_slip))
     return _CACHED[key]

@@ -49,6 +49,32 @@ def _controls(cfg: SceneConfig, protocols: list[EpisodeProtocol], t: np.ndarray)
     return ctrl
 
 
+def controls_batch(cfg: SceneConfig, protocols: list[EpisodeProtocol], t: np.ndarray) -> np.ndarray:
+    """`_controls` as array expressions over the episodes (the MuJoCo Warp path makes controls for 32k episodes
+    at a time): the same operations element by element, so the same values (tests/test_press_stroke_mjw.py)."""
+    c = cfg.indenter.count
+    E = len(protocols)
+    ctrl = np.zeros((E, len(t), 3 * c))
+    tt = np.asarray(t, float)[None, :]
+
+    def smooth(t0: np.ndarray, t1: np.ndarray) -> np.ndarray:  # indenter._smooth over (E, 1) columns
+        u = np.clip((tt - t0[:, None]) / np.maximum(t1 - t0, 1e-9)[:, None], 0.0, 1.0)
+        return 0.5 * (1.0 - np.cos(np.pi * u))
+
+    for i in range(c):
+        inds = [p.params["indenters"][i] for p in protocols]
+        col = {k: np.array([ind[k] for ind in inds], float) for k in ("xy_m", "stroke_xy_m", "t_press_s", "t_stroke_s",
+                                                                       "t_release_s", "force_n")}
+        active = np.array([bool(ind["active"]) for ind in inds])
+        s = smooth(col["t_stroke_s"][:, 0], col["t_stroke_s"][:, 1])
+        ctrl[:, :, 3 * i : 3 * i + 2] = col["xy_m"][:, None, :] + s[..., None] * col["stroke_xy_m"][:, None, :]
+        up = smooth(*col["t_press_s"].T)
+        down = 1.0 - smooth(*col["t_release_s"].T)
+        f = col["force_n"][:, None] * up * down
+        ctrl[:, :, 3 * i + 2] = -np.where(active[:, None], f, 0.0)
+    return ctrl
+
+
 def stick_slip(xy: np.ndarray, normal_n: np.ndarray, k_t: float, mu: float) -> np.ndarray:
     """Coulomb stick-slip shear force (N) on the pad along a tangential path.
 
@@ -88,7 +114,6 @@ def run_press_stroke(cfg: SceneConfig, protocols: list[EpisodeProtocol], threads
     dt = cfg.sampling.physics_timestep_s
     nstep = (n - 1) * sub
     m = mujoco.MjModel.from_xml_string(_mjcf(cfg))
-    ctrl = _controls(cfg, protocols, (np.arange(nstep) + 1.0) * dt)
     E = len(protocols)
     # initial states: active indenters touching the pad at their start position, inactive ones parked above
     d = mujoco.MjData(m)
@@ -105,6 +130,20 @@ def run_press_stroke(cfg: SceneConfig, protocols: list[EpisodeProtocol], threads
         mujoco.mj_getState(m, d, states[e], spec)
         sens0[e] = d.sensordata
     k_t, mu = shear_stiffness_n_per_m(cfg), cfg.indenter.friction
+    per = SENSORS_PER_INDENTER
+    from simulate.contact.load_field import physics_engine
+
+    engine, device = physics_engine(cfg)
+    if engine == "mujoco_warp":  # the same model, controls and stick-slip, as batched worlds (float32 physics)
+        from simulate.contact.mujoco_warp import worlds_for
+
+        rec = worlds_for(m, _mjcf(cfg), E, device, (per, C, k_t, mu)).run(
+            states[:, 1 : 1 + m.nq], lambda sl, eps: controls_batch(cfg, protocols[eps], (np.arange(sl.start, sl.stop) + 1.0) * dt),
+            np.concatenate([sens0, np.zeros((E, 2 * C))], axis=1), sub, n)
+        sd = rec[..., : m.nsensordata].reshape(E, n, C, per)
+        return _load_batch(cfg, protocols, sd[..., 0:3], np.clip(-sd[..., 6], 0.0, None),
+                           rec[..., m.nsensordata :].reshape(E, n, C, 2), sd[..., 3])
+    ctrl = _controls(cfg, protocols, (np.arange(nstep) + 1.0) * dt)
     rows = np.arange(1, n) * sub - 1
     pos = np.zeros((E, n, C, 3))
     fn = np.zeros((E, n, C))
@@ -112,7 +151,6 @@ def run_press_stroke(cfg: SceneConfig, protocols: list[EpisodeProtocol], threads
     found = np.zeros((E, n, C))
     datas = [mujoco.MjData(m) for _ in range(max(1, threads))]
     chunk = max(1, MAX_STEPS_PER_CHUNK // nstep)
-    per = SENSORS_PER_INDENTER
     for a in range(0, E, chunk):
         b = min(E, a + chunk)
         _, sd = mujoco.rollout.rollout(m, datas if threads > 1 else datas[0], states[a:b], ctrl[a:b], nstep=nstep)

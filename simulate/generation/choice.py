@@ -16,17 +16,38 @@ import os
 from dataclasses import dataclass, field
 
 from scenes import SceneConfig
+from simulate.protocols.compression_tester import KINDS as _VELOSTAT_KINDS
 
-# protocol kinds whose MuJoCo Warp path is checked against C MuJoCo (tests/test_contact_mjw.py, marked gpu):
-# the position-controlled box press of cnt_pdms. Kinds with their own contact stage (press_stroke) have none;
-# force-controlled kinds run on MuJoCo Warp only when asked for (--physics mujoco_warp).
-GPU_PROTOCOL_KINDS = ("sinusoid", "hold")
-GPU_CONTROLS = ("displacement",)
+# (protocol kind, control) whose MuJoCo Warp path is checked against C MuJoCo (contact force within 2e-3 of full
+# scale, measured <= 3e-5 on Warp's CPU device): the position-controlled box press of cnt_pdms
+# (tests/test_contact_mjw.py), the force-controlled staircases of fabric and the compression-tester kinds of
+# velostat (tests/test_contact_mjw_force.py; marked gpu for CUDA, slow for Warp's CPU device), and ntype's
+# press_stroke, whose contact stage runs its per-step stick-slip in a kernel after every MuJoCo Warp step
+# (simulate.contact.mujoco_warp.StickSlipWorlds, tests/test_press_stroke_mjw.py). element_loads has no MuJoCo stage.
+GPU_PROTOCOLS = {("sinusoid", "displacement"), ("hold", "displacement"), ("staircase", "force"),
+                 *((k, "force") for k in _VELOSTAT_KINDS), ("press_stroke", "force")}
+GPU_PROTOCOL_KINDS = tuple(sorted({k for k, _ in GPU_PROTOCOLS}))
+GPU_CONTROLS = ("displacement", "force")
+# the physics step the GPU path takes where `auto` chose it and the user set none (--set sampling.physics_timestep_s),
+# if larger than the scene's: the largest candidate step whose contact force stays within 0.5 % of full scale of a
+# 1 ms reference on the family's default protocol (bench/bench_physics_step.py, results/physics-step-<family>.json;
+# the step is the model's, so C MuJoCo measured it). Keyed by protocol kind: contact_design scales the indenter's
+# armature so that sqrt(k / m) dt is fixed (where the armature sets the mass: every preset), so the contact mode's period is a fixed number of steps whatever the
+# pad's stiffness, and the error depends on the step against the protocol's ramps, not on the pad.
+# Measured (8 episodes of the default protocol each): velostat_mix 5 ms = 2.6e-3 of full scale, 10 ms 6.7e-3 (the
+# preset's 2 ms: 5.9e-4); fabric_1 staircase 5 ms (the preset's) 3.6e-3, 10 ms 3.0e-2
+GPU_PHYSICS_STEP_S: dict[str, float] = {"staircase": 0.005, **{k: 0.005 for k in _VELOSTAT_KINDS}}
 # where the GPU feed runs and the scene names no compression: Blosc2 lz4 (level 1 + shuffle). The plain CLI on the
 # H100 (`generate cnt_pdms --episodes 4096`, 8 writers) ran 117 s with lz4 against 156 s with zstd for 14 % more
 # bytes (bench/results/user-cli-h100-cnt-lz4.json vs user-cli-h100-cnt.json): the writers' compression was the
-# bound. The CPU path keeps lzf (the same bytes as before)
+# bound. The CPU path keeps lzf (the same bytes as before). Only for cnt_pdms (sensor family): Blosc2 pays a fixed
+# cost per chunk (~1 ms on the project machine), and the narrow frames of the other families make small chunks
+# (fabric_1: 294 chunks of 1-3 kB per episode): their writers spend 221.7 / 51.3 / 22.3 ms per episode with lz4
+# against 11.2 / 19.7 / 9.1 ms with lzf, for more bytes (fabric_1 / velostat / ntype,
+# bench/results/writer-codec-cpu.json; the H100 CLI run of fabric_1 with lz4: 143 ms per episode, the writers its
+# bound after the physics, user-cli-h100-s8-fabric.json), so they keep the scene's compression
 GPU_COMPRESSION = "lz4"
+GPU_COMPRESSION_FAMILIES = ("cnt_pdms",)
 # writer processes of the GPU feed: all cores but 4 (the driver, the physics, the OS), at most 12: on the 16-core
 # H100 host 12 writers ran the 4096-episode CLI run in 122 s against 156 s with 8 (user-cli-h100-cnt-w12.json)
 MAX_AUTO_WRITERS = 12
@@ -48,6 +69,8 @@ class Choice:
                 else f", {self.workers} worker process(es)")
         comp = next((o.split("=", 1)[1] for o in self.overrides if o.startswith("generation.compression=")), None)
         comp = f", {comp} compression" if comp else ""
+        step = next((o.split("=", 1)[1] for o in self.overrides if o.startswith("sampling.physics_timestep_s=")), None)
+        comp += f", physics step {float(step) * 1e3:g} ms (GPU default of the protocol)" if step else ""
         return (f"engine: {engine} on {self.physics_device}, sensor kernels on {self.device}{feed}{comp} "
                 f"({self.reason})")
 
@@ -68,20 +91,32 @@ def gpu_blocker(cfg: SceneConfig) -> str | None:
     from simulate.contact.load_field import CONTACT_STAGES
 
     p = cfg.protocol
-    if p.kind in CONTACT_STAGES:
+    if p.kind in CONTACT_STAGES and (p.kind, p.control) not in GPU_PROTOCOLS:
         return f"protocol '{p.kind}' has its own C MuJoCo contact stage, no MuJoCo Warp path"
-    if p.kind not in GPU_PROTOCOL_KINDS or p.control not in GPU_CONTROLS:
+    if (p.kind, p.control) not in GPU_PROTOCOLS:
         return f"MuJoCo Warp not validated for protocol '{p.kind}' ({p.control} control); force it with --physics mujoco_warp"
     return None
 
 
+def gpu_physics_step(cfg: SceneConfig) -> float | None:
+    """The GPU path's physics step for this scene (GPU_PHYSICS_STEP_S), where it is larger than the scene's and
+    divides the sample period; else None (the scene's step stays)."""
+    step = GPU_PHYSICS_STEP_S.get(cfg.protocol.kind)
+    if step is None or step <= cfg.sampling.physics_timestep_s:
+        return None
+    ratio = 1.0 / (cfg.sampling.sample_rate_hz * step)
+    return step if abs(ratio - round(ratio)) <= 1e-6 and round(ratio) >= 1 else None
+
+
 def choose(cfg: SceneConfig, physics: str = "auto", device: str = "auto", workers: int | None = None,
-           backend: str = "warp", cuda: tuple[int, str] | None = None, mjw: bool | None = None) -> Choice:
+           backend: str = "warp", cuda: tuple[int, str] | None = None, mjw: bool | None = None,
+           step_asked: bool = False) -> Choice:
     """The engine, devices and processes for generating `cfg`.
 
     physics, device: the CLI's flags ("auto" = choose); a generation.physics the scene or --set gave (anything
     but "auto") counts as asked. workers: None = choose. cuda, mjw: what this machine has (default: ask Warp,
-    try importing mujoco_warp), for tests.
+    try importing mujoco_warp), for tests. step_asked: the user set sampling.physics_timestep_s (--set), so
+    `auto` keeps it (otherwise an auto-chosen GPU path takes `gpu_physics_step`).
     """
     from simulate.contact.mujoco_warp import available
 
@@ -117,8 +152,12 @@ def choose(cfg: SceneConfig, physics: str = "auto", device: str = "auto", worker
     if physics == "mujoco_warp":
         overrides += ["generation.physics=mujoco_warp", f"generation.device={'cuda' if device.startswith('cuda') else 'cpu'}"]
         physics_device = device
-        if physics_device.startswith("cuda") and "compression" not in g.model_fields_set:
+        if (physics_device.startswith("cuda") and "compression" not in g.model_fields_set
+                and cfg.sensor.family in GPU_COMPRESSION_FAMILIES):
             overrides.append(f"generation.compression={GPU_COMPRESSION}")
+        step = gpu_physics_step(cfg) if why.startswith("auto") and not step_asked else None
+        if step is not None:
+            overrides.append(f"sampling.physics_timestep_s={step!r}")
     else:
         physics_device = "cpu"
         if "physics" in g.model_fields_set:

@@ -293,7 +293,13 @@ def feed_worlds(cfg: SceneConfig) -> int:
     """Episodes per feed batch: FEED_WORLDS for each episode length the protocol draws (`length_groups` step one
     after another, so mixed frequencies keep FEED_WORLDS worlds in each), while the batch's sensordata stays
     within BATCH_RAM_FRACTION of the host's memory."""
+    from simulate.contact.load_field import CONTACT_STAGES
+
     p, s = cfg.protocol, cfg.sampling
+    if p.kind in CONTACT_STAGES:
+        # the stage runs in the driver, its load field in numpy on the host with (episodes, samples, indenters,
+        # taxels) float64 temporaries (press_stroke on ntype's 24 x 24 grid: ~2 GB per 4096 episodes)
+        return FEED_WORLDS // 4
     if p.kind != "sinusoid":
         return FEED_WORLDS
     freqs = sorted(set(p.frequencies_hz))

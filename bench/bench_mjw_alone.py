@@ -1,0 +1,99 @@
+"""MuJoCo Warp stepping the worlds of a `piezotwin generate` run alone: the bound of a physics-bound CLI run.
+
+    python bench/bench_mjw_alone.py --family fabric_1 --episodes 8192 [--tag h100-s8]
+
+The scene, overrides and episodes are those of `piezotwin generate <family> --episodes N` with defaults (the
+`auto` choice made the same way, so the same physics step), batched as the GPU feed batches them
+(`simulate.generation.feed._groups`); each batch runs `step_worlds` (protocols, controls, MuJoCo Warp, sensordata
+into shared memory) in this one process, one batch after another, with nothing else on the GPU. A 64-world
+batch of two samples first loads the kernels (compiled by the CLI run before, so the Warp cache is warm), not timed. Reported:
+seconds per batch ("worlds": the MuJoCo Warp part, as the feed's timings name it; "wall": the whole task),
+samples/s and world-steps/s. Merged into bench/results/user-cli-<tag>.json under runs.<family>.mjw_alone when
+that file has the family's run (bench_user_cli.py writes it), else written to mjw-alone-<tag>-<family>.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from multiprocessing import shared_memory
+from pathlib import Path
+
+
+def _free(out: dict) -> None:
+    for v in out.values():
+        if isinstance(v[0], str):
+            shm = shared_memory.SharedMemory(name=v[0])
+            shm.close()
+            shm.unlink()
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--family", required=True)
+    ap.add_argument("--episodes", type=int, required=True)
+    ap.add_argument("--tag", default="local")
+    ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
+    a = ap.parse_args()
+    from scenes import load_scene
+    from simulate.generation.choice import choose
+    from simulate.generation.feed import _groups, feed_worlds, step_worlds
+    from simulate.generation.run import episode_ids_of_shard, n_shards
+
+    base = [f"generation.episodes={a.episodes}"]
+    cfg = load_scene(a.family, base)
+    chosen = choose(cfg)
+    cfg = load_scene(a.family, base + chosen.overrides)
+    print(chosen.line())
+    groups = _groups(cfg, list(range(n_shards(cfg))), feed_worlds(cfg))
+    # load the kernels (Warp's cache is warm from the CLI run): 64 worlds of the same model, two samples
+    import numpy as np
+
+    from simulate.contact.load_field import build_model, physics_engine
+    from simulate.contact.mujoco_warp import WarpWorlds
+
+    m = build_model(cfg)
+    sub = cfg.sampling.substeps
+    q0 = np.zeros((64, m.nq))
+    q0[:, 2] = cfg.indenter.start_gap_m
+    WarpWorlds(m, 64, physics_engine(cfg)[1]).run(q0, np.zeros((64, 2 * sub, m.nu)), np.zeros(m.nsensordata), sub, 3)
+    batches = []
+    samples = 0
+    steps = 0
+    t0 = time.perf_counter()
+    for g in groups:
+        gids = [k for s in g for k in episode_ids_of_shard(cfg, s)]
+        t1 = time.perf_counter()
+        protos, out, spent = step_worlds(cfg, gids)
+        wall = time.perf_counter() - t1
+        _free(out)
+        n = sum(p.n_samples for p in protos)
+        samples += n
+        steps += (max(p.n_samples for p in protos) - 1) * cfg.sampling.substeps
+        batches.append({"episodes": len(gids), "samples": n, "wall_s": wall, "worlds_s": spent["worlds"],
+                        "sequential_steps": (max(p.n_samples for p in protos) - 1) * cfg.sampling.substeps})
+        print(f"batch of {len(gids)} episodes: {wall:.1f} s ({spent['worlds']:.1f} s worlds)")
+    total = time.perf_counter() - t0
+    res = {
+        "engine_line": chosen.line(),
+        "physics_timestep_s": cfg.sampling.physics_timestep_s,
+        "episodes": a.episodes,
+        "batches": batches,
+        "seconds": total,
+        "worlds_seconds": sum(b["worlds_s"] for b in batches),
+        "samples": samples,
+        "samples_per_s": samples / total,
+        "world_steps_per_s": sum(b["episodes"] * b["sequential_steps"] for b in batches) / total,
+    }
+    print(f"{a.family}: {samples} samples in {total:.1f} s = {samples / total:.3g} samples/s stepping alone")
+    cli = a.out / f"user-cli-{a.tag}.json"
+    if cli.exists() and a.family in (d := json.loads(cli.read_text()))["runs"]:
+        d["runs"][a.family]["mjw_alone"] = res
+        cli.write_text(json.dumps(d, indent=1) + "\n")
+    else:
+        (a.out / f"mjw-alone-{a.tag}-{a.family}.json").write_text(json.dumps(res, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,61 @@
+"""The force-controlled protocols on MuJoCo Warp against C MuJoCo: fabric staircases and the velostat
+compression-tester kinds (cnt_pdms' position-controlled press: tests/test_contact_mjw.py).
+
+Both engines run the same MJCF and controls; MuJoCo Warp computes in float32. The forces at stake are small
+(fabric 0.1-2 N on a stiff thin pad: 1-15 um deep; velostat 1-15 N: 1-20 um), which is why MuJoCo Warp runs box-box
+pairs through its box-box primitive (simulate/contact/mujoco_warp.py: its convex collider missed contacts shallower
+than ~1e-5 m). Measured on Warp's CPU device (short episodes below): contact force within 2.6e-5 (fabric_1) and
+2.8e-5 (velostat) of full scale, positions within 1e-9 m. Checked here: 2e-3 of full scale (as for cnt_pdms),
+positions within 1e-7 m, the contact found wherever the pad carries load, and the commanded force reached.
+The Warp-CPU runs compile MuJoCo Warp's kernels for each scene (~1.5 min cold): marked slow; the CUDA runs: gpu.
+"""
+
+import numpy as np
+import pytest
+
+from scenes import load_scene
+from simulate.contact.load_field import simulate_sensors
+from simulate.contact.mujoco_warp import available
+from simulate.generation.run import episode_protocols
+
+needs_mjw = pytest.mark.skipif(not available(), reason="mujoco_warp not installed (extra: gpu)")
+
+# short versions of the default protocols (same kinds, controls and contact model; fewer levels, shorter holds)
+SHORT = {
+    "fabric_1": ["protocol.stair_return_points_n=[1.0, 2.0]", "protocol.stair_dwell_s=1 s"],
+    "velostat": ["protocol.duration_s=20", "protocol.step_hold_s=1", "protocol.hold_max_s=6", "protocol.staircase_max_n=4"],
+}
+
+
+def _compare(family: str, device: str, n_episodes: int) -> None:
+    dev = "cpu" if device == "cpu" else "cuda"
+    cfg = load_scene(family, SHORT[family])
+    cfg_w = load_scene(family, SHORT[family] + ["generation.physics=mujoco_warp", f"generation.device={dev}"])
+    protos = episode_protocols(cfg, list(range(n_episodes)), list(range(n_episodes)))
+    a, ta = simulate_sensors(cfg, protos)
+    b, tb = simulate_sensors(cfg_w, protos)
+    np.testing.assert_array_equal(ta, tb)
+    fa, fb = a[..., 4:7], b[..., 4:7]
+    full = cfg.protocol.amplitude_max
+    assert np.abs(fa[..., 2]).max() > 0.5 * ta.max()  # the episodes press: a loaded contact is compared
+    assert np.abs(fa - fb).max() < 2e-3 * full
+    np.testing.assert_allclose(b[..., 0:3], a[..., 0:3], atol=1e-7)
+    loaded = -fa[..., 2] > 0.01 * full
+    assert (b[..., 3][loaded] > 0).all()  # MuJoCo Warp finds the contact wherever C MuJoCo carries load
+    # force control: the pad carries the commanded force once the ramps settle (holds), on both engines
+    hold = np.abs(np.diff(ta, axis=1, prepend=0.0)) < 1e-9
+    assert np.abs(-fb[..., 2] - ta)[hold].max() < 0.02 * full
+
+
+@needs_mjw
+@pytest.mark.slow
+@pytest.mark.parametrize("family", ["fabric_1", "velostat"])
+def test_force_control_mjw_cpu_matches_c_mujoco(family):
+    _compare(family, "cpu", 2)
+
+
+@needs_mjw
+@pytest.mark.gpu
+@pytest.mark.parametrize("family", ["fabric_1", "velostat"])
+def test_force_control_mjw_cuda_matches_c_mujoco(family, gpu_device):
+    _compare(family, gpu_device, 32)
