@@ -178,6 +178,10 @@ def test_experiment_ntype_tiny(tmp_path):
     # Table 1 also under MATLAB's reading of the spread, same spreads; the headline is eq. 9 as printed
     assert m["protocol"]["kernel"] == "eq9" and set(m["models"]["rbf_col_kernels"]["matlab"]) == {"1.0", "4.0", "7.0", "10.0"}
     assert set(m["models"]["rbf_col"]) == {"1.0", "4.0", "7.0", "10.0"}
+    # and under eqs. 10-12 as printed (exact solve), with Phi's condition number on the first fold
+    assert {"eq9+exact", "matlab+exact"} <= set(m["models"]["rbf_col_kernels"])
+    cn = m["findings"]["table1_exact_phi_condition_fold1"]["eq9+exact"]
+    assert cn["1.0"]["Fz"] < cn["10.0"]["Fz"] and "eq9+exact" in m["findings"]["table1_best_spread_exact"]
     assert set(m["models"]["rbf_win"]) == {"1", "5"}
     for k in ("E_Fx", "E_Fy", "E_Fz", "MAE_Fx", "n_Fz"):
         assert k in m["models"]["rbf_win"]["5"]["7.0"] and k in m["models"]["map_cnn"]
@@ -261,3 +265,26 @@ def test_rbf_kernel_readings_of_eq9(kernel):
     net = RBFNetwork(2, s, kernel, bias=False)
     net.centres_ = np.array([[0.0, 0.0], [3.0, 4.0]])
     np.testing.assert_allclose(net.hidden(np.array([[0.0, 0.0]])), kernel_phi(kernel, s, np.array([[0.0, 25.0]])), rtol=1e-12)
+
+
+def test_rbf_exact_solve_is_eq12_and_its_conditioning_grows_with_spread():
+    """Eqs. 10-12 as printed: one unit per training sample, w = Phi^-1 d, so the network reproduces every training
+    target (eq. 11); wider units make Phi closer to singular (its condition number grows with the spread), which
+    is what an unregularised solve amplifies; the RLS ridge (delta) is bounded instead."""
+    from learn.experiments.ntype import phi_condition, split_reading
+    from learn.models.rbf import RBFNetwork
+
+    rng = np.random.default_rng(3)
+    X = rng.uniform(16.0, 25.0, (120, 36))
+    Y = rng.uniform(0.0, 4.8, (120, 36))
+    for k in ("eq9", "matlab"):
+        net = RBFNetwork(len(X), 7.0, k, solver="exact").fit(X, Y, centres=X)
+        np.testing.assert_allclose(net.predict(X), Y, atol=1e-6)
+        assert net.coef_.shape == (120, 36)  # no bias unit in eq. 10
+    with pytest.raises(ValueError):
+        RBFNetwork(10, 7.0, "eq9", solver="exact").fit(X, Y, centres=X[:10])
+    with pytest.raises(ValueError):
+        RBFNetwork(len(X), 7.0, "eq9", solver="exact").fit(X, Y, centres=X).partial_fit(X, Y)
+    c = [phi_condition("eq9", s, X) for s in (1.0, 4.0, 10.0)]
+    assert c[0] < c[1] < c[2] and c[0] < 10.0 and c[2] > 1e3
+    assert split_reading("matlab+exact") == ("matlab", "exact") and split_reading("eq9") == ("eq9", "rls")
