@@ -193,6 +193,13 @@ def test_experiment_velostat_tiny(tmp_path):
     assert ck.kind == "ensemble" and len(ck.members) == 2
     assert j["bp_search"]["paper_cluster"]["inputs"] == {"r_input": "log", "encoding": "onehot"}
     assert j["bp_search"]["literal_unit"]["inputs"] == {"r_input": "ohm", "encoding": "index"}
+    # the literal chain trains through (sect. 4.2 step 6: no early stop on validation), the others early-stop
+    lt, pt = j["bp_search"]["literal_unit"]["training"], j["bp_search"]["paper_cluster"]["training"]
+    assert lt["patience"] >= lt["max_epochs"] and pt["patience"] < pt["max_epochs"]
+    # eq. 24 on R in ohm: the top third of the forces gets a small share of the scaled input (R ~ F^-1.05)
+    c = F["literal_input_crowding"]
+    assert c["r_median_1n_ohm"] > c["r_median_10n_ohm"] > c["r_median_15n_ohm"] > 0
+    assert 0.0 < c["share_10_15n"] < 0.1
     assert {"silhouette", "bounds", "centres", "gj", "r_drift_raw_mean", "r_drift_comp_mean"} <= set(j["creep"])
     assert j["clustering"]["k_elbow"] >= 1 and j["paper"]["silhouette"] == 0.931
     for k in ("raw_bp", "paper_cluster", "literal_unit"):
