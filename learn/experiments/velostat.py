@@ -1089,7 +1089,7 @@ DIFFERENCES = """
   calibrated unit, a 10 N error for every model).
 - **BP inputs.** The paper's literal inputs (unit index, R in ohm, min-max scaled, eq. 24) are kept as the
   `literal_*` rows; our default is ln R and a one-hot unit / cluster (`bp` hyper-parameters `r_input`, `encoding`).
-  R spans ~200 ohm at 15 N to tens of kohm at 1 N, so min-max R crowds 2-15 N into the bottom few % of [0, 1],
+  R spans ~1 kohm at 15 N to ~18 kohm at 1 N (medians, quick data), so min-max R gives 10-15 N under 2 % of [0, 1],
   and an index makes neighbouring numbers look alike while their curves are unrelated (units) or only ordered
   (clusters). ln R turns a unit's gain into a shift, which the sigmoid layer represents.
 - **The paper's static curve** (re-read for the literal chains' top-step error): the text gives no resistance
