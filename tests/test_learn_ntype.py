@@ -178,6 +178,10 @@ def test_experiment_ntype_tiny(tmp_path):
     # Table 1 also under MATLAB's reading of the spread, same spreads; the headline is eq. 9 as printed
     assert m["protocol"]["kernel"] == "eq9" and set(m["models"]["rbf_col_kernels"]["matlab"]) == {"1.0", "4.0", "7.0", "10.0"}
     assert set(m["models"]["rbf_col"]) == {"1.0", "4.0", "7.0", "10.0"}
+    # and under eqs. 10-12 as printed (exact solve), with Phi's condition number on the first fold
+    assert {"eq9+exact", "matlab+exact"} <= set(m["models"]["rbf_col_kernels"])
+    cn = m["findings"]["table1_exact_phi_condition_fold1"]["eq9+exact"]
+    assert cn["1.0"]["Fz"] < cn["10.0"]["Fz"] and "eq9+exact" in m["findings"]["table1_best_spread_exact"]
     assert set(m["models"]["rbf_win"]) == {"1", "5"}
     for k in ("E_Fx", "E_Fy", "E_Fz", "MAE_Fx", "n_Fz"):
         assert k in m["models"]["rbf_win"]["5"]["7.0"] and k in m["models"]["map_cnn"]
@@ -261,3 +265,64 @@ def test_rbf_kernel_readings_of_eq9(kernel):
     net = RBFNetwork(2, s, kernel, bias=False)
     net.centres_ = np.array([[0.0, 0.0], [3.0, 4.0]])
     np.testing.assert_allclose(net.hidden(np.array([[0.0, 0.0]])), kernel_phi(kernel, s, np.array([[0.0, 25.0]])), rtol=1e-12)
+
+
+def test_rbf_exact_solve_is_eq12_and_its_conditioning_grows_with_spread():
+    """Eqs. 10-12 as printed: one unit per training sample, w = Phi^-1 d, so the network reproduces every training
+    target (eq. 11); wider units make Phi closer to singular (its condition number grows with the spread), which
+    is what an unregularised solve amplifies; the RLS ridge (delta) is bounded instead."""
+    from learn.experiments.ntype import phi_condition, split_reading
+    from learn.models.rbf import RBFNetwork
+
+    rng = np.random.default_rng(3)
+    X = rng.uniform(16.0, 25.0, (120, 36))
+    Y = rng.uniform(0.0, 4.8, (120, 36))
+    for k in ("eq9", "matlab"):
+        net = RBFNetwork(len(X), 7.0, k, solver="exact").fit(X, Y, centres=X)
+        np.testing.assert_allclose(net.predict(X), Y, atol=1e-6)
+        assert net.coef_.shape == (120, 36)  # no bias unit in eq. 10
+    with pytest.raises(ValueError):
+        RBFNetwork(10, 7.0, "eq9", solver="exact").fit(X, Y, centres=X[:10])
+    with pytest.raises(ValueError):
+        RBFNetwork(len(X), 7.0, "eq9", solver="exact").fit(X, Y, centres=X).partial_fit(X, Y)
+    c = [phi_condition("eq9", s, X) for s in (1.0, 4.0, 10.0)]
+    assert c[0] < c[1] < c[2] and c[0] < 10.0 and c[2] > 1e3
+    assert split_reading("matlab+exact") == ("matlab", "exact") and split_reading("eq9") == ("eq9", "rls")
+
+
+@pytest.fixture(scope="module")
+def quick_run(tmp_path_factory):
+    from learn.experiments import get_experiment
+
+    return get_experiment("ntype").run(tmp_path_factory.mktemp("q") / "q", mode="quick", progress=False, log=lambda s: None)
+
+
+@pytest.mark.slow
+def test_experiment_ntype_quick(quick_run):
+    """Issue 14's ntype targets that the quick run meets (bench/results/experiments/ntype-quick.json): on the paper's
+    task window 5 beats no window on all three components, its errors are within 3x of Table 3's, and ours (the
+    element MLP) beats the best paper model on all three."""
+    from learn.experiments.ntype import PAPER_TABLE3
+
+    F = quick_run["findings"]
+    assert quick_run["task"] == "paper" and all(F["window5_beats_no_window"].values())
+    w5 = quick_run["models"]["rbf_win"]["5"]
+    best = min(w5, key=lambda s: sum(w5[s][f"E_{c}"] for c in ("Fx", "Fy", "Fz")))
+    for c, p in zip(("Fx", "Fy", "Fz"), PAPER_TABLE3[5]):
+        assert w5[best][f"E_{c}"] < 3.0 * p, (c, w5[best][f"E_{c}"], p)
+    assert all(F["elem_mlp_beats_best_paper_model"].values())
+    # eqs. 10-12 as printed: Phi over the training samples stays well conditioned (1080 samples in 36-D lie
+    # 13-22 input units from their nearest neighbour), so the exact solve does not turn Table 1 up at large spread
+    cn = F["table1_exact_phi_condition_fold1"]
+    assert max(v for s in cn["eq9+exact"].values() for v in s.values()) < 1e6
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=False, reason="issue 14 open (measured in bench/results/experiments/ntype-quick*.json): "
+                   "Table 1's best spread is 10, the sweep's edge, on seeds 0-2 (error flat from 7 to 10: F_z 4.25 -> "
+                   "4.12 %), also under eqs. 10-12 as printed (exact solve: 4.20 -> 4.03 %) and MATLAB's spread; a test "
+                   "input sits 13-22 input units from its nearest training sample: wider than every MATLAB unit swept "
+                   "(0.5 at d = spread), narrower than eq. 9's from spread 3 on (0.5 at 12 units), where it flattens")
+def test_experiment_ntype_quick_open_targets(quick_run):
+    F = quick_run["findings"]
+    assert F["table1_interior_optimum"]

@@ -79,7 +79,15 @@ PAPER_FIG_SD = (0.2247, 0.0901, 0.1862)
 PAPER_FIG_N = 180  # sect. 3.2: 5 testing samples x 36 components
 KERNEL_FORMULA = {"eq9": "exp(-d / (2 spread^2)) (eq. 9 as printed: 0.5 at d = 2 ln2 spread^2)",
                   "matlab": "exp(-ln2 (d / spread)^2) (MATLAB newrb: 0.5 at d = spread)",
-                  "sigma": "exp(-d^2 / (2 spread^2)) (Gaussian of sigma = spread)"}
+                  "sigma": "exp(-d^2 / (2 spread^2)) (Gaussian of sigma = spread)",
+                  "eq9+exact": "eq. 9 as printed, weights by eq. 12 (w = Phi^-1 d, every training sample a unit, no bias)",
+                  "matlab+exact": "MATLAB's spread reading, weights by eq. 12 (newrbe's exact design less its output bias)"}
+
+
+def split_reading(reading: str) -> tuple[str, str]:
+    """"kernel" or "kernel+solver" -> (kernel, solver); the solver defaults to RLS (learn/models/rbf.py)."""
+    k, _, sol = reading.partition("+")
+    return k, (sol or "rls")
 
 
 @dataclass
@@ -97,7 +105,10 @@ class Mode:
     # 3.8 % (one quick fold, eq. 9 kernel, spread 7: the window-5 deficit on F_z was a centre shortage)
     centres_win: int = 800  # sliding-window networks (shared over the 36 elements)
     kernel: str = "eq9"  # the paper's eq. 9 as printed (learn/models/rbf.py); the others are reported beside it
-    alt_kernels: tuple[str, ...] = ("matlab",)  # Table 1 also swept under these readings of "spread" (same centres)
+    # Table 1 also swept under these readings (same centres): "kernel" = that spread reading with the RLS output
+    # weights; "kernel+exact" = eqs. 10-12 as printed, w = Phi^-1 d over every training sample, no bias (the
+    # paper's own solve; "matlab+exact" is MATLAB newrbe's design less its output bias)
+    alt_kernels: tuple[str, ...] = ("matlab", "eq9+exact", "matlab+exact")
     rest_keep: float = 0.1  # share of unloaded element rows kept for the window networks' training
     win_rows_max: int | None = None  # cap on the window networks' training rows (random subset; None = all)
     min_abs_ref: float = 0.5  # N, eq. 14 over components with |F| >= this
@@ -316,6 +327,7 @@ def _run(md: Mode, mode: str, out: Path, data: Path, seqs: list, fp: dict, folds
     res_emlp: list[dict] = []
     res_mean: list[dict] = []
     gaps: dict[str, list] = {}  # median distance (paper units) from a test input to its nearest RBF centre, per fold
+    cond: dict[str, dict[str, dict[str, float]]] = {}  # eq. 12's Phi condition number, first fold: reading -> spread -> component
 
     def gap(At: np.ndarray, C: np.ndarray) -> float:
         return float(np.median(np.sqrt(sq_dist(At, C).min(1))))
@@ -345,8 +357,12 @@ def _run(md: Mode, mode: str, out: Path, data: Path, seqs: list, fp: dict, folds
                     net = RBFNetwork(len(C), s, md.kernel, seed=seed + fi).fit(Ntr[..., c], Ytr[..., c], centres=C)
                     preds[s][..., c] = net.predict(Nte[..., c])
                     for k in md.alt_kernels:
-                        net = RBFNetwork(len(C), s, k, seed=seed + fi).fit(Ntr[..., c], Ytr[..., c], centres=C)
+                        kern, sol = split_reading(k)
+                        Ck = Ntr[..., c] if sol == "exact" else C  # eq. 12: one unit per training sample
+                        net = RBFNetwork(len(Ck), s, kern, seed=seed + fi, solver=sol).fit(Ntr[..., c], Ytr[..., c], centres=Ck)
                         alt[k][s][..., c] = net.predict(Nte[..., c])
+                        if sol == "exact" and fi == 0:  # how well eq. 12's Phi is conditioned (first fold)
+                            cond.setdefault(k, {}).setdefault(str(s), {})[COMPONENTS[c]] = phi_condition(kern, s, Ntr[..., c])
             for s in spreads:
                 res_col[s].append(component_errors(Yte, preds[s], md.min_abs_ref, literal))
                 for k in md.alt_kernels:
@@ -442,11 +458,37 @@ def _run(md: Mode, mode: str, out: Path, data: Path, seqs: list, fp: dict, folds
     # why a best spread can sit at the sweep's end: a unit is 0.5 at d = spread, so a spread well below the
     # typical distance from a test input to its nearest centre leaves it between the units
     metrics["findings"]["nearest_centre_median"] = {k: float(np.mean(v)) for k, v in gaps.items()}
+    if cond:
+        metrics["findings"]["table1_exact_phi_condition_fold1"] = cond
+        metrics["findings"].update(exact_findings(results, spreads))
     try:
         plots(out, metrics, keep_pred)
     except Exception as exc:  # noqa: BLE001  (a report without plots is still a report)
         log(f"plots failed: {exc}")
     return metrics
+
+
+def phi_condition(kernel: str, spread: float, X: np.ndarray) -> float:
+    """2-norm condition number of eq. 12's Phi = [phi(||X_i - X_j||)] over the training inputs X (symmetric,
+    positive definite in exact arithmetic for both kernels): lambda_max / lambda_min, inf where round-off has made
+    the smallest eigenvalue <= 0 (Phi numerically singular)."""
+    from learn.models.rbf import kernel_phi, sq_dist
+
+    X = np.asarray(X, np.float64)
+    lam = np.linalg.eigvalsh(kernel_phi(kernel, spread, sq_dist(X, X)))
+    return float(lam[-1] / lam[0]) if lam[0] > 0 else float("inf")
+
+
+def exact_findings(results: dict[str, Any], spreads: list[float]) -> dict[str, Any]:
+    """Best spread of Table 1 under each exact-solve reading (eq. 12) and whether it is inside the sweep."""
+    F: dict[str, Any] = {}
+    for k, t in results.get("rbf_col_kernels", {}).items():
+        if split_reading(k)[1] != "exact":
+            continue
+        b = float(_best_spread(t))
+        F.setdefault("table1_best_spread_exact", {})[k] = b
+        F.setdefault("table1_interior_optimum_exact", {})[k] = bool(b not in (min(spreads), max(spreads)))
+    return F
 
 
 def _mean3(d: dict[str, Any]) -> float:
@@ -611,6 +653,10 @@ def _e3(d: dict[str, Any] | None, nd: int = 2) -> list[str]:
     return [fmt(d[f"E_{c}"], nd) if d else "–" for c in COMPONENTS]
 
 
+def _sci(x: float) -> str:
+    return "inf" if not np.isfinite(x) else f"{x:.1e}"
+
+
 def _pp(v: tuple | None) -> list[str]:
     return [f"{x:.2f}" for x in v] if v else ["–"] * 3
 
@@ -717,6 +763,16 @@ def _task_report(m: dict[str, Any], h: str = "##", plots_dir: str = "") -> str:
                              f"{fmt(v[c]['ratio_n_p5_p50_p95'][0], 2)}-{fmt(v[c]['ratio_n_p5_p50_p95'][2], 2)}"
                              + ("" if v[c]["paper_inside_5_95"] else " (paper outside)") for c in COMPONENTS)
                          for k, v in bands.items()) + "; paper " + " / ".join(fmt(v, 2) for v in PAPER_IMPLIED_FORCE_N) + ".")
+    if "table1_best_spread_exact" in F:
+        cn = F.get("table1_exact_phi_condition_fold1", {})
+
+        def _cond(k: str) -> str:
+            c = cn.get(k, {})
+            return " (Phi condition number, fold 1, spread " + ", ".join(
+                f"{fmt(float(s), 0)}: {_sci(max(c[s].values()))}" for s in c) + ")" if c else ""
+        lines.append("- Eqs. 10-12 as printed (w = Phi^-1 d, every training sample a unit, no bias, no RLS ridge): Table 1 "
+                     "best spread " + "; ".join(f"`{k}` {b:g}" + ("" if F["table1_interior_optimum_exact"][k] else " (edge)")
+                                                + _cond(k) for k, b in F["table1_best_spread_exact"].items()) + ".")
     if F.get("nearest_centre_median"):
         hd = P.get("half_distance_at_spread")
         unit = (f"a unit is 0.5 at d = {fmt(hd[str(P['spreads'][0])], 1)} to {fmt(hd[str(P['spreads'][-1])], 1)} over the sweep"

@@ -21,6 +21,15 @@ Spread conventions (``kernel``), d = ||X - X_j|| in input units:
 Which one the paper ran it does not say beyond eq. 9 (it calls the unit "Gaussian" but prints an unsquared
 norm); the experiment reports the sweep under all three.
 
+Output-weight solvers (``solver``):
+  "rls"     recursive least squares from P0 = I / delta (sect. 3.1: "k-means ... and recursive least square
+            (RLS) method are used"): after all rows, the ridge solution (H^T H + delta I)^-1 H^T Y, plus a bias unit.
+  "exact"   eqs. 10-12 as printed: one unit per training sample (N centres = the N training inputs), no bias,
+            Phi w = d solved exactly, w = Phi^-1 d (eq. 12; MATLAB newrbe's design, which adds an output bias).
+            Nothing bounds w: where Phi is ill-conditioned (wide units, close samples) the readout noise of the
+            training targets' inputs is amplified into the weights (the condition number is what the ntype
+            experiment reports beside it).
+
 The spread is a distance in input units, so it only means something for a stated input scale: the ntype
 experiment min-max maps resistances onto the paper's kOhm ranges (eq. 13: R_z -> [16, 25], R_x, R_y ->
 [32, 50]) before the network sees them (learn/experiments/ntype.py). The registered compensator ``rbf``
@@ -36,7 +45,7 @@ import numpy as np
 
 from learn.models.base import Compensator, FnStreamer, Streamer, register
 
-__all__ = ["KERNELS", "kernel_phi", "half_distance", "KMeans", "RecursiveLeastSquares", "RBFNetwork", "RBFCompensator", "sq_dist"]
+__all__ = ["KERNELS", "SOLVERS", "kernel_phi", "half_distance", "KMeans", "RecursiveLeastSquares", "RBFNetwork", "RBFCompensator", "sq_dist"]
 
 
 def sq_dist(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -46,6 +55,7 @@ def sq_dist(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 KERNELS = ("eq9", "matlab", "sigma")
+SOLVERS = ("rls", "exact")
 
 
 def kernel_gamma(kernel: str, spread: float) -> float:
@@ -207,7 +217,9 @@ class RBFNetwork:
 
     def __init__(self, n_centres: int = 100, spread: float = 7.0, kernel: str = "matlab", bias: bool = True,
                  delta: float = 1e-3, lam: float = 1.0, block: int = 256, kmeans_iter: int = 100,
-                 kmeans_max_points: int | None = 20000, seed: int = 0):
+                 kmeans_max_points: int | None = 20000, seed: int = 0, solver: str = "rls"):
+        if solver not in SOLVERS:
+            raise ValueError(f"solver must be one of {SOLVERS}")
         if kernel not in KERNELS:
             raise ValueError("kernel must be 'eq9' (exp(-d / 2 spread^2), the paper's eq. 9 as printed), 'matlab' "
                              "(exp(-ln2 (d / spread)^2)) or 'sigma' (exp(-d^2 / 2 spread^2))")
@@ -216,12 +228,13 @@ class RBFNetwork:
         self.n_centres, self.spread, self.kernel, self.bias = int(n_centres), float(spread), kernel, bool(bias)
         self.delta, self.lam, self.block = float(delta), float(lam), int(block)
         self.kmeans_iter, self.kmeans_max_points, self.seed = int(kmeans_iter), kmeans_max_points, int(seed)
+        self.solver = solver
         self.centres_: np.ndarray | None = None
         self.rls_: RecursiveLeastSquares | None = None
 
     def get_params(self, deep: bool = True) -> dict[str, Any]:
         return {k: getattr(self, k) for k in ("n_centres", "spread", "kernel", "bias", "delta", "lam", "block",
-                                              "kmeans_iter", "kmeans_max_points", "seed")}
+                                              "kmeans_iter", "kmeans_max_points", "seed", "solver")}
 
     @property
     def gamma(self) -> float:
@@ -232,7 +245,7 @@ class RBFNetwork:
         """[N, F] -> [N, K (+1)] hidden-layer outputs."""
         X = np.asarray(X, np.float64).reshape(len(X), -1)
         H = kernel_phi(self.kernel, self.spread, sq_dist(X, self.centres_))
-        return np.concatenate([H, np.ones((len(X), 1))], 1) if self.bias else H
+        return np.concatenate([H, np.ones((len(X), 1))], 1) if self.bias and self.solver == "rls" else H
 
     def place_centres(self, X: np.ndarray) -> np.ndarray:
         km = KMeans(self.n_centres, self.kmeans_iter, seed=self.seed, max_points=self.kmeans_max_points)
@@ -242,9 +255,19 @@ class RBFNetwork:
         X = np.asarray(X, np.float64).reshape(len(X), -1)
         self.centres_ = np.asarray(centres, np.float64) if centres is not None else self.place_centres(X)
         self.rls_ = None
+        if self.solver == "exact":  # eq. 12: w = Phi^-1 d, Phi [N, N] over the training inputs, no bias unit
+            if len(self.centres_) != len(X):
+                raise ValueError("solver 'exact' (eq. 12) needs one centre per training sample")
+            Phi = kernel_phi(self.kernel, self.spread, sq_dist(X, self.centres_))
+            self.rls_ = RecursiveLeastSquares(self.delta, self.lam, self.block)
+            self.rls_.W = np.linalg.solve(Phi, np.asarray(Y, np.float64).reshape(len(X), -1))
+            self.rls_.n_samples_seen_ = len(X)
+            return self
         return self.partial_fit(X, Y)
 
     def partial_fit(self, X: np.ndarray, Y: np.ndarray) -> "RBFNetwork":
+        if self.solver == "exact":
+            raise ValueError("solver 'exact' (eq. 12) is a batch solve: use fit")
         X = np.asarray(X, np.float64).reshape(len(X), -1)
         if self.centres_ is None:
             self.centres_ = self.place_centres(X)
