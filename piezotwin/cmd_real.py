@@ -202,6 +202,8 @@ def sim2real(
                          "run-level sd of the press levels (hierarchical levels) instead of the std of the run means.")] = False,
     fit_threshold: Annotated[bool, typer.Option("--fit-threshold", help="Fit the threshold force F_0 (F_eff = F - F_0: "
                              "the force a curved mount carries before the film is loaded) on a board without a readout floor.")] = False,
+    creep_linear: Annotated[bool, typer.Option("--creep-linear", help="Linear creep: the fitted creep force "
+                            "proportional to the load (the steady law stays a power law).")] = False,
 ) -> None:
     """Real -> sim -> real: fit the chain, generate randomized data around it, pre-train, fine-tune, report."""
     from learn.sim2real import S2R_BUDGET, run_sim2real
@@ -224,6 +226,8 @@ def sim2real(
         b["run_level"] = True
     if fit_threshold:
         b["fit_threshold"] = True
+    if creep_linear:
+        b["creep_linear"] = True
     try:
         import shlex
         import sys

@@ -242,10 +242,11 @@ LB = np.array([0.2, np.log(1e-3), np.log(1e-3), np.log(0.02), np.log(0.5), np.lo
 UB = np.array([4.0, np.log(50.0), np.log(1e4), np.log(5.0), np.log(1e3), np.log(1e7), 1e3])
 
 
-def _free(fit_series: bool, fit_threshold: bool = False) -> list[int]:
-    """Indices of theta the fit moves: the shape always; r_series and the threshold where the readout saturates
-    (fit_series); the threshold alone with fit_threshold (a mount that carries force before the film is loaded)."""
-    return [0, 1, 2, 3, 4] + ([5, 6] if fit_series else [6] if fit_threshold else [])
+def _free(fit_series: bool, fit_threshold: bool = False, creep_linear: bool = False) -> list[int]:
+    """Indices of theta the fit moves: the shape always (F_c not with creep_linear: held at its upper bound);
+    r_series and the threshold where the readout saturates (fit_series); the threshold alone with fit_threshold
+    (a mount that carries force before the film is loaded)."""
+    return sorted([0, 1, 3, 4] + ([] if creep_linear else [2]) + ([5, 6] if fit_series else [6] if fit_threshold else []))
 
 
 def _with(p: ChainParams, th: np.ndarray, fit_series: bool | list[int]) -> ChainParams:
@@ -438,7 +439,8 @@ N_RUN_BOOT = 200  # replicates of the run bootstrap of level_run_sd (no refit: c
 
 def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = None, n_boot: int = 16,
               min_force_frac: float = 0.1, min_force_n: float = 0.05, max_nfev: int = 60, seed: int = 0,
-              progress=None, level_prior: bool = False, fit_threshold: bool = False) -> ChainFit:
+              progress=None, level_prior: bool = False, fit_threshold: bool = False,
+              creep_linear: bool = False) -> ChainFit:
     """Fit the chain to real runs (see the module docstring); progress(k, n) is called after each fit.
 
     level_prior: the press levels are draws l_j ~ N(mu, sd^2) of a placement chosen before the press, so
@@ -450,7 +452,12 @@ def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = 
 
     fit_threshold: fit the threshold force F_0 (F_eff = F - F_0: the force a mount or cover carries before the
     film is loaded) also where the readout does not saturate (fit_series off: the Lupasic board), without a
-    series resistance."""
+    series resistance.
+
+    creep_linear: linear creep (Boltzmann superposition, Findley, Lai & Onaran, Creep and Relaxation of Nonlinear
+    Viscoelastic Materials 1976, ch. 2): the creep force proportional to the load, Phi = a F (F_c held at its
+    upper bound, 1e4 N, where a F_c ln(1 + F / F_c) = a F within 0.2 % up to 40 N), so the steady law stays
+    the power law -n and the hold's relative drop is the same at every force."""
     p0 = replace(p0, r_leak_ohm=leak_from_unloaded(runs, p0))
     data = _Data(runs, p0, min_force_frac, min_force_n)
     if len(data.presses) < 3:
@@ -458,7 +465,9 @@ def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = 
     if fit_series is None:
         fit_series = any("adc_full_scale" in r.attrs for r in runs)  # an ADC of known full scale: a floor shows
     idx = np.arange(len(data.presses))
-    fit_series = _free(bool(fit_series), fit_threshold)
+    fit_series = _free(bool(fit_series), fit_threshold, creep_linear)
+    if creep_linear:
+        p0 = replace(p0, creep_force_n=float(np.exp(UB[2])))
     q, res = _fit_shape(data, p0, idx, fit_series, max_nfev)
     prior = None
     if level_prior:
