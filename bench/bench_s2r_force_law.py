@@ -96,10 +96,16 @@ def main(argv=None):
     ap.add_argument("--test-episodes", required=True)
     ap.add_argument("--reference", required=True, type=Path)
     ap.add_argument("--arm", action="append", default=[], help="NAME=RUN")
+    ap.add_argument("--series-check", action="store_true", help="also fit r_series + F_0 (fit_series) on the training "
+                    "runs from 0 and 20 ohm (no bootstrap): does the readout show a floor?")
     ap.add_argument("-o", "--out", required=True, type=Path)
     a = ap.parse_args(argv)
     sides = {"reference": a.reference} | {s.split("=", 1)[0]: Path(s.split("=", 1)[1]) for s in a.arm}
-    out = {"real": a.real, "test_episodes": a.test_episodes, "sides": {}}
+    import shlex
+    import sys
+
+    out = {"command": "python bench/bench_s2r_force_law.py " + shlex.join(sys.argv[1:] if argv is None else argv),
+           "real": a.real, "test_episodes": a.test_episodes, "sides": {}}
     for name, run in sides.items():
         m = json.loads((run / "metrics.json").read_text())
         lv = training_levels(run, a.real, a.test_episodes, C)
@@ -119,6 +125,19 @@ def main(argv=None):
                    "validation-tail RMSE (mean over budgets and seeds) is <= the reference's in both Lupasic directions, and "
                    "tests/test_fit.py recovers the known chain; A and B both passing: B only if its tails are <= A's in both "
                    "directions (test numbers reported, unused)")
+    if a.series_check:
+        from learn.sim2real import _chain_prior
+
+        runs = C.load_real_runs(a.real, rate_hz=20.0)
+        train = [r for r in runs if not fnmatch.fnmatch(r.key, a.test_episodes)]
+        out["series_check"] = []
+        for r_s in (0.0, 20.0):
+            f = C.fit_chain(train, replace(_chain_prior("velostat", runs), r_series_ohm=r_s), n_boot=0, level_prior=True,
+                            fit_series=True)
+            out["series_check"].append({"start_r_series_ohm": r_s, "r_series_ohm": f.params.r_series_ohm,
+                                        "threshold_force_n": f.params.threshold_force_n, "exponent": f.params.exponent,
+                                        "within_press_rms_log_reading": f.error["rms_log_reading_within_press"]})
+        print("series check", out["series_check"])
     a.out.write_text(json.dumps(out, indent=1, default=float))
     for name, s in out["sides"].items():
         print(name, {k: s["training_fit"][k] for k in ("run_mean_level_trend_per_ln_force", "press_level_trend_per_ln_force", "within_press_rms_log_reading")},

@@ -451,8 +451,8 @@ def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = 
     rms_w and sd from the free-level fit (random-effects least squares, one step).
 
     fit_threshold: fit the threshold force F_0 (F_eff = F - F_0: the force a mount or cover carries before the
-    film is loaded) also where the readout does not saturate (fit_series off: the Lupasic board), without a
-    series resistance.
+    film is loaded; the FSR's actuation force set by its mechanical preload, Interlink FSR Integration Guide) also
+    where the readout does not saturate (fit_series off: the Lupasic board), without a series resistance.
 
     creep_linear: linear creep (Boltzmann superposition, Findley, Lai & Onaran, Creep and Relaxation of Nonlinear
     Viscoelastic Materials 1976, ch. 2): the creep force proportional to the load, Phi = a F (F_c held at its

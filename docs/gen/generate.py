@@ -605,8 +605,9 @@ def sim2real_results() -> str:
                              "; ".join(f"{c['n_runs']}: {num(c['test_finetuned_rmse'])}" for c in s["curve"]),
                              f"{s['test_two_point_pct_fs']:.1f} %"])
             law = " / ".join(f"{c['from_n']:.0f}-{c['to_n']:.0f} N {c['slope']:.2f}" for c in d["real_training_run_mean_dlnr_dlnf"])
-            frow.append([f.stem.removeprefix("s2r-force-law-"), "real training runs (model-free)", "", "", "", "", "", "",
-                         law, "", "", "", ""])
+            if law:
+                    frow.append([f.stem.removeprefix("s2r-force-law-"), "real training runs (model-free)", "", "", "", "", "", "",
+                             law, "", "", "", ""])
         out += ("\n\nThe force law against the training runs' run means (`sim2real --fit-threshold`, `--creep-linear`; "
                 "`bench/bench_s2r_force_law.py`, `bench/results/s2r-force-law-*.json`): the run-mean press level's trend "
                 "per ln plateau force on the training fit, the fitted chain's steady-state d ln R / d ln F between 1, 2, "
