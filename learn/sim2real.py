@@ -253,8 +253,14 @@ S2R_BUDGET = {  # the default budget of `piezotwin sim2real` (2 CPU cores, <= 15
     "fit_rate_hz": 20.0, "n_boot": 16, "n_episodes": 96, "episode_s": 60.0, "pretrain_epochs": 40,
     "pretrain_patience": 12, "finetune_epochs": 120, "finetune_patience": 20, "lr": 2e-3, "policy": "none",
     "finetune_norm": "checkpoint", "rehearsal": 0.0, "n_train_seeds": 3, "time_budget_s": 900.0, "valid_tail": 0.25,
-    "press_slope": False, "rated_force_n": None, "run_level": False,
+    "press_slope": False, "rated_force_n": None, "run_level": False, "fit_threshold": False,
+    "creep_linear": False,
 }
+# creep_linear: the chain's creep force proportional to the load (linear creep; F_c held at its bound;
+# sensors.chain_fit.fit_chain), seventh round, adopted only by the rule written before scoring (CHANGELOG)
+# fit_threshold: fit the chain's threshold force F_0 (F_eff = F - F_0, the force the curved mount carries before the
+# film is loaded; sensors.chain_fit.fit_chain) on a board whose readout shows no floor (the Lupasic board); seventh
+# round, adopted only by the rule written before scoring (CHANGELOG)
 # run_level: each simulated run's ln gain from the hierarchical run-level sd of the fitted press levels
 # (sensors.chain_fit.run_level_sd) instead of the std of the run means; sixth round, adopted only by the
 # validation-tail rule (CHANGELOG)
@@ -444,7 +450,8 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
             p0 = _chain_prior(family, runs)
             # placement-level prior where presses land at varying places (the Lupasic board: no ADC full scale)
             fit = C.fit_chain(train_runs, p0, n_boot=int(B["n_boot"]), seed=seed,
-                              progress=lambda k, n: bar.update(task, completed=k), level_prior=not any(r.attrs.get("adc_full_scale") for r in runs))
+                              progress=lambda k, n: bar.update(task, completed=k), level_prior=not any(r.attrs.get("adc_full_scale") for r in runs),
+                              fit_threshold=bool(B.get("fit_threshold")), creep_linear=bool(B.get("creep_linear")))
             held = C.evaluate(fit, [r for r in runs if r.key in test_keys])
             rand = C.randomization_from_fit(fit, train_runs, press_slope=bool(B["press_slope"]),
                                             rated_force_n=B.get("rated_force_n"), run_level=bool(B.get("run_level")))

@@ -200,6 +200,10 @@ def sim2real(
                              "as the user knows it (never the test runs' maximum): the simulated presses span it.")] = None,
     run_level: Annotated[bool, typer.Option("--run-level", help="Draw each simulated run's ln gain from the fitted "
                          "run-level sd of the press levels (hierarchical levels) instead of the std of the run means.")] = False,
+    fit_threshold: Annotated[bool, typer.Option("--fit-threshold", help="Fit the threshold force F_0 (F_eff = F - F_0: "
+                             "the force a curved mount carries before the film is loaded) on a board without a readout floor.")] = False,
+    creep_linear: Annotated[bool, typer.Option("--creep-linear", help="Linear creep: the fitted creep force "
+                            "proportional to the load (the steady law stays a power law).")] = False,
 ) -> None:
     """Real -> sim -> real: fit the chain, generate randomized data around it, pre-train, fine-tune, report."""
     from learn.sim2real import S2R_BUDGET, run_sim2real
@@ -220,6 +224,10 @@ def sim2real(
         b["rated_force_n"] = float(rated_force_n)
     if run_level:
         b["run_level"] = True
+    if fit_threshold:
+        b["fit_threshold"] = True
+    if creep_linear:
+        b["creep_linear"] = True
     try:
         import shlex
         import sys

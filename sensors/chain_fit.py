@@ -242,11 +242,20 @@ LB = np.array([0.2, np.log(1e-3), np.log(1e-3), np.log(0.02), np.log(0.5), np.lo
 UB = np.array([4.0, np.log(50.0), np.log(1e4), np.log(5.0), np.log(1e3), np.log(1e7), 1e3])
 
 
-def _with(p: ChainParams, th: np.ndarray, fit_series: bool) -> ChainParams:
+def _free(fit_series: bool, fit_threshold: bool = False, creep_linear: bool = False) -> list[int]:
+    """Indices of theta the fit moves: the shape always (F_c not with creep_linear: held at its upper bound);
+    r_series and the threshold where the readout saturates (fit_series); the threshold alone with fit_threshold
+    (a mount that carries force before the film is loaded)."""
+    return sorted([0, 1, 3, 4] + ([] if creep_linear else [2]) + ([5, 6] if fit_series else [6] if fit_threshold else []))
+
+
+def _with(p: ChainParams, th: np.ndarray, fit_series: bool | list[int]) -> ChainParams:
+    free = fit_series if isinstance(fit_series, list) else _free(bool(fit_series))
     q = replace(p, exponent=float(th[0]), creep_amplitude=float(np.exp(th[1])), creep_force_n=float(np.exp(th[2])),
                 tau_min_s=float(np.exp(th[3])), tau_max_s=float(np.exp(max(th[4], th[3]))))
-    if fit_series:
+    if 5 in free:
         q.r_series_ohm = float(np.exp(th[5]))
+    if 6 in free:
         q.threshold_force_n = float(th[6])
     return q
 
@@ -301,15 +310,22 @@ class _Data:
         return out, np.asarray(lev)
 
 
-def _fit_shape(data: _Data, p0: ChainParams, idx: np.ndarray, fit_series: bool, max_nfev: int,
+def _fit_shape(data: _Data, p0: ChainParams, idx: np.ndarray, fit_series: bool | list[int], max_nfev: int,
                prior: tuple[float, float] | None = None):
-    """prior = (within-press rms, level sd): fit with the level prior (see fit_chain's level_prior)."""
+    """prior = (within-press rms, level sd): fit with the level prior (see fit_chain's level_prior); fit_series: a
+    bool (rounds 1-6) or the free indices of theta (_free)."""
     from scipy.optimize import least_squares
 
-    n = 7 if fit_series else 5
+    free = fit_series if isinstance(fit_series, list) else _free(bool(fit_series))
+    full0 = _theta(p0)
+
+    def expand(th):
+        full = full0.copy()
+        full[free] = th
+        return full
 
     def fun(th):
-        q = _with(p0, np.concatenate([th, _theta(p0)[n:]]), fit_series)
+        q = _with(p0, expand(th), free)
         # series resistance enters inside the log: refit the level per press through ln(R_film e^l + r_s)
         out, lev = _profile(data, q, idx)
         if prior is None:
@@ -317,9 +333,10 @@ def _fit_shape(data: _Data, p0: ChainParams, idx: np.ndarray, fit_series: bool, 
         sw, sl = prior
         return np.concatenate([np.concatenate([e / (np.sqrt(max(len(e), 1)) * sw) for e in out]), (lev - np.mean(lev)) / sl])
 
-    th0 = np.clip(_theta(p0)[:n], LB[:n] + 1e-6, UB[:n] - 1e-6)
-    res = least_squares(fun, th0, bounds=(LB[:n], UB[:n]), x_scale="jac", max_nfev=max_nfev, method="trf")
-    q = _with(p0, np.concatenate([res.x, _theta(p0)[n:]]), fit_series)
+    th0 = np.clip(full0[free], LB[free] + 1e-6, UB[free] - 1e-6)
+    res = least_squares(fun, th0, bounds=(LB[free], UB[free]), x_scale="jac", max_nfev=max_nfev, method="trf")
+    q = _with(p0, expand(res.x), free)
+    res.names = [NAMES[i] for i in free]
     return q, res
 
 
@@ -422,7 +439,8 @@ N_RUN_BOOT = 200  # replicates of the run bootstrap of level_run_sd (no refit: c
 
 def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = None, n_boot: int = 16,
               min_force_frac: float = 0.1, min_force_n: float = 0.05, max_nfev: int = 60, seed: int = 0,
-              progress=None, level_prior: bool = False) -> ChainFit:
+              progress=None, level_prior: bool = False, fit_threshold: bool = False,
+              creep_linear: bool = False) -> ChainFit:
     """Fit the chain to real runs (see the module docstring); progress(k, n) is called after each fit.
 
     level_prior: the press levels are draws l_j ~ N(mu, sd^2) of a placement chosen before the press, so
@@ -430,7 +448,16 @@ def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = 
     prior the shape is refit on [e_j / (sqrt(n_j) rms_w), (l_j - mean l) / sd]: each press's within-press
     residuals count as one observation (its samples are strongly correlated: the presses' own ln R-ln F slopes
     spread by sd 0.16 within a Lupasic run, bench/bench_s2r_identify.py) beside its level's prior term;
-    rms_w and sd from the free-level fit (random-effects least squares, one step)."""
+    rms_w and sd from the free-level fit (random-effects least squares, one step).
+
+    fit_threshold: fit the threshold force F_0 (F_eff = F - F_0: the force a mount or cover carries before the
+    film is loaded; the FSR's actuation force set by its mechanical preload, Interlink FSR Integration Guide) also
+    where the readout does not saturate (fit_series off: the Lupasic board), without a series resistance.
+
+    creep_linear: linear creep (Boltzmann superposition, Findley, Lai & Onaran, Creep and Relaxation of Nonlinear
+    Viscoelastic Materials 1976, ch. 2): the creep force proportional to the load, Phi = a F (F_c held at its
+    upper bound, 1e4 N, where a F_c ln(1 + F / F_c) = a F within 0.2 % up to 40 N), so the steady law stays
+    the power law -n and the hold's relative drop is the same at every force."""
     p0 = replace(p0, r_leak_ohm=leak_from_unloaded(runs, p0))
     data = _Data(runs, p0, min_force_frac, min_force_n)
     if len(data.presses) < 3:
@@ -438,6 +465,9 @@ def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = 
     if fit_series is None:
         fit_series = any("adc_full_scale" in r.attrs for r in runs)  # an ADC of known full scale: a floor shows
     idx = np.arange(len(data.presses))
+    fit_series = _free(bool(fit_series), fit_threshold, creep_linear)
+    if creep_linear:
+        p0 = replace(p0, creep_force_n=float(np.exp(UB[2])))
     q, res = _fit_shape(data, p0, idx, fit_series, max_nfev)
     prior = None
     if level_prior:
@@ -493,7 +523,7 @@ def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = 
     err["n_presses"] = int(len(idx))
     err["n_missed_presses"] = int(sum(data.missed))
     return ChainFit(fin["p"], ranges, [-half, half], boot, err, [float(x) for x in lev - np.log(fin["p"].r0_ohm)],
-                    {"nfev": int(res.nfev), "status": int(res.status), "message": str(res.message), "names": list(NAMES[:len(res.x)])})
+                    {"nfev": int(res.nfev), "status": int(res.status), "message": str(res.message), "names": list(res.names)})
 
 
 def _finish(q: ChainParams, data: _Data, idx: np.ndarray, runs: Seq[RealRun]) -> dict[str, Any]:

@@ -356,3 +356,28 @@ def test_chain_fit_records_the_run_level_and_draws_it_per_simulated_run():
     assert lo <= h["point"] * 1.01 and lo < mid < hi
     assert fit.level_band90[1] == pytest.approx(CF.new_run_band90(h["within_run_sd"], h["point"], 8, fit.error["n_presses"]))
     assert CF.randomization_from_fit(fit, runs, run_level=True).episode["gain_log"].sd == pytest.approx(h["point"])
+
+
+def test_chain_fit_threshold_and_linear_creep_recover_known_parameters():
+    """fit_threshold (F_0 without a series resistance) and creep_linear (Phi = a F): a chain made with a 0.5 N
+    threshold and linear creep is recovered (exponent, threshold, hold drop); on a chain without a threshold the
+    fitted F_0 stays near 0."""
+    true = CF.ChainParams(exponent=1.0, r0_ohm=3000.0, creep_amplitude=1.5, creep_force_n=1e4, tau_min_s=0.1,
+                          tau_max_s=3.0, n_creep=4, level_log_sd=0.4, r_ref_ohm=1e4, full_scale=1000.0, noise_sd=0.0,
+                          threshold_force_n=0.5)
+    runs = _synthetic_runs(true, n_runs=3)
+    p0 = CF.ChainParams(r_ref_ohm=1e4, full_scale=1000.0, n_creep=4)
+    fit = CF.fit_chain(runs, p0, n_boot=0, level_prior=True, fit_threshold=True, creep_linear=True)
+    q = fit.params
+    assert abs(q.exponent - 1.0) < 0.05, q.exponent
+    assert abs(q.threshold_force_n - 0.5) < 0.1, q.threshold_force_n
+    assert q.creep_force_n == pytest.approx(1e4) and q.r_series_ohm == 0.0
+    assert fit.error["rms_log_reading_within_press"] < 0.03
+    assert "threshold_force_n" in fit.result["names"] and "ln_creep_force_n" not in fit.result["names"]
+    d = CF.evaluate(fit, _synthetic_runs(true, n_runs=2, seed=7))["plateau_drop"]
+    assert abs(d["sim_median"] - d["real_median"]) < 0.03
+    # the default fit holds F_0 at 0 and moves F_c (rounds 1-6)
+    assert CF._free(False) == [0, 1, 2, 3, 4] and CF._free(True) == [0, 1, 2, 3, 4, 5, 6]
+    none = CF.fit_chain(_synthetic_runs(_replace(true, threshold_force_n=0.0), n_runs=3), p0, n_boot=0, level_prior=True,
+                        fit_threshold=True, creep_linear=True)
+    assert none.params.threshold_force_n < 0.1, none.params.threshold_force_n

@@ -636,6 +636,33 @@ def sim2real_results() -> str:
                 + table(["split", "run-level draw", "simulated run gain sd (ln)", "pre-train sim valid (N)",
                          "pre-trained on training runs (N)", "fine-tuned validation (N)", "test fine-tuned by budget (N)",
                          "test fine-tuned, all runs (% FS)", "two-point (% FS)", "training side not worse"], lrow))
+    flw = sorted(RESULTS.glob("s2r-force-law-*.json"))
+    if flw:
+        frow = []
+        for f in flw:
+            d = json.loads(f.read_text())
+            for name, v in d["sides"].items():
+                tf, s = v["training_fit"], v["summary"]
+                pr = tf["params"]
+                frow.append([f.stem.removeprefix("s2r-force-law-"), name, "yes" if v["fit_threshold"] else "no",
+                             "yes" if v["creep_linear"] else "no", num(pr["exponent"], 3), num(pr["threshold_force_n"], 3),
+                             num(pr["creep_force_n"]), num(tf["run_mean_level_trend_per_ln_force"], 3),
+                             " / ".join(num(c["slope"], 2) for c in tf["chain_steady_dlnr_dlnf"]),
+                             num(tf["within_press_rms_log_reading"], 4), num(s["finetuned_valid_rmse_mean"]),
+                             "; ".join(f"{c['n_runs']}: {num(c['test_finetuned_rmse'])}" for c in s["curve"]),
+                             f"{s['test_two_point_pct_fs']:.1f} %"])
+            law = " / ".join(f"{c['from_n']:.0f}-{c['to_n']:.0f} N {c['slope']:.2f}" for c in d["real_training_run_mean_dlnr_dlnf"])
+            if law:
+                    frow.append([f.stem.removeprefix("s2r-force-law-"), "real training runs (model-free)", "", "", "", "", "", "",
+                             law, "", "", "", ""])
+        out += ("\n\nThe force law against the training runs' run means (`sim2real --fit-threshold`, `--creep-linear`; "
+                "`bench/bench_s2r_force_law.py`, `bench/results/s2r-force-law-*.json`): the run-mean press level's trend "
+                "per ln plateau force on the training fit, the fitted chain's steady-state d ln R / d ln F between 1, 2, "
+                "5, 10, 20 and 40 N, and the fine-tuned RMSE on the training runs' validation tails (mean over budgets and "
+                "seeds, N), by the rule written before scoring (CHANGELOG); the test numbers are reported, not used:\n\n"
+                + table(["split", "side", "threshold fitted", "linear creep", "exponent", "F_0 (N)", "F_c (N)",
+                         "run-mean level trend (ln / ln N)", "steady d ln R / d ln F", "within-press rms (ln)",
+                         "fine-tuned validation (N)", "test fine-tuned by budget (N)", "two-point (% FS)"], frow))
     abl = sorted(RESULTS.glob("s2r-ablation-*.json"))
     if abl:
         arows = []
