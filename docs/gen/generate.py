@@ -404,6 +404,20 @@ def bench_checksum() -> str:
 
 
 # ----------------------------------------------------------------------------------------------- sim2real
+# the columns every "measured by a rule fixed before scoring" comparison of the sim2real rounds reports
+RULE_HEADER = ["pre-train sim valid (N)", "pre-trained on training runs (N)", "fine-tuned validation (N)",
+               "test fine-tuned by budget (N)", "test fine-tuned, all runs (% FS)", "two-point (% FS)",
+               "training side not worse"]
+
+
+def _rule_cells(v: dict, d: dict) -> list[str]:
+    """One side of a rule comparison (bench_s2r_*.json): the RULE_HEADER cells."""
+    return [num(v["pretrain_sim_valid_rmse"]), num(v["zero_shot_training_runs_rmse"]), num(v["finetuned_valid_rmse_mean"]),
+            "; ".join(f"{c['n_runs']}: {num(c['test_finetuned_rmse'])}" for c in v["curve"]),
+            f"{v['test_finetuned_pct_fs']:.1f} %", f"{v['test_two_point_pct_fs']:.1f} %",
+            "yes" if d["training_side_not_worse"] else "no"]
+
+
 def sim2real_results() -> str:
     """Tables of the `piezotwin sim2real` runs recorded as bench/results/experiments/sim2real-<family>-<split>.json
     (Lupasic directions and TAMS covers left out one at a time)."""
@@ -603,19 +617,12 @@ def sim2real_results() -> str:
                 v = d[side]
                 pk = v.get("simulated_peak_force_n") or {}
                 rrow.append([f.stem.removeprefix("s2r-rated-range-"), num(v.get("rated_force_n")),
-                             f"{num(pk.get('low'))} – {num(pk.get('high'))}" if pk else "–",
-                             num(v["pretrain_sim_valid_rmse"]), num(v["zero_shot_training_runs_rmse"]),
-                             num(v["finetuned_valid_rmse_mean"]),
-                             "; ".join(f"{c['n_runs']}: {num(c['test_finetuned_rmse'])}" for c in v["curve"]),
-                             f"{v['test_finetuned_pct_fs']:.1f} %", f"{v['test_two_point_pct_fs']:.1f} %",
-                             "yes" if d["training_side_not_worse"] else "no"])
+                             f"{num(pk.get('low'))} – {num(pk.get('high'))}" if pk else "–", *_rule_cells(v, d)])
         out += ("\n\nSimulated presses over the sensor's rated force (`sim2real --rated-force-n`, set by the user; "
                 "`bench/bench_s2r_rated_range.py`, `bench/results/s2r-rated-range-*.json`): chosen on the training side only, "
                 "adopted if the fine-tuned RMSE on the training runs' validation tails (mean over budgets and seeds, N) does "
                 "not get worse in both Lupasic directions; the test numbers are reported, not used:\n\n"
-                + table(["split", "rated force (N)", "simulated peaks (N)", "pre-train sim valid (N)",
-                         "pre-trained on training runs (N)", "fine-tuned validation (N)", "test fine-tuned by budget (N)",
-                         "test fine-tuned, all runs (% FS)", "two-point (% FS)", "training side not worse"], rrow))
+                + table(["split", "rated force (N)", "simulated peaks (N)", *RULE_HEADER], rrow))
     rlv = sorted(RESULTS.glob("s2r-run-level-*.json"))
     if rlv:
         lrow = []
@@ -624,18 +631,12 @@ def sim2real_results() -> str:
             for side in ("without", "run_level"):
                 v = d[side]
                 lrow.append([f.stem.removeprefix("s2r-run-level-"), "yes" if v.get("run_level") else "no",
-                             num(v["episode_gain_log_sd"], 3), num(v["pretrain_sim_valid_rmse"]),
-                             num(v["zero_shot_training_runs_rmse"]), num(v["finetuned_valid_rmse_mean"]),
-                             "; ".join(f"{c['n_runs']}: {num(c['test_finetuned_rmse'])}" for c in v["curve"]),
-                             f"{v['test_finetuned_pct_fs']:.1f} %", f"{v['test_two_point_pct_fs']:.1f} %",
-                             "yes" if d["training_side_not_worse"] else "no"])
+                             num(v["episode_gain_log_sd"], 3), *_rule_cells(v, d)])
         out += ("\n\nEach simulated run's ln gain from the hierarchical run-level sd or not (`sim2real --run-level`; "
                 "`bench/bench_s2r_run_level.py`, `bench/results/s2r-run-level-*.json`): adopted if the fine-tuned RMSE on "
                 "the training runs' validation tails (mean over budgets and seeds, N) does not get worse in both Lupasic "
                 "directions; the test numbers are reported, not used:\n\n"
-                + table(["split", "run-level draw", "simulated run gain sd (ln)", "pre-train sim valid (N)",
-                         "pre-trained on training runs (N)", "fine-tuned validation (N)", "test fine-tuned by budget (N)",
-                         "test fine-tuned, all runs (% FS)", "two-point (% FS)", "training side not worse"], lrow))
+                + table(["split", "run-level draw", "simulated run gain sd (ln)", *RULE_HEADER], lrow))
     flw = sorted(RESULTS.glob("s2r-force-law-*.json"))
     if flw:
         frow = []
