@@ -48,7 +48,7 @@ def _cfg(extra: list[str], device: str | None = None):
 def physics(device: str, worlds: list[int], n_samples: int) -> dict:
     """World-steps/s of MuJoCo Warp against batch size, and C MuJoCo (all cores) on the largest batch <= 4096."""
     from simulate.contact.load_field import _initial_states, build_model, episode_controls, simulate_sensors
-    from simulate.contact.mujoco_warp import WarpWorlds
+    from simulate.contact.mujoco_warp import WarpWorlds, box_primitive_for
     from simulate.protocols.indenter import make_episode_protocol
 
     cfg = _cfg([])
@@ -60,7 +60,7 @@ def physics(device: str, worlds: list[int], n_samples: int) -> dict:
         nstep = (n_samples - 1) * sub
         ctrl, _ = episode_controls(cfg, protos, nstep)
         st, s0 = _initial_states(m, cfg, protos, ctrl[:, 0])
-        ww = WarpWorlds(m, W, device)
+        ww = WarpWorlds(m, W, device, box_primitive=box_primitive_for(cfg.protocol.control))
         ww.run(st[:, 1:1 + m.nq], ctrl[:, : 5 * sub], s0, sub, 6)  # compile + capture outside the timing
         t0 = time.perf_counter()
         ww.run(st[:, 1:1 + m.nq], ctrl, s0, sub, n_samples)
@@ -88,7 +88,7 @@ def _physics_worker(args) -> tuple[float, int]:
 
     init_warp()
     from simulate.contact.load_field import _initial_states, build_model, episode_controls
-    from simulate.contact.mujoco_warp import WarpWorlds
+    from simulate.contact.mujoco_warp import WarpWorlds, box_primitive_for
     from simulate.protocols.indenter import make_episode_protocol
 
     cfg = _cfg([])
@@ -97,7 +97,7 @@ def _physics_worker(args) -> tuple[float, int]:
     nstep = (n_samples - 1) * sub
     ctrl, _ = episode_controls(cfg, protos, nstep)
     st, s0 = _initial_states(m, cfg, protos, ctrl[:, 0])
-    ww = WarpWorlds(m, worlds, "cuda:0")
+    ww = WarpWorlds(m, worlds, "cuda:0", box_primitive=box_primitive_for(cfg.protocol.control))
     ww.run(st[:, 1:1 + m.nq], ctrl[:, : 5 * sub], s0, sub, 6)
     t0 = time.perf_counter()
     ww.run(st[:, 1:1 + m.nq], ctrl, s0, sub, n_samples)

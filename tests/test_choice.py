@@ -118,3 +118,13 @@ def test_cpu_physics_with_gpu_sensors_takes_worker_processes(monkeypatch):
     monkeypatch.setattr(ch.os, "cpu_count", lambda: 2)
     assert choose(load_scene("ntype", ["protocol.kind=element_loads"]), cuda=H100, mjw=True).workers == 1
     assert choose(load_scene("ntype", ["protocol.kind=element_loads"]), cuda=(0, ""), mjw=True).workers == 1
+
+
+@pytest.mark.parametrize("preset, primitive", [("cnt_pdms", False), ("fabric_1", True), ("velostat", True),
+                                               ("ntype", True)])
+def test_box_box_primitive_only_where_contacts_are_micrometres_deep(preset, primitive):
+    """Force-controlled presets hold contacts of a few um, which MuJoCo Warp's convex collider misses; the
+    displacement-controlled cnt_pdms press is mm deep and steps faster with the convex collider."""
+    from simulate.contact.mujoco_warp import box_primitive_for
+
+    assert box_primitive_for(load_scene(preset).protocol.control) is primitive

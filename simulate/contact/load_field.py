@@ -143,12 +143,12 @@ def simulate_sensors(
     m = mujoco.MjModel.from_xml_string(mjcf)
     E = len(protocols)
     if engine == "mujoco_warp":
-        from simulate.contact.mujoco_warp import worlds_for
+        from simulate.contact.mujoco_warp import box_primitive_for, worlds_for
 
         # controls are made chunk by chunk on a host thread while the worlds step (no (E, nstep, 3) array)
         states0, sens0 = _initial_states(m, cfg, protocols, episode_controls(cfg, protocols, nstep, slice(0, 1))[0][:, 0])
         qpos0 = states0[:, 1 : 1 + m.nq]  # full-physics state = (time, qpos, qvel, ...)
-        out = worlds_for(m, mjcf, E, device).run(qpos0, lambda sl, eps: episode_controls(cfg, protocols[eps], nstep, sl)[0], sens0, sub, n,
+        out = worlds_for(m, mjcf, E, device, box_primitive=box_primitive_for(cfg.protocol.control)).run(qpos0, lambda sl, eps: episode_controls(cfg, protocols[eps], nstep, sl)[0], sens0, sub, n,
                                                  out=None if alloc is None else alloc((E, n, m.nsensordata)))
     else:
         ctrl, _ = episode_controls(cfg, protocols, nstep)
@@ -223,7 +223,7 @@ def simulate_sensors_padded(cfg: SceneConfig, protocols: list[EpisodeProtocol], 
     """MuJoCo Warp only: episodes of mixed lengths as one batch of worlds, stepped as long as the longest;
     returns {n_samples: (sensordata (E_n, n, ns), target (E_n, n))} in `length_groups` order. An episode's
     samples depend only on its own controls up to then, so each equals its run in a batch of its own length."""
-    from simulate.contact.mujoco_warp import worlds_for
+    from simulate.contact.mujoco_warp import box_primitive_for, worlds_for
 
     engine, device = physics_engine(cfg)
     if engine != "mujoco_warp":
@@ -238,7 +238,8 @@ def simulate_sensors_padded(cfg: SceneConfig, protocols: list[EpisodeProtocol], 
     m = mujoco.MjModel.from_xml_string(mjcf)
     ctrl = padded_controls(cfg, protocols, nsteps)
     states0, sens0 = _initial_states(m, cfg, protocols, ctrl(slice(0, 1), slice(0, len(protocols)))[:, 0])
-    out = worlds_for(m, mjcf, len(protocols), device).run(states0[:, 1 : 1 + m.nq], ctrl, sens0, sub, n)
+    out = worlds_for(m, mjcf, len(protocols), device, box_primitive=box_primitive_for(cfg.protocol.control)).run(
+        states0[:, 1 : 1 + m.nq], ctrl, sens0, sub, n)
     res = {}
     for k in sorted(set(lengths.tolist())):
         j = np.flatnonzero(lengths == k)

@@ -57,7 +57,7 @@ class WarpWorlds:
     Shapes: ctrl (E, nstep, nu) float; returns sensordata (E, n_samples, nsensordata) float64.
     """
 
-    def __init__(self, m, n_worlds: int, device: str, sensors_every_step: bool = False):
+    def __init__(self, m, n_worlds: int, device: str, sensors_every_step: bool = False, box_primitive: bool = True):
         import copy
 
         import mujoco
@@ -66,11 +66,15 @@ class WarpWorlds:
         self.mjm, self.E, self.device = m, n_worlds, device
         self.mjd = mujoco.MjData(m)
         m = copy.copy(m)
-        # box-box pairs through MuJoCo Warp's box-box primitive (a port of C MuJoCo's mjc_BoxBox, which the C
-        # path runs): its default for box-box is the general convex collider (GJK/EPA), which reports no contact
-        # for penetrations below ~1e-5 m (measured on Warp's CPU device, 10 mm boxes), where the force-controlled
-        # presses of fabric_1 and velostat sit (1-20 um); C MuJoCo's box-box ignores this flag
-        m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_NATIVECCD)
+        # box_primitive: box-box pairs through MuJoCo Warp's box-box primitive (a port of C MuJoCo's mjc_BoxBox,
+        # which the C path runs): its default for box-box is the general convex collider (GJK/EPA), which reports
+        # no contact for penetrations below ~1e-5 m (measured on Warp's CPU device, 10 mm boxes), where the
+        # force-controlled presses of fabric_1, velostat and ntype sit (1-20 um); C MuJoCo's box-box ignores this
+        # flag. The displacement-controlled cnt_pdms presses go mm deep and keep the convex collider, which steps
+        # them faster: the compact 6 x 6 mixed-frequency bench on the H100 spent 114 s in MuJoCo Warp's worlds with
+        # it (gpu-pipeline-h100-s7-mix-final.json) and 196 s with the primitive (gpu-pipeline-h100-s8-mix.json)
+        if box_primitive:
+            m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_NATIVECCD)
         quiet = copy.copy(m)  # the substeps between two records: same model, sensors off
         quiet.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
         self._buffers: tuple | None = None  # (chunk, substeps, seq, rec, rec_host, graph) of the last run, reused by the next
@@ -247,17 +251,24 @@ class StickSlipWorlds(WarpWorlds):
         wp.launch(_advance, dim=1, inputs=[self.counter, 1])
 
 
-_CACHED: dict = {}  # (MJCF, n_worlds, device) -> WarpWorlds: one set per process
+_CACHED: dict = {}  # (MJCF, n_worlds, device, stick_slip, box_primitive) -> WarpWorlds: one set per process
 
 
-def worlds_for(m, mjcf: str, n_worlds: int, device: str, stick_slip: tuple | None = None) -> WarpWorlds:
+def box_primitive_for(control: str) -> bool:
+    """Whether a protocol's presses need MuJoCo Warp's box-box primitive (see WarpWorlds): force control holds
+    contacts of a few micrometres; displacement control presses millimetres deep."""
+    return control != "displacement"
+
+
+def worlds_for(m, mjcf: str, n_worlds: int, device: str, stick_slip: tuple | None = None,
+               box_primitive: bool = True) -> WarpWorlds:
     """The process's worlds for this scene and batch size, made once (put_model, put_data for n_worlds, the
     CUDA graph) and reused by the next batch of the same shape (the GPU feed's physics processes step one
     batch after another); a different scene or size replaces them. stick_slip: (per_indenter, count, k_t, mu)
-    for `StickSlipWorlds`."""
-    key = (mjcf, n_worlds, device, stick_slip)
+    for `StickSlipWorlds`. box_primitive: see WarpWorlds (False for displacement control: `box_primitive_for`)."""
+    key = (mjcf, n_worlds, device, stick_slip, box_primitive)
     if key not in _CACHED:
         _CACHED.clear()  # free the old worlds' device memory before allocating new ones
-        _CACHED[key] = (WarpWorlds(m, n_worlds, device) if stick_slip is None
+        _CACHED[key] = (WarpWorlds(m, n_worlds, device, box_primitive=box_primitive) if stick_slip is None
                         else StickSlipWorlds(m, n_worlds, device, *stick_slip))
     return _CACHED[key]
