@@ -31,7 +31,7 @@ import numpy as np
 from scenes.config import SceneConfig
 from sensors.base import LoadBatch
 from simulate.contact.mjcf import SENSORS_PER_INDENTER, shear_stiffness_n_per_m
-from simulate.protocols.indenter import EpisodeProtocol, press_stroke_force, press_stroke_xy
+from simulate.protocols.indenter import EpisodeProtocol, press_stroke_force, press_stroke_xy, stack_indenters
 from sensors.taxels import interval_coverage, sphere_overlap, taxel_area_m2, taxel_xy_m
 
 MAX_STEPS_PER_CHUNK = 1_000_000  # episodes x physics steps per rollout call
@@ -50,28 +50,15 @@ def _controls(cfg: SceneConfig, protocols: list[EpisodeProtocol], t: np.ndarray)
 
 
 def controls_batch(cfg: SceneConfig, protocols: list[EpisodeProtocol], t: np.ndarray) -> np.ndarray:
-    """`_controls` as array expressions over the episodes (the MuJoCo Warp path makes controls for 32k episodes
-    at a time): the same operations element by element, so the same values (tests/test_press_stroke_mjw.py)."""
+    """`_controls` over the episodes at once (the MuJoCo Warp path makes controls for 32k episodes at a time):
+    the same command law on `stack_indenters`, so the same values (tests/test_press_stroke_mjw.py)."""
     c = cfg.indenter.count
-    E = len(protocols)
-    ctrl = np.zeros((E, len(t), 3 * c))
+    ctrl = np.zeros((len(protocols), len(t), 3 * c))
     tt = np.asarray(t, float)[None, :]
-
-    def smooth(t0: np.ndarray, t1: np.ndarray) -> np.ndarray:  # indenter._smooth over (E, 1) columns
-        u = np.clip((tt - t0[:, None]) / np.maximum(t1 - t0, 1e-9)[:, None], 0.0, 1.0)
-        return 0.5 * (1.0 - np.cos(np.pi * u))
-
     for i in range(c):
-        inds = [p.params["indenters"][i] for p in protocols]
-        col = {k: np.array([ind[k] for ind in inds], float) for k in ("xy_m", "stroke_xy_m", "t_press_s", "t_stroke_s",
-                                                                       "t_release_s", "force_n")}
-        active = np.array([bool(ind["active"]) for ind in inds])
-        s = smooth(col["t_stroke_s"][:, 0], col["t_stroke_s"][:, 1])
-        ctrl[:, :, 3 * i : 3 * i + 2] = col["xy_m"][:, None, :] + s[..., None] * col["stroke_xy_m"][:, None, :]
-        up = smooth(*col["t_press_s"].T)
-        down = 1.0 - smooth(*col["t_release_s"].T)
-        f = col["force_n"][:, None] * up * down
-        ctrl[:, :, 3 * i + 2] = -np.where(active[:, None], f, 0.0)
+        ind = stack_indenters([p.params["indenters"][i] for p in protocols])
+        ctrl[:, :, 3 * i : 3 * i + 2] = press_stroke_xy(ind, tt)
+        ctrl[:, :, 3 * i + 2] = -press_stroke_force(ind, tt)
     return ctrl
 
 

@@ -140,26 +140,37 @@ def _staircase(proto: EpisodeProtocol, cfg: SceneConfig, tau: np.ndarray) -> np.
     return np.where(tau < 0.0, 0.0, out)
 
 
-def _smooth(t: np.ndarray, t0: float, t1: float) -> np.ndarray:
-    """Raised-cosine step from 0 at t0 to 1 at t1."""
-    u = np.clip((t - t0) / max(t1 - t0, 1e-9), 0.0, 1.0)
+def _smooth(t: np.ndarray, t0, t1) -> np.ndarray:
+    """Raised-cosine step from 0 at t0 to 1 at t1 (t0, t1 floats, or arrays that broadcast against t)."""
+    u = np.clip((t - t0) / np.maximum(t1 - t0, 1e-9), 0.0, 1.0)
     return 0.5 * (1.0 - np.cos(np.pi * u))
 
 
 def press_stroke_force(ind: dict, t: np.ndarray) -> np.ndarray:
-    """Commanded normal force (N) of one indenter of a "press_stroke" episode at absolute times t."""
-    if not ind["active"]:
+    """Commanded normal force (N) of one indenter of a "press_stroke" episode at absolute times t (or, with
+    `stack_indenters`, of one indenter of many episodes: t [1, T] -> [E, T])."""
+    if np.ndim(ind["active"]) == 0 and not ind["active"]:
         return np.zeros_like(np.asarray(t, float))
     up = _smooth(t, *ind["t_press_s"])
     down = 1.0 - _smooth(t, *ind["t_release_s"])
-    return ind["force_n"] * up * down
+    return np.where(ind["active"], ind["force_n"] * up * down, 0.0)
 
 
 def press_stroke_xy(ind: dict, t: np.ndarray) -> np.ndarray:
-    """Commanded x/y (m) of one indenter of a "press_stroke" episode: shape t.shape + (2,)."""
+    """Commanded x/y (m) of one indenter of a "press_stroke" episode: shape t.shape + (2,) (stacked: [E, T, 2])."""
     t = np.asarray(t, float)
     s = _smooth(t, *ind["t_stroke_s"])
     return np.asarray(ind["xy_m"], float) + s[..., None] * np.asarray(ind["stroke_xy_m"], float)
+
+
+def stack_indenters(inds: list[dict]) -> dict:
+    """One indenter of E episodes as one dict of arrays shaped to broadcast against t [1, T] in
+    `press_stroke_force` / `press_stroke_xy` (times and force [E, 1], positions [E, 1, 2]): the same law, the
+    same operations element by element, for a batch."""
+    col = lambda k: np.array([ind[k] for ind in inds], float)  # noqa: E731
+    return {"active": np.array([bool(ind["active"]) for ind in inds])[:, None], "force_n": col("force_n")[:, None],
+            **{k: tuple(col(k).T[:, :, None]) for k in ("t_press_s", "t_stroke_s", "t_release_s")},
+            **{k: col(k)[:, None, :] for k in ("xy_m", "stroke_xy_m")}}
 
 
 def _press_stroke(proto: EpisodeProtocol, cfg: SceneConfig, tau: np.ndarray) -> np.ndarray:
