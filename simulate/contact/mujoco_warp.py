@@ -100,9 +100,17 @@ class WarpWorlds:
         for i in range(substeps):
             wp.launch(_set_ctrl, dim=(E, nu), inputs=[seq, self.counter, self.d.ctrl])
             mjw.step(self.m if i == substeps - 1 else self.m_quiet, self.d)
+            self._after_step()
             wp.launch(_advance, dim=1, inputs=[self.counter, 0])
         wp.launch(_record, dim=(E, ns), inputs=[self.d.sensordata, self.counter, out])
+        self._record_extra(out)
         wp.launch(_advance, dim=1, inputs=[self.counter, 1])
+
+    def _after_step(self) -> None:
+        """Launches after every physics step, inside the captured sample (subclasses: their per-step kernels)."""
+
+    def _record_extra(self, out: wp.array3d) -> None:
+        """Store the subclass's n_extra values of this sample after the sensordata in `out` (nothing here)."""
 
     def run(self, qpos0: np.ndarray, ctrl, sens0: np.ndarray, substeps: int, n_samples: int,
             out: np.ndarray | None = None) -> np.ndarray:
@@ -212,7 +220,7 @@ def _stick_slip_step(sensordata: wp.array2d(dtype=wp.float32), per: int, k_t: wp
 
 
 @wp.kernel
-def _record_extra(extra: wp.array2d(dtype=wp.float32), counter: wp.array(dtype=wp.int32), offset: int,
+def _record_shear(extra: wp.array2d(dtype=wp.float32), counter: wp.array(dtype=wp.int32), offset: int,
                   out: wp.array3d(dtype=wp.float32)):
     w, j = wp.tid()
     out[w, counter[1], offset + j] = extra[w, j]
@@ -236,19 +244,12 @@ class StickSlipWorlds(WarpWorlds):
         self.anchor.assign(np.ascontiguousarray(xy.reshape(self.E, -1), np.float64))
         self.force.zero_()
 
-    def _step_sample(self, seq: wp.array3d, out: wp.array3d, substeps: int) -> None:
-        import mujoco_warp as mjw
+    def _after_step(self) -> None:
+        wp.launch(_stick_slip_step, dim=(self.E, self.count),
+                  inputs=[self.d.sensordata, self.per, wp.float64(self.k_t), wp.float64(self.mu), self.anchor, self.force])
 
-        E, nu, ns = self.E, self.mjm.nu, self.mjm.nsensordata
-        for _ in range(substeps):
-            wp.launch(_set_ctrl, dim=(E, nu), inputs=[seq, self.counter, self.d.ctrl])
-            mjw.step(self.m, self.d)
-            wp.launch(_stick_slip_step, dim=(E, self.count),
-                      inputs=[self.d.sensordata, self.per, wp.float64(self.k_t), wp.float64(self.mu), self.anchor, self.force])
-            wp.launch(_advance, dim=1, inputs=[self.counter, 0])
-        wp.launch(_record, dim=(E, ns), inputs=[self.d.sensordata, self.counter, out])
-        wp.launch(_record_extra, dim=(E, self.n_extra), inputs=[self.force, self.counter, ns, out])
-        wp.launch(_advance, dim=1, inputs=[self.counter, 1])
+    def _record_extra(self, out: wp.array3d) -> None:
+        wp.launch(_record_shear, dim=(self.E, self.n_extra), inputs=[self.force, self.counter, self.mjm.nsensordata, out])
 
 
 _CACHED: dict = {}  # (MJCF, n_worlds, device, stick_slip, box_primitive) -> WarpWorlds: one set per process
