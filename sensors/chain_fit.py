@@ -249,8 +249,8 @@ def _free(fit_series: bool, fit_threshold: bool = False, creep_linear: bool = Fa
     return sorted([0, 1, 3, 4] + ([] if creep_linear else [2]) + ([5, 6] if fit_series else [6] if fit_threshold else []))
 
 
-def _with(p: ChainParams, th: np.ndarray, fit_series: bool | list[int]) -> ChainParams:
-    free = fit_series if isinstance(fit_series, list) else _free(bool(fit_series))
+def _with(p: ChainParams, th: np.ndarray, free: list[int]) -> ChainParams:
+    """p with the shape of theta (all seven entries); r_series and the threshold only where free (_free)."""
     q = replace(p, exponent=float(th[0]), creep_amplitude=float(np.exp(th[1])), creep_force_n=float(np.exp(th[2])),
                 tau_min_s=float(np.exp(th[3])), tau_max_s=float(np.exp(max(th[4], th[3]))))
     if 5 in free:
@@ -310,13 +310,12 @@ class _Data:
         return out, np.asarray(lev)
 
 
-def _fit_shape(data: _Data, p0: ChainParams, idx: np.ndarray, fit_series: bool | list[int], max_nfev: int,
+def _fit_shape(data: _Data, p0: ChainParams, idx: np.ndarray, free: list[int], max_nfev: int,
                prior: tuple[float, float] | None = None):
-    """prior = (within-press rms, level sd): fit with the level prior (see fit_chain's level_prior); fit_series: a
-    bool (rounds 1-6) or the free indices of theta (_free)."""
+    """Fit the free entries of theta (_free); prior = (within-press rms, level sd): fit with the level prior (see
+    fit_chain's level_prior)."""
     from scipy.optimize import least_squares
 
-    free = fit_series if isinstance(fit_series, list) else _free(bool(fit_series))
     full0 = _theta(p0)
 
     def expand(th):
@@ -465,15 +464,15 @@ def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = 
     if fit_series is None:
         fit_series = any("adc_full_scale" in r.attrs for r in runs)  # an ADC of known full scale: a floor shows
     idx = np.arange(len(data.presses))
-    fit_series = _free(bool(fit_series), fit_threshold, creep_linear)
+    free = _free(bool(fit_series), fit_threshold, creep_linear)
     if creep_linear:
         p0 = replace(p0, creep_force_n=float(np.exp(UB[2])))
-    q, res = _fit_shape(data, p0, idx, fit_series, max_nfev)
+    q, res = _fit_shape(data, p0, idx, free, max_nfev)
     prior = None
     if level_prior:
         out, lev = _profile(data, q, idx)
         prior = (float(np.sqrt(np.mean(np.concatenate(out) ** 2))), float(np.std(lev, ddof=1)))
-        q, res = _fit_shape(data, q, idx, fit_series, max_nfev, prior)
+        q, res = _fit_shape(data, q, idx, free, max_nfev, prior)
     if progress:
         progress(1, n_boot + 1)
     fin = _finish(q, data, idx, runs)
@@ -482,7 +481,7 @@ def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = 
     for b in range(n_boot):
         # resample presses with replacement (runs keep their own presses' force histories)
         bi = rng.integers(0, len(idx), len(idx))
-        qb, _ = _fit_shape(data, q, bi, fit_series, max(10, max_nfev // 3), prior)
+        qb, _ = _fit_shape(data, q, bi, free, max(10, max_nfev // 3), prior)
         boot.append(_summary(_finish(qb, data, bi, runs)))
         if progress:
             progress(b + 2, n_boot + 1)
