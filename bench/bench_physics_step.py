@@ -32,7 +32,11 @@ CANDIDATES_MS = (1.0, 2.0, 2.5, 4.0, 5.0, 10.0, 12.5, 20.0, 25.0, 50.0)
 def contact_forces(cfg, protos) -> np.ndarray:
     """(sum of T_e, 3) net contact force on the pad at the sample times of every episode, episodes one after
     another (x, y tangential, z compressive); episodes of one length run as one batch."""
-    from simulate.contact.load_field import CONTACT_STAGES, iter_load_batches, simulate_sensors
+    from simulate.contact.load_field import (
+        CONTACT_STAGES,
+        iter_load_batches,
+        simulate_sensors,
+    )
     from simulate.generation.run import length_groups
 
     per = {}

@@ -33,8 +33,8 @@ def main() -> None:
     from sensors.data.recording import write_recording
     from sensors.warp_setup import init_warp
     from simulate.contact.load_field import run_episodes
-    from simulate.protocols.indenter import make_episode_protocol
     from simulate.generation.run import channel_arrays, episode_channels
+    from simulate.protocols.indenter import make_episode_protocol
 
     init_warp()
     cfg = load_scene("cnt_pdms", [f"protocol.frequencies_hz=[{a.frequency}]"])

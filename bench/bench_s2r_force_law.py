@@ -27,7 +27,6 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-
 from bench_s2r_press_slope import summary
 
 FORCES_N = (1.0, 2.0, 5.0, 10.0, 20.0, 40.0)

@@ -98,7 +98,7 @@ def model_free(runs, C) -> dict:
     for r in rows:
         del r["local_e2"], r["local_rate"]
     local = {"slope_sd_within_run": float(np.std(ds, ddof=1)), "slope_vs_level": float(np.polyfit(dl, ds, 1)[0]),
-             "slope_level_corr": float(np.corrcoef(ds, dl)[0, 1]), "n_presses": int(len(ds)),
+             "slope_level_corr": float(np.corrcoef(ds, dl)[0, 1]), "n_presses": len(ds),
              "residual_by_rate": bins, "floor_sd_log": float(np.sqrt(max(c[0], 0.0))), "timing_sd_s": float(np.sqrt(max(c[1], 0.0)))}
     return {"rows": rows, "per_run": per_run, "local": local}
 

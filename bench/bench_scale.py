@@ -48,8 +48,8 @@ def stage_profile(batch: int, threads: int = 1) -> dict:
     from sensors.registry import make_sensor
     from sensors.warp_setup import init_warp
     from simulate.contact.load_field import load_field as contact
-    from simulate.protocols.indenter import make_episode_protocol
     from simulate.generation.run import channel_arrays, episode_channels
+    from simulate.protocols.indenter import make_episode_protocol
 
     init_warp()
     cfg = _cfg(batch, batch)
@@ -91,8 +91,8 @@ def stage_profile(batch: int, threads: int = 1) -> dict:
         # peak Python/numpy heap (tracemalloc) per episode
         import tracemalloc
 
-        from simulate.generation import run
         from simulate.contact.mjcf import build_mjcf
+        from simulate.generation import run
 
         mjcf = build_mjcf(cfg)
         default_parts = run.PIPELINE_PARTS
@@ -230,7 +230,7 @@ def main() -> None:
                 for w in workers:
                     r = throughput(b, w, a.shards_per_worker, Path(tmp), parts)
                     rows.append(r)
-                    print(f"parts {parts} shard of {b:3d} episodes {str(r['rollout_batches']):14s} workers {w}: "
+                    print(f"parts {parts} shard of {b:3d} episodes {r['rollout_batches']!s:14s} workers {w}: "
                           f"{r['samples_per_s']:7.0f} samples/s  {r['taxel_steps_per_s']:.3g} taxel-steps/s  "
                           f"{r['episodes_per_s']:.2f} episodes/s  {r['file_MB_per_s']:.1f} MB/s to disk  {r['cpu_us_per_sample']:.0f} CPU-us/sample "
                           f"({r['seconds']:.1f} s, load {r['loadavg_1min_after']:.1f})")

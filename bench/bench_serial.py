@@ -38,7 +38,15 @@ def board_bytes(n_bytes: int, width: int = 64) -> tuple[bytes, int]:
 
 def loopback_capture(data: bytes, out_dir: str | os.PathLike, timeout_s: float = 30.0) -> dict:
     """Serve ``data`` once over a loopback socket to a ``capture``; what it measured (see the module docstring)."""
-    from sensors.serial.capture import EVENT, RAW, SESSION, StreamSpec, capture, rawlog_path, read_records
+    from sensors.serial.capture import (
+        EVENT,
+        RAW,
+        SESSION,
+        StreamSpec,
+        capture,
+        rawlog_path,
+        read_records,
+    )
 
     srv = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
     srv.bind(("127.0.0.1", 0))

@@ -24,7 +24,7 @@ from safetensors.numpy import load_file, save_file
 from learn.models.base import Compensator, make_model
 from learn.normalize import ZScore
 
-__all__ = ["save_checkpoint", "load_checkpoint", "read_config", "CHECKPOINT_FORMAT", "CHECKPOINT_VERSION"]
+__all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_VERSION", "load_checkpoint", "read_config", "save_checkpoint"]
 
 CHECKPOINT_FORMAT = "piezotwin-checkpoint"
 CHECKPOINT_VERSION = 1
@@ -69,7 +69,7 @@ def save_checkpoint(
         "dataset": dataset or {},
         "seed": comp.seed,
         "version": _version(),
-        "created_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds").replace("+00:00", "Z"),
+        "created_utc": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds").replace("+00:00", "Z"),
         "training": hist,
         "tensors": {k: {"shape": list(v.shape), "dtype": str(v.dtype)} for k, v in tensors.items()},
         "extra": extra or {},

@@ -11,16 +11,18 @@ from __future__ import annotations
 import hashlib
 import json
 from collections import defaultdict
+from collections.abc import Callable, Iterable
+from collections.abc import Sequence as Seq
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Sequence as Seq
+from typing import Any
 
 import numpy as np
 
 from sensors.data.manifest import episode_key, read_manifest, shard_files
 from sensors.data.recording import Recording
 
-__all__ = ["Sequence", "load_sequences", "stratified_split", "dataset_fingerprint", "group_by"]
+__all__ = ["Sequence", "dataset_fingerprint", "group_by", "load_sequences", "stratified_split"]
 
 
 @dataclass

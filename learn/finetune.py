@@ -32,9 +32,11 @@ from __future__ import annotations
 
 import copy
 import fnmatch
+from collections.abc import Callable
+from collections.abc import Sequence as Seq
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Sequence as Seq
+from typing import Any
 
 import numpy as np
 import torch
@@ -46,8 +48,19 @@ from learn.normalize import ZScore
 from sensors.data.resample import resample
 
 __all__ = [
-    "InputMap", "FREEZE_POLICIES", "load_recording", "resample", "apply_map", "head_parameter_names",
-    "finetune", "train_from_scratch", "restandardise", "split_runs", "RealSplit", "split_tail", "VALID_TAIL_FRACTION",
+    "FREEZE_POLICIES",
+    "VALID_TAIL_FRACTION",
+    "InputMap",
+    "RealSplit",
+    "apply_map",
+    "finetune",
+    "head_parameter_names",
+    "load_recording",
+    "resample",
+    "restandardise",
+    "split_runs",
+    "split_tail",
+    "train_from_scratch",
 ]
 
 FREEZE_POLICIES = ("head", "none")
@@ -190,7 +203,7 @@ def split_tail(seqs: Seq[Sequence], frac: float = VALID_TAIL_FRACTION) -> tuple[
         gaps = [(a.stop + b.start) // 2 for a, b in zip(pr[:-1], pr[1:])]
         cut = min(gaps, key=lambda g: abs(g - want)) if gaps else int(round(want))
         cut = int(min(max(cut, 1), n - 1))
-        part = lambda a, b, tag: Sequence(s.x[a:b], s.y[a:b], s.inputs, s.targets, s.units,  # noqa: E731
+        part = lambda a, b, tag: Sequence(s.x[a:b], s.y[a:b], s.inputs, s.targets, s.units,
                                           {**s.meta, "key": f"{s.key}[{tag}]"},
                                           {k: v[a:b] for k, v in s.extra.items() if len(v) == n})
         heads.append(part(0, cut, "head"))

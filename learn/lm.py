@@ -19,12 +19,13 @@ The solver is generic: ``residuals(theta) -> r [N]`` and ``jacobian(theta) -> J 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
-__all__ = ["LMConfig", "LMHistory", "lm_delta", "LevenbergMarquardt"]
+__all__ = ["LMConfig", "LMHistory", "LevenbergMarquardt", "lm_delta"]
 
 
 @dataclass

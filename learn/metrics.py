@@ -15,8 +15,16 @@ import numpy as np
 from sensors.analysis import hysteresis_error_fso as _hyst
 
 __all__ = [
-    "mae", "rmse", "mse", "r2", "pearson_r", "mean_relative_error",
-    "hysteresis_error_fso", "cycle_slices", "loop_hysteresis", "regression_metrics",
+    "cycle_slices",
+    "hysteresis_error_fso",
+    "loop_hysteresis",
+    "mae",
+    "mean_relative_error",
+    "mse",
+    "pearson_r",
+    "r2",
+    "regression_metrics",
+    "rmse",
 ]
 
 

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Any, Iterable
+from typing import Any
 
 import numpy as np
 
@@ -14,7 +15,7 @@ class ZScore:
     std: np.ndarray  # [n_features], > 0
 
     @classmethod
-    def fit(cls, arrays: Iterable[np.ndarray]) -> "ZScore":
+    def fit(cls, arrays: Iterable[np.ndarray]) -> ZScore:
         a = np.concatenate([np.asarray(x, np.float64).reshape(len(x), -1) for x in arrays], axis=0)
         mean = a.mean(axis=0)
         std = a.std(axis=0)
@@ -22,7 +23,7 @@ class ZScore:
         return cls(mean, std)
 
     @classmethod
-    def identity(cls, n: int) -> "ZScore":
+    def identity(cls, n: int) -> ZScore:
         return cls(np.zeros(n), np.ones(n))
 
     def apply(self, x: np.ndarray) -> np.ndarray:
@@ -35,5 +36,5 @@ class ZScore:
         return {"mean": [float(v) for v in self.mean], "std": [float(v) for v in self.std]}
 
     @classmethod
-    def from_json(cls, d: dict[str, Any]) -> "ZScore":
+    def from_json(cls, d: dict[str, Any]) -> ZScore:
         return cls(np.asarray(d["mean"], np.float64), np.asarray(d["std"], np.float64))

@@ -15,9 +15,11 @@ writes report.md, metrics.json, learning_curve.png, predictions.png and checkpoi
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
+from collections.abc import Sequence as Seq
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Sequence as Seq
+from typing import Any
 
 import numpy as np
 
@@ -26,7 +28,7 @@ from learn import metrics as M
 from learn.data import Sequence, dumps, load_sequences
 from learn.experiments.common import fmt, md_table
 
-__all__ = ["pretrain", "run_finetune", "checkpoint_input_map"]
+__all__ = ["checkpoint_input_map", "pretrain", "run_finetune"]
 
 
 def pretrain(data_dir: str | Path, out_dir: str | Path, *, kind: str = "tcn", hparams: dict[str, Any] | None = None,
@@ -323,7 +325,7 @@ class StaticCurve:
 class _Calibrated:
     """A compensator fed the two-point calibrated reading (see two_point_calibration)."""
 
-    def __init__(self, comp, cal: "TwoPoint"):
+    def __init__(self, comp, cal: TwoPoint):
         self.comp, self.cal = comp, cal
 
     def predict(self, x: np.ndarray) -> np.ndarray:
@@ -402,9 +404,9 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
 
     from learn.checkpoint import load_checkpoint, save_checkpoint
     from learn.models.base import make_model
+    from scenes.randomize import Randomization
     from sensors import chain_fit as C
     from simulate.generation.chain_gen import generate_chain
-    from scenes.randomize import Randomization
 
     B = {**S2R_BUDGET, **(budget or {})}
     out = Path(out_dir)
@@ -536,7 +538,7 @@ def _timing(done: dict[str, Any], wall4: float, cpu4: float, B: dict) -> dict[st
             "load_average_at_end": list(os.getloadavg())}
 
 
-def _chain_prior(family: str, runs) -> "Any":
+def _chain_prior(family: str, runs) -> Any:
     from sensors.chain_fit import ChainParams
 
     adc = next((r.attrs.get("adc_full_scale") for r in runs if r.attrs.get("adc_full_scale")), None)

@@ -21,13 +21,14 @@ import copy
 import math
 import re
 import time
+from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
-from typing import Any, Callable, Iterator
+from typing import Any
 
 import torch
 from torch import nn
 
-__all__ = ["TrainConfig", "TrainHistory", "train_model", "seeded", "training_device", "resolve_device", "current_device"]
+__all__ = ["TrainConfig", "TrainHistory", "current_device", "resolve_device", "seeded", "train_model", "training_device"]
 
 TRAIN_DEVICES = ("cpu", "cuda", "auto")  # what --train-device accepts (also "cuda:N")
 _DEVICE: contextvars.ContextVar[str] = contextvars.ContextVar("piezotwin_train_device", default="cpu")
@@ -157,7 +158,13 @@ def train_model(
     the first epoch's weights.
     """
     from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+    )
 
     dev = torch.device(resolve_device(cfg.device) if cfg.device is not None else current_device())
     xt, yt = (t.to(dev) for t in train)

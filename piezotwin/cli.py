@@ -9,12 +9,12 @@ from __future__ import annotations
 import os
 import sys
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 from rich.table import Table
 
-from piezotwin.common import (  # noqa: F401
+from piezotwin.common import (
     SetOpt, _check_writable, _load, _print_dataset_header, _print_dataset_summary, _print_summary, _quiet_warp, app, console,
     err, fail,
 )
@@ -41,15 +41,15 @@ def _dump_timings() -> None:
 def generate(
     scene: Annotated[str, typer.Argument(help="Preset name (e.g. cnt_pdms) or a scene YAML file.")],
     out: Annotated[Path, typer.Option("-o", "--out", help="Output dataset folder.")] = Path("runs/default"),
-    episodes: Annotated[Optional[int], typer.Option(help="Number of episodes.")] = None,
-    seed: Annotated[Optional[int], typer.Option(help="Root seed.")] = None,
+    episodes: Annotated[int | None, typer.Option(help="Number of episodes.")] = None,
+    seed: Annotated[int | None, typer.Option(help="Root seed.")] = None,
     set_: SetOpt = None,
     backend: Annotated[str, typer.Option(help="Sensor kernels: warp | numpy.")] = "warp",
     device: Annotated[str, typer.Option(help="Warp device: auto (CUDA when present) | cpu | cuda | cuda:N.")] = "auto",
     executor: Annotated[str, typer.Option(help="Where shards run: local (process pool when --workers > 1) | ray.")] = "local",
-    address: Annotated[Optional[str], typer.Option(help="Ray cluster address (ray executor; default: start a local one).")] = None,
-    shards: Annotated[Optional[int], typer.Option(help="Number of shards (sets generation.episodes_per_shard).")] = None,
-    workers: Annotated[Optional[int], typer.Option(help="Worker processes (local pool; writers of the GPU feed) or CPUs of a local Ray cluster; default: 1, or up to 8 writers where the GPU feed runs.")] = None,
+    address: Annotated[str | None, typer.Option(help="Ray cluster address (ray executor; default: start a local one).")] = None,
+    shards: Annotated[int | None, typer.Option(help="Number of shards (sets generation.episodes_per_shard).")] = None,
+    workers: Annotated[int | None, typer.Option(help="Worker processes (local pool; writers of the GPU feed) or CPUs of a local Ray cluster; default: 1, or up to 8 writers where the GPU feed runs.")] = None,
     physics: Annotated[str, typer.Option(help="Contact stage: auto (MuJoCo Warp where CUDA and mujoco_warp are, else C MuJoCo) | mujoco (C, CPU) | mujoco_warp (batched worlds on --device).")] = "auto",
 ) -> None:
     """Generate a dataset: HDF5 shards + manifest.json. Resumes at the first missing shard.
@@ -164,8 +164,8 @@ def inspect(path: Annotated[Path, typer.Argument(help="A recording (.h5) or a da
 def characterize(
     scene: Annotated[str, typer.Argument(help="Preset name or scene YAML.")] = "cnt_pdms",
     set_: SetOpt = None,
-    plot: Annotated[Optional[Path], typer.Option(help="Write the characterization plot as a PNG here.")] = None,
-    json_out: Annotated[Optional[Path], typer.Option("--json", help="Write the numbers as JSON here.")] = None,
+    plot: Annotated[Path | None, typer.Option(help="Write the characterization plot as a PNG here.")] = None,
+    json_out: Annotated[Path | None, typer.Option("--json", help="Write the numbers as JSON here.")] = None,
     backend: Annotated[str, typer.Option(help="warp | numpy")] = "warp",
 ) -> None:
     """Hysteresis error (% FSO), loop area and phase lag per loading frequency, beside the paper's figure."""
@@ -206,11 +206,11 @@ def presets() -> None:
 
 
 # command modules register on `app` (piezotwin.common) when imported (one line each)
-from piezotwin import cmd_learn  # noqa: E402,F401
-from piezotwin import cmd_viz  # noqa: E402,F401
-from piezotwin import cmd_serial  # noqa: E402,F401
-from piezotwin import cmd_real  # noqa: E402,F401
-from piezotwin import cmd_calibrate  # noqa: E402,F401
+from piezotwin import cmd_learn  # noqa: F401
+from piezotwin import cmd_viz  # noqa: F401
+from piezotwin import cmd_serial  # noqa: F401
+from piezotwin import cmd_real  # noqa: F401
+from piezotwin import cmd_calibrate  # noqa: F401
 
 
 def main() -> None:  # pragma: no cover

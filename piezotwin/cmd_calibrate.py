@@ -11,7 +11,7 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from piezotwin.common import app, console, fail  # noqa: E402
+from piezotwin.common import app, console, fail
 
 # family -> "module:function" returning a sensors.calibration.CalibrationResult; each family adds one line
 CALIBRATIONS: dict[str, str] = {

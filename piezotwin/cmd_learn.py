@@ -7,24 +7,23 @@ cli.py imports this module at its bottom.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
-
-from piezotwin.common import SetOpt, _check_writable, app, console, err, fail  # noqa: E402
+from piezotwin.common import SetOpt, _check_writable, app, console, err, fail
 
 
 @app.command()
 def experiment(
     key: Annotated[str, typer.Argument(help="Paper key (cnt_pdms, fabric, velostat, ntype) or 'all'.")],
     quick: Annotated[bool, typer.Option("--quick", help="Small data and capped epochs: a few minutes on 2 cores.")] = False,
-    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Report folder (default runs/experiment-<key>[-quick]).")] = None,
-    data: Annotated[Optional[Path], typer.Option("--data", help="Dataset folder to make or reuse (default <out>/data).")] = None,
+    out: Annotated[Path | None, typer.Option("-o", "--out", help="Report folder (default runs/experiment-<key>[-quick]).")] = None,
+    data: Annotated[Path | None, typer.Option("--data", help="Dataset folder to make or reuse (default <out>/data).")] = None,
     set_: SetOpt = None,
-    models: Annotated[Optional[str], typer.Option(help="Comma-separated subset of models (the trivial 'mean' always runs).")] = None,
+    models: Annotated[str | None, typer.Option(help="Comma-separated subset of models (the trivial 'mean' always runs).")] = None,
     seed: Annotated[int, typer.Option(help="Seed of the data, the split and the training.")] = 0,
-    mode: Annotated[Optional[str], typer.Option(hidden=True, help="full | quick | tiny (overrides --quick).")] = None,
+    mode: Annotated[str | None, typer.Option(hidden=True, help="full | quick | tiny (overrides --quick).")] = None,
     train_device: Annotated[str, typer.Option(
         "--train-device", help="Where the gradient-trained nets train: cpu (default: bit-reproducible), cuda, cuda:N "
         "or auto (CUDA when torch sees one). Closed-form and Levenberg-Marquardt fits stay on the CPU.")] = "cpu",

@@ -7,14 +7,14 @@ fit       the velostat film model's parameters to a real recording, writes the f
 
 from __future__ import annotations
 
-import math
 import json
+import math
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
-from piezotwin.common import _check_writable, app, console, err, fail  # noqa: E402
+from piezotwin.common import _check_writable, app, console, err, fail
 
 
 def _need_file(p: Path, what: str) -> None:
@@ -38,7 +38,7 @@ def pretrain(
     model: Annotated[str, typer.Option(help="Model kind (tcn, mlp, gru, lstm).")] = "tcn",
     input_channel: Annotated[str, typer.Option("--input", help="Simulated input channel.")] = "resistance_measured",
     transform: Annotated[str, typer.Option(help="Input transform: log | none.")] = "log",
-    max_epochs: Annotated[Optional[int], typer.Option(help="Cap on training epochs.")] = None,
+    max_epochs: Annotated[int | None, typer.Option(help="Cap on training epochs.")] = None,
     seed: Annotated[int, typer.Option(help="Seed of the split and the training.")] = 0,
 ) -> None:
     """Pre-train a compensator on simulated data; the checkpoint records its input map (channel, transform, rate)."""
@@ -68,15 +68,15 @@ def finetune(
     checkpoint: Annotated[Path, typer.Argument(help="Pre-trained checkpoint folder.")],
     recording: Annotated[Path, typer.Argument(help="Real recording (piezotwin import / capture).")],
     out: Annotated[Path, typer.Option("-o", "--out", help="Report folder.")],
-    train_fraction: Annotated[Optional[float], typer.Option(help="Share of the runs for fine-tuning (rest: test); with --test-episodes, share of the non-test runs.")] = None,
-    test_episodes: Annotated[Optional[str], typer.Option(help="Glob of episode names held out as the test set (e.g. '*exp2').")] = None,
+    train_fraction: Annotated[float | None, typer.Option(help="Share of the runs for fine-tuning (rest: test); with --test-episodes, share of the non-test runs.")] = None,
+    test_episodes: Annotated[str | None, typer.Option(help="Glob of episode names held out as the test set (e.g. '*exp2').")] = None,
     freeze: Annotated[str, typer.Option(help="Freeze policy: head (features frozen) | none (all layers).")] = "head",
     lr: Annotated[float, typer.Option(help="Fine-tuning learning rate (Adam).")] = 3e-4,
     max_epochs: Annotated[int, typer.Option(help="Cap on epochs (fine-tuning and from scratch).")] = 300,
     patience: Annotated[int, typer.Option(help="Early-stopping patience on the held-out real runs.")] = 30,
     input_channel: Annotated[str, typer.Option("--input", help="Real input channel.")] = "sensor",
     target: Annotated[str, typer.Option(help="Label channel.")] = "force",
-    rate: Annotated[Optional[float], typer.Option(help="Resample the real recording to this rate (default: the checkpoint's).")] = None,
+    rate: Annotated[float | None, typer.Option(help="Resample the real recording to this rate (default: the checkpoint's).")] = None,
     no_curve: Annotated[bool, typer.Option("--no-curve", help="Skip the learning curve.")] = False,
     seed: Annotated[int, typer.Option(help="Seed of the split and the training.")] = 0,
 ) -> None:
@@ -114,7 +114,7 @@ def fit(
     out: Annotated[Path, typer.Option("-o", "--out", help="Report folder (fitted preset YAML, fit.json, fit.png).")] = Path("runs/fit"),
     input_channel: Annotated[str, typer.Option("--input", help="Real reading channel (proportional to resistance).")] = "sensor",
     target: Annotated[str, typer.Option(help="Force channel (N).")] = "force",
-    episodes: Annotated[Optional[str], typer.Option(help="Glob of episodes to fit (default all).")] = None,
+    episodes: Annotated[str | None, typer.Option(help="Glob of episodes to fit (default all).")] = None,
     rate: Annotated[float, typer.Option(help="Rate the recording is resampled to for the fit (Hz).")] = 20.0,
     min_force: Annotated[float, typer.Option(help="Samples below this force (N) are left out of the residual.")] = 0.5,
     chain: Annotated[bool, typer.Option("--chain", help="Identify the whole chain (placement spread, creep, divider readout, noise) with bootstrap ranges (sensors/chain_fit.py); always for the divider family.")] = False,
@@ -159,7 +159,7 @@ def fit(
                   highlight=False)
 
 
-def import_with_spec(spec: str, data: Optional[Path], second: Optional[Path], out: Path, rate: Optional[float]) -> None:
+def import_with_spec(spec: str, data: Path | None, second: Path | None, out: Path, rate: float | None) -> None:
     """`piezotwin import --spec SPEC DATA`: any column log (sensors/data/column_import.py)."""
     from piezotwin.common import _print_summary
     from sensors.data.column_import import import_columns, load_spec
@@ -192,11 +192,11 @@ def sim2real(
     recording: Annotated[Path, typer.Argument(help="Real recording (piezotwin import).")],
     test_episodes: Annotated[str, typer.Option("--test-episodes", help="Glob of the real test runs (never fitted, never trained on).")],
     out: Annotated[Path, typer.Option("-o", "--out", help="Output folder (resumable: finished steps are kept).")],
-    episodes: Annotated[Optional[int], typer.Option(help="Simulated episodes (default: the budget's 96).")] = None,
-    pretrain_epochs: Annotated[Optional[int], typer.Option(help="Pre-training epoch cap (default 40).")] = None,
-    n_boot: Annotated[Optional[int], typer.Option(help="Bootstrap replicates of the fit (default 16).")] = None,
+    episodes: Annotated[int | None, typer.Option(help="Simulated episodes (default: the budget's 96).")] = None,
+    pretrain_epochs: Annotated[int | None, typer.Option(help="Pre-training epoch cap (default 40).")] = None,
+    n_boot: Annotated[int | None, typer.Option(help="Bootstrap replicates of the fit (default 16).")] = None,
     seed: Annotated[int, typer.Option(help="Root seed (split, fit bootstrap, generation, training).")] = 0,
-    rated_force_n: Annotated[Optional[float], typer.Option("--rated-force-n", help="The sensor's / rig's rated force (N), "
+    rated_force_n: Annotated[float | None, typer.Option("--rated-force-n", help="The sensor's / rig's rated force (N), "
                              "as the user knows it (never the test runs' maximum): the simulated presses span it.")] = None,
     run_level: Annotated[bool, typer.Option("--run-level", help="Draw each simulated run's ln gain from the fitted "
                          "run-level sd of the press levels (hierarchical levels) instead of the std of the run means.")] = False,

@@ -12,14 +12,12 @@ import signal
 import sys
 import threading
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
+from piezotwin.common import _check_writable, _print_summary, app, console, err, fail
 from sensors.serial.codec import PROTOCOLS
-
-
-from piezotwin.common import _check_writable, _print_summary, app, console, err, fail  # noqa: E402
 
 _PROTO_HELP = "Framing: " + " | ".join(PROTOCOLS) + "."
 
@@ -32,26 +30,31 @@ def _check_protocol(p: str | None, opt: str) -> None:
 @app.command()
 def capture(
     out: Annotated[Path, typer.Option("-o", "--out", help="Recording to write (.h5); the raw log is OUT.rawlog.")],
-    port: Annotated[Optional[str], typer.Option(help="Port URL: /dev/ttyUSB0, socket://HOST:PORT, loop://, a pty path.")] = None,
+    port: Annotated[str | None, typer.Option(help="Port URL: /dev/ttyUSB0, socket://HOST:PORT, loop://, a pty path.")] = None,
     protocol: Annotated[str, typer.Option(help=_PROTO_HELP)] = "text",
     baudrate: Annotated[int, typer.Option(help="Baud rate.")] = 115200,
-    n_values: Annotated[Optional[int], typer.Option(help="Values per sample (poll: float32 per reply, default 1).")] = None,
+    n_values: Annotated[int | None, typer.Option(help="Values per sample (poll: float32 per reply, default 1).")] = None,
     name: Annotated[str, typer.Option(help="Stream name (channel name in the recording).")] = "s0",
     units: Annotated[str, typer.Option(help="Units of the stream's values.")] = "raw",
-    poll_hz: Annotated[Optional[float], typer.Option(help="poll: cap on the polling rate (default: as fast as replies come).")] = None,
-    port2: Annotated[Optional[str], typer.Option(help="A second port (e.g. a load cell).")] = None,
+    poll_hz: Annotated[float | None, typer.Option(help="poll: cap on the polling rate (default: as fast as replies come).")] = None,
+    port2: Annotated[str | None, typer.Option(help="A second port (e.g. a load cell).")] = None,
     protocol2: Annotated[str, typer.Option(help="Framing of the second port.")] = "text",
     baudrate2: Annotated[int, typer.Option(help="Baud rate of the second port.")] = 115200,
-    n_values2: Annotated[Optional[int], typer.Option(help="Values per sample of the second port.")] = None,
+    n_values2: Annotated[int | None, typer.Option(help="Values per sample of the second port.")] = None,
     name2: Annotated[str, typer.Option(help="Name of the second stream.")] = "s1",
     units2: Annotated[str, typer.Option(help="Units of the second stream.")] = "raw",
-    duration: Annotated[Optional[float], typer.Option(help="Stop after this many seconds (default: Ctrl-C).")] = None,
+    duration: Annotated[float | None, typer.Option(help="Stop after this many seconds (default: Ctrl-C).")] = None,
     flush_s: Annotated[float, typer.Option(help="Flush + fsync the raw log this often (s, <= 1).")] = 0.5,
     reconnect_s: Annotated[float, typer.Option(help="Keep retrying a vanished port this long (s) before giving up.")] = 0.0,
     rebuild: Annotated[bool, typer.Option("--rebuild", help="Only rebuild OUT from OUT.rawlog (after a crash or a parser fix).")] = False,
 ) -> None:
     """Capture one or two serial streams (host-time stamped, aligned) into a recording; appends on restart."""
-    from sensors.serial.capture import CaptureError, StreamSpec, build_recording, rawlog_path
+    from sensors.serial.capture import (
+        CaptureError,
+        StreamSpec,
+        build_recording,
+        rawlog_path,
+    )
     from sensors.serial.capture import capture as run_capture
 
     _check_protocol(protocol, "--protocol")
@@ -106,16 +109,16 @@ def capture(
 
 @app.command("import")
 def import_(
-    sensor_log: Annotated[Optional[Path], typer.Argument(help="Sensor log: 'value unix_time_s' per line (with --spec: the data folder or one file).")] = None,
-    force_log: Annotated[Optional[Path], typer.Argument(help="Load-cell log: 'force unix_time_s' per line.")] = None,
+    sensor_log: Annotated[Path | None, typer.Argument(help="Sensor log: 'value unix_time_s' per line (with --spec: the data folder or one file).")] = None,
+    force_log: Annotated[Path | None, typer.Argument(help="Load-cell log: 'force unix_time_s' per line.")] = None,
     out: Annotated[Path, typer.Option("-o", "--out", help="Recording to write (.h5).")] = Path("real.h5"),
-    lupasic_dir: Annotated[Optional[Path], typer.Option("--dir", help="Instead of two logs: every run of a Lupasic folder (velostat_data/, futek_data/), one episode each.")] = None,
-    rate: Annotated[Optional[float], typer.Option(help="Common clock rate in Hz (default: the sensor's rate, rounded).")] = None,
+    lupasic_dir: Annotated[Path | None, typer.Option("--dir", help="Instead of two logs: every run of a Lupasic folder (velostat_data/, futek_data/), one episode each.")] = None,
+    rate: Annotated[float | None, typer.Option(help="Common clock rate in Hz (default: the sensor's rate, rounded).")] = None,
     force_units: Annotated[str, typer.Option(help="Units of the force log: N | kg | counts (counts need --calibration).")] = "N",
-    calibration: Annotated[Optional[Path], typer.Option(help="'counts kg' pairs, e.g. futek_calibration.txt.")] = None,
+    calibration: Annotated[Path | None, typer.Option(help="'counts kg' pairs, e.g. futek_calibration.txt.")] = None,
     sensor_units: Annotated[str, typer.Option(help="Units of the sensor values.")] = "raw",
     family: Annotated[str, typer.Option(help="Sensor family recorded in /sensor.")] = "velostat",
-    spec: Annotated[Optional[str], typer.Option("--spec", help="Column-log spec: a YAML file or a built-in layout (lupasic-sweep, tams); see docs/real-sensors.md.")] = None,
+    spec: Annotated[str | None, typer.Option("--spec", help="Column-log spec: a YAML file or a built-in layout (lupasic-sweep, tams); see docs/real-sensors.md.")] = None,
     force: Annotated[bool, typer.Option("--force", help="Replace the -o recording if it exists.")] = False,
 ) -> None:
     """Import a sensor log and a load-cell log (host unix time) into a recording with source="real"."""
@@ -157,9 +160,9 @@ def serve(
     source: Annotated[str, typer.Argument(help="Preset name (simulated, one episode) or a recording file.")],
     url: Annotated[str, typer.Option(help="socket://HOST:PORT (listen; port 0 = any), pty[:LINK], or a port URL to write to.")],
     protocol: Annotated[str, typer.Option(help=_PROTO_HELP)] = "frames",
-    rate: Annotated[Optional[float], typer.Option(help="Samples per second (default: the source's rate).")] = None,
-    channel: Annotated[Optional[str], typer.Option(help="Channel to serve (default: resistance_measured / adc).")] = None,
-    set_: Annotated[Optional[list[str]], typer.Option("--set", help="Override a preset field (repeatable).")] = None,
+    rate: Annotated[float | None, typer.Option(help="Samples per second (default: the source's rate).")] = None,
+    channel: Annotated[str | None, typer.Option(help="Channel to serve (default: resistance_measured / adc).")] = None,
+    set_: Annotated[list[str] | None, typer.Option("--set", help="Override a preset field (repeatable).")] = None,
     episode: Annotated[int, typer.Option(help="Episode index of the preset to simulate.")] = 0,
     drop_bytes: Annotated[float, typer.Option(help="Fault: probability that a byte is dropped.")] = 0.0,
     bit_flips: Annotated[float, typer.Option(help="Fault: probability that a byte gets one bit flipped.")] = 0.0,
@@ -167,10 +170,10 @@ def serve(
     stall_every_s: Annotated[float, typer.Option(help="... every this many seconds.")] = 2.0,
     disconnect_every_s: Annotated[float, typer.Option(help="Fault: drop the link this often (s).")] = 0.0,
     fault_seed: Annotated[int, typer.Option(help="Seed of the fault draws.")] = 0,
-    duration: Annotated[Optional[float], typer.Option(help="Stop after this many seconds.")] = None,
-    frames: Annotated[Optional[int], typer.Option(help="Stop after this many samples.")] = None,
+    duration: Annotated[float | None, typer.Option(help="Stop after this many seconds.")] = None,
+    frames: Annotated[int | None, typer.Option(help="Stop after this many samples.")] = None,
     baudrate: Annotated[int, typer.Option(help="Baud rate (real ports).")] = 115200,
-    fault_log: Annotated[Optional[Path], typer.Option(help="Write what was sent, corrupted or unsent (JSON) here.")] = None,
+    fault_log: Annotated[Path | None, typer.Option(help="Write what was sent, corrupted or unsent (JSON) here.")] = None,
     start_delay: Annotated[float, typer.Option(help="Wait this long (s) after a client appears before streaming.")] = 0.0,
     client_timeout: Annotated[float, typer.Option(help="Stop when no client has come for this long (s), at the start or after a client left.")] = 30.0,
 ) -> None:
@@ -179,8 +182,8 @@ def serve(
     Over socket:// it serves one client at a time, for as many clients as come (a restarted capture gets
     the stream again, from the next sample on); each client's arrival and departure is printed."""
     from sensors.serial.board import DeviceError, Faults, check_rate
-    from simulate.generation.board_source import load_source
     from sensors.serial.board import serve as run_serve
+    from simulate.generation.board_source import load_source
 
     _check_protocol(protocol, "--protocol")
     if duration is not None and not duration > 0:

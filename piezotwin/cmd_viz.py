@@ -6,9 +6,10 @@ Bad input (missing file, unknown field, episode or time out of range, wrong suff
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated, Iterator, Optional
+from typing import Annotated
 
 import typer
 
@@ -16,7 +17,7 @@ from piezotwin.common import _check_writable, app, console, err, fail, unreadabl
 
 
 @contextmanager
-def _open(path: Path, episode: Optional[str], fields: list[str] | None) -> Iterator:
+def _open(path: Path, episode: str | None, fields: list[str] | None) -> Iterator:
     from sensors.data.recording import Recording, RecordingError
     from simulate.pictures.fields import FieldError, load_episode
 
@@ -43,7 +44,14 @@ def _open(path: Path, episode: Optional[str], fields: list[str] | None) -> Itera
 
 
 def _bar(label: str):
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
 
     return Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("frames"),
                     TimeElapsedColumn(), TimeRemainingColumn(), console=err, transient=False)
@@ -56,22 +64,22 @@ def _viz_errors():
     return (FieldError, VizUnavailable)
 
 
-Episode = Annotated[Optional[str], typer.Option("--episode", "-e", help="Episode index (0..) or id (ep-000003). Default: the first.")]
+Episode = Annotated[str | None, typer.Option("--episode", "-e", help="Episode index (0..) or id (ep-000003). Default: the first.")]
 
 
 @app.command()
 def show(
     recording: Annotated[Path, typer.Argument(help="A recording (.h5) or a dataset folder (its first shard).")],
     episode: Episode = None,
-    time: Annotated[Optional[float], typer.Option("--time", "-t", help="Time in s (nearest sample). Default: peak force.")] = None,
+    time: Annotated[float | None, typer.Option("--time", "-t", help="Time in s (nearest sample). Default: peak force.")] = None,
     field: Annotated[str, typer.Option("--field", "-f", help="deformation | pressure | strain | resistance | force_taxel")] = "deformation",
-    out: Annotated[Optional[Path], typer.Option("-o", "--out", help="Write a .png (or with --animate an .mp4/.gif) instead of opening a window.")] = None,
+    out: Annotated[Path | None, typer.Option("-o", "--out", help="Write a .png (or with --animate an .mp4/.gif) instead of opening a window.")] = None,
     animate: Annotated[bool, typer.Option("--animate", help="Animate the whole episode into -o FILE.mp4|.gif.")] = False,
-    exaggeration: Annotated[Optional[float], typer.Option(help="Deformation scale factor (default: a round factor showing the peak at ~30 % of thickness).")] = None,
+    exaggeration: Annotated[float | None, typer.Option(help="Deformation scale factor (default: a round factor showing the peak at ~30 % of thickness).")] = None,
     view: Annotated[str, typer.Option(help="iso | top")] = "iso",
     size: Annotated[str, typer.Option(help="Image size WxH in pixels.")] = "896x640",
     fps: Annotated[float, typer.Option(help="Animation frame rate; frames are sampled for real-time playback.")] = 25.0,
-    max_frames: Annotated[Optional[int], typer.Option(help="At most this many animation frames.")] = None,
+    max_frames: Annotated[int | None, typer.Option(help="At most this many animation frames.")] = None,
 ) -> None:
     """Render the sensor at one instant: deformed body coloured by a field, indenter where it was.
 
@@ -102,7 +110,13 @@ def show(
         fail(f"-o '{out}' must end in .png (for a movie add --animate)")
     if out is not None:
         _check_writable(out.parent if str(out.parent) else Path("."))
-    from simulate.pictures.render import RenderOptions, has_display, render_animation, render_frame, show_window
+    from simulate.pictures.render import (
+        RenderOptions,
+        has_display,
+        render_animation,
+        render_frame,
+        show_window,
+    )
 
     opts = RenderOptions(window_size=(w, h), view=view, exaggeration=exaggeration)
     with _open(recording, episode, [field]) as ev:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 from rich.console import Console, ConsoleDimensions
@@ -65,7 +65,7 @@ def _check_writable(out: Path) -> None:
         fail(f"output folder '{out}' is not writable")
 
 
-SetOpt = Annotated[Optional[list[str]], typer.Option("--set", help="Override a config field: key.path=value (repeatable).")]
+SetOpt = Annotated[list[str] | None, typer.Option("--set", help="Override a config field: key.path=value (repeatable).")]
 
 
 def unreadable(path: Path, exc: BaseException) -> None:
@@ -90,7 +90,7 @@ def _channel_table(channels: dict, title: str | None = None) -> Table:
     t = Table(show_header=True, header_style="bold", title=title)
     for col in ("channel", "units", "dims", "frame", "min", "max"):
         t.add_column(col, justify="right" if col in ("min", "max") else "left")
-    fmt = lambda v: "-" if v is None else f"{v:.4g}"  # noqa: E731
+    fmt = lambda v: "-" if v is None else f"{v:.4g}"
     for name, c in channels.items():
         t.add_row(name, c["units"], ",".join(c["dim_names"]), str(c["frame_shape"]), fmt(c["min"]), fmt(c["max"]))
     return t

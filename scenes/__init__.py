@@ -3,4 +3,4 @@
 from scenes.config import SceneConfig
 from scenes.loader import ConfigError, config_json, list_presets, load_scene
 
-__all__ = ["SceneConfig", "ConfigError", "load_scene", "list_presets", "config_json"]
+__all__ = ["ConfigError", "SceneConfig", "config_json", "list_presets", "load_scene"]

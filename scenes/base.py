@@ -22,17 +22,17 @@ NonNegFloat = Annotated[float, Field(ge=0)]
 Fraction = Annotated[float, Field(ge=0, le=1)]
 
 
-def Pos(hi: float) -> Any:  # noqa: N802  (a type, used in annotations)
+def Pos(hi: float) -> Any:
     """A float with 0 < x <= hi."""
     return Annotated[float, Field(gt=0, le=hi)]
 
 
-def NonNeg(hi: float) -> Any:  # noqa: N802
+def NonNeg(hi: float) -> Any:
     """A float with 0 <= x <= hi."""
     return Annotated[float, Field(ge=0, le=hi)]
 
 
-def Between(lo: float, hi: float) -> Any:  # noqa: N802
+def Between(lo: float, hi: float) -> Any:
     """A float with lo <= x <= hi."""
     return Annotated[float, Field(ge=lo, le=hi)]
 

@@ -8,13 +8,19 @@ Defaults without a source in the papers are marked `# estimate`.
 from __future__ import annotations
 
 import math
-
-from typing import Annotated, Literal, Optional, Union
+from typing import Annotated, Literal
 
 from pydantic import Field, field_validator, model_validator
 
-
-from scenes.base import Between, Fraction, NonNeg, NonNegFloat, Pos, PositiveFloat, Strict  # noqa: F401  (re-exported)
+from scenes.base import (  # noqa: F401  (re-exported)
+    Between,
+    Fraction,
+    NonNeg,
+    NonNegFloat,
+    Pos,
+    PositiveFloat,
+    Strict,
+)
 from scenes.fabric_config import FabricSensorConfig
 from scenes.ntype_config import NtypeSensorConfig
 from scenes.scene_randomize import RandomizeConfig
@@ -113,7 +119,7 @@ class ProtocolConfig(Strict):
     staircase_max_n: Pos(1000.0) = 10.0  # velostat Fig. 6: 1 N to 10 N
 
     @model_validator(mode="after")
-    def _check(self) -> "ProtocolConfig":
+    def _check(self) -> ProtocolConfig:
         if self.amplitude_min > self.amplitude_max:
             raise ValueError(
                 f"protocol.amplitude_min ({self.amplitude_min}) must be <= protocol.amplitude_max ({self.amplitude_max})"
@@ -136,7 +142,7 @@ class SamplingConfig(Strict):
     physics_timestep_s: Between(1e-6, 1.0) = 0.001  # MuJoCo step; estimate
 
     @model_validator(mode="after")
-    def _check(self) -> "SamplingConfig":
+    def _check(self) -> SamplingConfig:
         ratio = 1.0 / (self.sample_rate_hz * self.physics_timestep_s)
         if abs(ratio - round(ratio)) > 1e-6 or round(ratio) < 1:
             raise ValueError(
@@ -158,7 +164,7 @@ class MechanicsConfig(Strict):
     prony_times_s: list[Pos(1e6)] = Field(default_factory=lambda: [0.05, 0.5, 5.0])  # estimate: one per decade over 0.1-2 Hz
 
     @model_validator(mode="after")
-    def _check(self) -> "MechanicsConfig":
+    def _check(self) -> MechanicsConfig:
         if len(self.prony_fractions) != len(self.prony_times_s):
             raise ValueError("sensor.mechanics.prony_fractions and prony_times_s must have the same length")
         if len(self.prony_fractions) > 8:
@@ -175,7 +181,7 @@ class HysteresisConfig(Strict):
     recovery_time_s: Pos(1e6) = 30.0  # estimate: slow relaxation of play states toward the input at rest
 
     @model_validator(mode="after")
-    def _check(self) -> "HysteresisConfig":
+    def _check(self) -> HysteresisConfig:
         if len(self.play_thresholds) != len(self.play_weights):
             raise ValueError("sensor.hysteresis.play_thresholds and play_weights must have the same length")
         if len(self.play_weights) > 16:
@@ -209,7 +215,7 @@ class PercolationConfig(Strict):
     breakdown_time_s: Pos(1e6) = 0.02  # estimate: paths break as the matrix recoils (5x slower); loop area rising over 0.1-2 Hz
 
     @model_validator(mode="after")
-    def _check(self) -> "PercolationConfig":
+    def _check(self) -> PercolationConfig:
         if self.threshold_wt_fraction >= self.filler_wt_fraction:
             raise ValueError("sensor.percolation.threshold_wt_fraction must be below filler_wt_fraction (the sensor conducts at rest)")
         return self
@@ -271,7 +277,7 @@ class CntPdmsSensorConfig(Strict):
     readout: Literal["pad", "taxel"] = "pad"
 
     @model_validator(mode="after")
-    def _taxel_gain(self) -> "CntPdmsSensorConfig":
+    def _taxel_gain(self) -> CntPdmsSensorConfig:
         # one taxel under the indenter changes ~5x more (relatively) than the whole pad: the pad's default
         # gain would clip the ADC, so a taxel readout defaults to ~75 % of the range at F_max  # estimate
         if self.readout == "taxel" and "amp_gain" not in self.electronics.model_fields_set:
@@ -282,7 +288,7 @@ class CntPdmsSensorConfig(Strict):
 
 # one member per sensor family, told apart by its `family` literal (SceneConfig fills in cnt_pdms when missing)
 SensorConfig = Annotated[
-    Union[CntPdmsSensorConfig, FabricSensorConfig, NtypeSensorConfig, VelostatSensorConfig],
+    CntPdmsSensorConfig | FabricSensorConfig | NtypeSensorConfig | VelostatSensorConfig,
     Field(discriminator="family"),
 ]
 
@@ -300,7 +306,7 @@ class GenerationConfig(Strict):
     physics: Literal["mujoco", "mujoco_warp", "auto"] = "mujoco"
     # channels written per episode (None = all): e.g. [time, adc, force_taxel, contact_force, position]
     # for compact datasets; names are checked against the load channels and the sensor's outputs
-    record: Optional[list[str]] = None
+    record: list[str] | None = None
 
 
 class SceneConfig(Strict):
@@ -314,7 +320,7 @@ class SceneConfig(Strict):
     sampling: SamplingConfig = Field(default_factory=SamplingConfig)
     sensor: SensorConfig = Field(default_factory=CntPdmsSensorConfig)
     generation: GenerationConfig = Field(default_factory=GenerationConfig)
-    randomize: Optional[RandomizeConfig] = None  # per-episode distributions (scenes/scene_randomize.py)
+    randomize: RandomizeConfig | None = None  # per-episode distributions (scenes/scene_randomize.py)
 
     @model_validator(mode="before")
     @classmethod
@@ -325,7 +331,7 @@ class SceneConfig(Strict):
         return data
 
     @model_validator(mode="after")
-    def _cross(self) -> "SceneConfig":
+    def _cross(self) -> SceneConfig:
         nyq = self.sampling.sample_rate_hz / 2.0
         for f in self.protocol.frequencies_hz:
             if f >= nyq / 5.0:

@@ -48,7 +48,7 @@ class FabricCreepConfig(Strict):
     prony_times_s: list[Pos(1e6)] = Field(default_factory=lambda: [1.0, 30.0])  # estimate
 
     @model_validator(mode="after")
-    def _check(self) -> "FabricCreepConfig":
+    def _check(self) -> FabricCreepConfig:
         if len(self.prony_fractions) != len(self.prony_times_s):
             raise ValueError("sensor.creep.prony_fractions and prony_times_s must have the same length")
         if len(self.prony_fractions) > 8:
@@ -67,7 +67,7 @@ class FabricHysteresisConfig(Strict):
     recovery_time_s: Pos(1e6) = 120.0  # estimate: slow release of the compaction at rest
 
     @model_validator(mode="after")
-    def _check(self) -> "FabricHysteresisConfig":
+    def _check(self) -> FabricHysteresisConfig:
         if len(self.play_thresholds_n) != len(self.play_weights):
             raise ValueError("sensor.hysteresis.play_thresholds_n and play_weights must have the same length")
         if len(self.play_weights) > 16:
@@ -105,7 +105,7 @@ class FabricPressConfig(Strict):
     max_presses: Annotated[int, Field(ge=1, le=4096)] = 256  # draws per episode; press k uses draw k mod max_presses
 
     @model_validator(mode="after")
-    def _check(self) -> "FabricPressConfig":
+    def _check(self) -> FabricPressConfig:
         if self.release_force_n > self.onset_force_n:
             raise ValueError("sensor.press.release_force_n must not exceed onset_force_n")
         m, cv = self.set_fraction_mean, self.set_fraction_cv
@@ -126,7 +126,7 @@ class MultimeterConfig(Strict):
     gain_error: Annotated[float, Field(ge=-0.1, le=0.1)] = 0.0  # estimate: calibration error (fraction)
 
     @model_validator(mode="after")
-    def _check(self) -> "MultimeterConfig":
+    def _check(self) -> MultimeterConfig:
         if not self.ranges_ohm or sorted(self.ranges_ohm) != list(self.ranges_ohm):
             raise ValueError("sensor.multimeter.ranges_ohm must list at least one range, ascending")
         return self

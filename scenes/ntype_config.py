@@ -123,7 +123,7 @@ class NtypeSensorConfig(Strict):
     readout: NtypeReadoutConfig = Field(default_factory=NtypeReadoutConfig)
 
     @model_validator(mode="after")
-    def _check(self) -> "NtypeSensorConfig":
+    def _check(self) -> NtypeSensorConfig:
         e = self.element
         flat = e.reading == "coplanar" or (e.reading == "eq8" and e.inclined_azimuth_deg in (0.0, 90.0))
         if flat and e.filler_shear_modulus_pa == 0.0:

@@ -23,7 +23,7 @@ Quantities (all optional; units in the names):
 
 from __future__ import annotations
 
-from typing import Literal, Optional
+from typing import Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
@@ -37,14 +37,14 @@ class Dist(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     kind: Literal["fixed", "uniform", "loguniform", "normal", "lognormal", "choice"] = "fixed"
-    value: Optional[float] = None  # fixed
-    low: Optional[float] = None  # uniform / loguniform
-    high: Optional[float] = None
-    mean: Optional[float] = None  # normal
-    sd: Optional[float] = None
-    median: Optional[float] = None  # lognormal
-    log_sd: Optional[float] = None
-    values: Optional[list[float]] = None  # choice
+    value: float | None = None  # fixed
+    low: float | None = None  # uniform / loguniform
+    high: float | None = None
+    mean: float | None = None  # normal
+    sd: float | None = None
+    median: float | None = None  # lognormal
+    log_sd: float | None = None
+    values: list[float] | None = None  # choice
 
     @model_validator(mode="after")
     def _check(self):

@@ -21,7 +21,7 @@ An empty section changes nothing (the config JSON omits it; no draw is made).
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal, Optional
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import Field, model_validator
@@ -37,12 +37,12 @@ class ParamDist(Strict):
     """A bounded distribution of one scene value."""
 
     kind: Literal["uniform", "loguniform", "choice"] = "uniform"
-    low: Optional[Between(-1e9, 1e9)] = None
-    high: Optional[Between(-1e9, 1e9)] = None
-    values: Optional[Annotated[list[Between(-1e9, 1e9)], Field(min_length=1, max_length=1000)]] = None
+    low: Between(-1000000000.0, 1000000000.0) | None = None
+    high: Between(-1000000000.0, 1000000000.0) | None = None
+    values: Annotated[list[Between(-1000000000.0, 1000000000.0)], Field(min_length=1, max_length=1000)] | None = None
 
     @model_validator(mode="after")
-    def _check(self) -> "ParamDist":
+    def _check(self) -> ParamDist:
         if self.kind == "choice":
             if not self.values:
                 raise ValueError("choice needs values")

@@ -55,7 +55,7 @@ class VelostatCreepConfig(Strict):
     times_s: list[Pos(1e6)] = Field(default_factory=lambda: [0.5, 1.5, 5.0, 15.0, 50.0, 150.0])  # estimate (spectrum): half-decade spacing over the 1-100 s of the paper's holds
 
     @model_validator(mode="after")
-    def _check(self) -> "VelostatCreepConfig":
+    def _check(self) -> VelostatCreepConfig:
         if not 1 <= len(self.times_s) <= 8:
             raise ValueError(f"'times_s' must list 1 to 8 times (got {len(self.times_s)})")
         return self
@@ -78,7 +78,7 @@ class VelostatReadoutConfig(Strict):
     adc_range_v: Pos(100.0) = 3.3  # estimate: unipolar 0-3.3 V
 
     @model_validator(mode="after")
-    def _check(self) -> "VelostatReadoutConfig":
+    def _check(self) -> VelostatReadoutConfig:
         if self.compliance_v > self.adc_range_v:
             raise ValueError(
                 f"'compliance_v' ({self.compliance_v} V) must be <= adc_range_v ({self.adc_range_v} V)"
@@ -97,4 +97,4 @@ class VelostatSensorConfig(Strict):
     readout: VelostatReadoutConfig = Field(default_factory=VelostatReadoutConfig)
 
 
-__all__ = ["VelostatSensorConfig", "VelostatFilmConfig", "VelostatCreepConfig", "VelostatReadoutConfig", "Fraction"]
+__all__ = ["Fraction", "VelostatCreepConfig", "VelostatFilmConfig", "VelostatReadoutConfig", "VelostatSensorConfig"]

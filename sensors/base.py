@@ -58,7 +58,7 @@ class LoadBatch:
     def fields_on_device(self) -> bool:
         return not isinstance(self.deformation_m, np.ndarray)
 
-    def on_host(self) -> "LoadBatch":
+    def on_host(self) -> LoadBatch:
         """This batch with the taxel fields as numpy arrays (E, T, N) / (E, T, N, 2) (a no-op on the host)."""
         if not self.fields_on_device:
             return self

@@ -41,14 +41,25 @@ from __future__ import annotations
 
 import fnmatch
 import json
+from collections.abc import Sequence as Seq
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any, Sequence as Seq
+from typing import Any
 
 import numpy as np
 
-__all__ = ["ChainParams", "Press", "RealRun", "load_real_runs", "simulate_reading", "fit_chain", "ChainFit",
-           "evaluate", "reading_from_resistance", "resistance_from_reading"]
+__all__ = [
+    "ChainFit",
+    "ChainParams",
+    "Press",
+    "RealRun",
+    "evaluate",
+    "fit_chain",
+    "load_real_runs",
+    "reading_from_resistance",
+    "resistance_from_reading",
+    "simulate_reading",
+]
 
 F_REF_N = 1.0
 
@@ -91,7 +102,7 @@ class ChainParams:
         return d
 
     @classmethod
-    def from_json(cls, d: dict[str, Any]) -> "ChainParams":
+    def from_json(cls, d: dict[str, Any]) -> ChainParams:
         return cls(**{k: v for k, v in d.items() if k in cls.__dataclass_fields__})
 
 
@@ -519,7 +530,7 @@ def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = 
     err["level_run_sd"] = {"point": fin["level_run_sd"], "anova": fin["level_run_sd_anova"],
                            "within_run_sd": fin["level_within_run_sd"], "n_runs": int(n_runs),
                            "prior_sd": RUN_LEVEL_PRIOR_SD, "prior_dof": RUN_LEVEL_PRIOR_DOF}
-    err["n_presses"] = int(len(idx))
+    err["n_presses"] = len(idx)
     err["n_missed_presses"] = int(sum(data.missed))
     return ChainFit(fin["p"], ranges, [-half, half], boot, err, [float(x) for x in lev - np.log(fin["p"].r0_ohm)],
                     {"nfev": int(res.nfev), "status": int(res.status), "message": str(res.message), "names": list(res.names)})
@@ -578,7 +589,7 @@ def within_press_error(p: ChainParams, data: _Data, idx: np.ndarray) -> dict[str
     a = np.concatenate(errs) if errs else np.zeros(0)
     return {"rms_log_reading_within_press": float(np.sqrt(np.mean(a ** 2))) if len(a) else float("nan"),
             "per_run": {k: float(np.sqrt(np.mean(np.concatenate(v) ** 2))) for k, v in per_run.items()},
-            "n_samples": int(len(a))}
+            "n_samples": len(a)}
 
 
 def evaluate(fit: ChainFit, runs: Seq[RealRun], min_force_frac: float = 0.1, min_force_n: float = 0.05) -> dict[str, Any]:
@@ -597,7 +608,7 @@ def evaluate(fit: ChainFit, runs: Seq[RealRun], min_force_frac: float = 0.1, min
     err["level_in_band90"] = float(np.mean((rel >= lo) & (rel <= hi)))
     err["level_mean_log_vs_fit"] = float(np.mean(rel))
     err["level_sd_log"] = float(np.std(rel, ddof=1)) if len(rel) > 1 else 0.0
-    err["n_presses"] = int(len(idx))
+    err["n_presses"] = len(idx)
     err["plateau_drop"] = plateau_drops(p, data, idx, lev)
     return err
 
@@ -697,7 +708,7 @@ def press_slope_spread(fit: ChainFit, runs: Seq[RealRun], seed: int = 0) -> dict
     p = fit.params
     ds, dl = _press_slopes([(r.force, r.reading, r.dt, r.fs) for r in runs], p)
     if len(ds) < 8:
-        return {"slope_level_coef": 0.0, "slope_press_sd": 0.0, "n_presses": int(len(ds))}
+        return {"slope_level_coef": 0.0, "slope_press_sd": 0.0, "n_presses": len(ds)}
     rng = np.random.default_rng([int(seed), 0x51])
     q = replace(p, miss_prob=0.0)
     sim = [(r.force, simulate_reading(r.force, r.dt, q, fs=r.fs, rng=rng), r.dt, r.fs) for r in runs]
@@ -707,8 +718,8 @@ def press_slope_spread(fit: ChainFit, runs: Seq[RealRun], seed: int = 0) -> dict
     # the level term only where the correlation is resolved (|r| > 2 / sqrt(n), about two standard errors)
     coef = float(np.cov(ds, dl)[0, 1] / var_dl) if var_dl > 0 and abs(corr) > 2.0 / np.sqrt(len(ds)) else 0.0
     resid = float(np.var(ds - coef * dl, ddof=1))
-    out = {"slope_sd_real": float(np.std(ds, ddof=1)), "slope_level_corr": corr, "n_presses": int(len(ds)),
-           "n_presses_chain": int(len(cs))}
+    out = {"slope_sd_real": float(np.std(ds, ddof=1)), "slope_level_corr": corr, "n_presses": len(ds),
+           "n_presses_chain": len(cs)}
     if len(cs) < 8:  # the chain's own spread is not measurable on these forces (saturated readout): nothing added
         return {"slope_level_coef": 0.0, "slope_press_sd": 0.0, **out}
     chain = float(np.var(cs, ddof=1))

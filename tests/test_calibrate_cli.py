@@ -60,7 +60,12 @@ def test_velostat_calibration_pulls_perturbed_creep_back_and_preset_is_its_fit()
     brings it back to the target and to the preset's value (rerun `piezotwin calibrate velostat --write` after a
     physics change). Ideal load field, numpy chain: a few seconds."""
     from scenes import load_scene
-    from simulate.characterize.velostat import PAPER_CREEP_ERROR_N, _with_amplitude, fit_creep_amplitude, staircase_error
+    from simulate.characterize.velostat import (
+        PAPER_CREEP_ERROR_N,
+        _with_amplitude,
+        fit_creep_amplitude,
+        staircase_error,
+    )
 
     cfg = load_scene("velostat")
     a0 = cfg.sensor.creep.amplitude

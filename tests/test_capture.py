@@ -15,9 +15,17 @@ import pytest
 from typer.testing import CliRunner
 
 from piezotwin.cli import app
-from sensors.serial.capture import RAW, CaptureError, StreamSpec, build_recording, capture, rawlog_path, read_records
 from sensors.data.recording import Recording
 from sensors.serial.board import DeviceError, Faults, Source, serve
+from sensors.serial.capture import (
+    RAW,
+    CaptureError,
+    StreamSpec,
+    build_recording,
+    capture,
+    rawlog_path,
+    read_records,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 runner = CliRunner()

@@ -139,7 +139,9 @@ def test_gpu_generation_keeps_fields_on_device_and_slices_the_sensor_stage(gpu_d
     """The GPU path (taxel fields left on the device for cnt_pdms, sensor stage in slices after one physics
     batch) records the same channels as the same worlds with the fields copied to the host in one pass."""
     from sensors.registry import make_sensor
-    from simulate.contact import load_field as contact  # where iter_load_batches looks simulate_sensors up
+    from simulate.contact import (
+        load_field as contact,  # where iter_load_batches looks simulate_sensors up
+    )
     from simulate.generation import run
 
     dev = "cpu" if gpu_device == "cpu" else "cuda"
@@ -164,7 +166,11 @@ def test_gpu_generation_keeps_fields_on_device_and_slices_the_sensor_stage(gpu_d
 def _worlds_runs(device: str):
     """Sensordata of the same episodes: sensors in every step; sensors only in the recorded step, run twice
     on the same (reused) worlds; plus a run of other episodes in between."""
-    from simulate.contact.load_field import _initial_states, build_model, episode_controls
+    from simulate.contact.load_field import (
+        _initial_states,
+        build_model,
+        episode_controls,
+    )
     from simulate.contact.mujoco_warp import WarpWorlds
 
     cfg = load_scene("cnt_pdms", SHORT)

@@ -5,14 +5,12 @@ import importlib.util
 from pathlib import Path
 
 import numpy as np
-
 import pytest
 
-import simulate.generation.run as run
 from scenes import load_scene
 from sensors.data.manifest import read_manifest, shard_path
 from sensors.data.recording import Recording
-from simulate.generation import executors
+from simulate.generation import executors, run
 
 FAST = ["protocol.frequencies_hz=[2.0]", "protocol.cycles=1", "pad.taxels_x=6", "pad.taxels_y=6",
         "generation.episodes=4", "generation.episodes_per_shard=1", "generation.root_seed=11"]
@@ -196,9 +194,11 @@ def test_feed_packs_each_gpu_slice_before_the_next_overwrites_its_staging(gpu_de
     packed into shared blocks of a BlockPool slice by slice (3-episode slices, 2-episode shards), equal to the
     same physics run through the plain path (a fresh host array per copy)."""
     from sensors.data.manifest import episode_seed
-    from simulate.contact import load_field as contact  # where iter_load_batches looks simulate_sensors up
-    from simulate.generation import feed
+    from simulate.contact import (
+        load_field as contact,  # where iter_load_batches looks simulate_sensors up
+    )
     from simulate.contact.load_field import physics_engine
+    from simulate.generation import feed
 
     dev = "cpu" if gpu_device == "cpu" else "cuda"
     cfg = load_scene("cnt_pdms", FAST[:-3] + ["sensor.readout=taxel", "generation.physics=mujoco_warp", f"generation.device={dev}",

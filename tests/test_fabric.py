@@ -5,10 +5,25 @@ import numpy as np
 import pytest
 
 from scenes import ConfigError, load_scene
+from sensors.fabric.calibrate import (
+    HYSTERESIS_BAND_PCT,
+    PAPER_CURVES,
+    loading_branch_x,
+    repeat_hysteresis,
+    repeat_readings,
+)
 from sensors.fabric.model import FabricSensor, multimeter_numpy
-from sensors.fabric.calibrate import HYSTERESIS_BAND_PCT, PAPER_CURVES, loading_branch_x, repeat_hysteresis, repeat_readings
-from sensors.fabric.reference import fabric_chain_numpy, fabric_params, press_draws, stack_resistance
-from simulate.protocols.indenter import make_episode_protocol, staircase_levels, target_waveform
+from sensors.fabric.reference import (
+    fabric_chain_numpy,
+    fabric_params,
+    press_draws,
+    stack_resistance,
+)
+from simulate.protocols.indenter import (
+    make_episode_protocol,
+    staircase_levels,
+    target_waveform,
+)
 
 PRESETS = {n: f"fabric_{n}" for n in (1, 3, 6, 12)}
 DWELL = 20  # samples: 2 s at 10 Hz
@@ -243,9 +258,9 @@ def test_characterize_fabric_1_through_mujoco(cfgs):
 
 
 def test_generate_fabric_dataset(tmp_path):
-    import simulate.generation.run as run
-    from sensors.data.recording import Recording
     from sensors.data.manifest import shard_path
+    from sensors.data.recording import Recording
+    from simulate.generation import run
 
     cfg = load_scene("fabric_1", ["generation.episodes=2", "generation.episodes_per_shard=2",
                                   "protocol.stair_cycles_min=1", "protocol.stair_cycles_max=1", "protocol.amplitude_max=1.0"])

@@ -8,8 +8,8 @@ from typer.testing import CliRunner
 
 from piezotwin.cli import app
 from scenes import load_scene
-from sensors.velostat import fit as VF
 from sensors.data.recording import Channel, write_recording
+from sensors.velostat import fit as VF
 from sensors.velostat.reference import FilmParams, film_chain_numpy
 
 runner = CliRunner()
@@ -94,10 +94,10 @@ def test_fit_cli_writes_loadable_preset_and_rejects_bad_input(tmp_path):
 
 
 # ------------------------------------------------------------------ the whole chain (sensors/chain_fit.py)
-from dataclasses import replace as _replace  # noqa: E402
+from dataclasses import replace as _replace
 
-from sensors import chain_fit as CF  # noqa: E402
-from scenes.randomize import Dist, Randomization, draw  # noqa: E402
+from scenes.randomize import Dist, Randomization, draw
+from sensors import chain_fit as CF
 
 
 def _synthetic_runs(p, n_runs=4, seed=1, fs=1000.0, rate=20.0):
@@ -266,9 +266,8 @@ def test_press_slope_spread_recovers_known_sensitivity_variation():
 def test_rated_force_widens_the_simulated_presses_to_the_rating_only():
     """The simulated peak forces span the sensor's rated force when the user gives it (the presses the real
     training runs lack), keep the training range where it already covers the rating, and are drawn inside it."""
-    from scenes.randomize import draw_one
+    from scenes.randomize import Randomization, draw_one
     from simulate.generation.chain_gen import press_protocol
-    from scenes.randomize import Randomization
 
     peaks = [20.6, 21.0, 22.5]  # pike2-like training presses (N)
     d0 = CF.peak_force_dist(peaks)

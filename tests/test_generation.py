@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-import simulate.generation.run as run
 from scenes import load_scene
 from sensors.data.dataset import WindowDataset
 from sensors.data.manifest import read_manifest, shard_path
 from sensors.data.recording import Recording
+from simulate.generation import run
 
 FAST = ["protocol.frequencies_hz=[2.0]", "protocol.cycles=1", "pad.taxels_x=6", "pad.taxels_y=6",
         "generation.episodes=4", "generation.episodes_per_shard=2", "generation.root_seed=11"]

@@ -130,7 +130,7 @@ def test_bp_lm_beats_trivial_and_static_baselines_on_held_out_data(tmp_path):
     tr = [_play_sensor(150, s) for s in range(4)]
     va = [_play_sensor(150, 50)]
     te = [_play_sensor(150, s) for s in (100, 101)]
-    rmse = lambda m: float(np.sqrt(np.mean(np.concatenate([(m.predict(a) - b) ** 2 for a, b in te]))))  # noqa: E731
+    rmse = lambda m: float(np.sqrt(np.mean(np.concatenate([(m.predict(a) - b) ** 2 for a, b in te]))))
     fitted = {}
     for kind, hp in (("mean", {}), ("cubic", {}), ("bp_lm", {"restarts": 2, "max_epochs": 200})):
         m = make_model(kind, **hp)

@@ -9,8 +9,14 @@ import torch
 from typer.testing import CliRunner
 
 from learn.experiments import EXPERIMENTS
-from learn.experiments.ntype import (NEIGHBOURS, component_errors, kfold_episodes, minmax_fit, to_paper_scale,
-                                     window_inputs)
+from learn.experiments.ntype import (
+    NEIGHBOURS,
+    component_errors,
+    kfold_episodes,
+    minmax_fit,
+    to_paper_scale,
+    window_inputs,
+)
 from learn.models import MODELS, make_model
 from learn.models.element_mlp import invert_strain, mirror_x
 from learn.models.rbf import KMeans, RBFNetwork, RecursiveLeastSquares

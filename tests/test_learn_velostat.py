@@ -6,9 +6,16 @@ import numpy as np
 import pytest
 import torch
 
+from learn.models.velostat import (
+    BPCompensator,
+    CreepTracker,
+    KMeans,
+    gj_criterion,
+    semi_trapezoid,
+    silhouette_samples,
+    silhouette_score,
+)
 from scenes import load_scene
-from learn.models.velostat import (BPCompensator, CreepTracker, KMeans, gj_criterion, semi_trapezoid,
-                                   silhouette_samples, silhouette_score)
 
 torch.set_num_threads(1)
 
@@ -144,10 +151,10 @@ def test_bp_log_onehot_inputs(tmp_path):
     x, y = data(400)
     xv, yv = data(80)
     xt, yt = data(200)
-    fit = lambda **hp: BPCompensator(hidden=6, max_epochs=60, patience=20, **hp).fit([x], [y], valid=([xv], [yv]))  # noqa: E731
+    fit = lambda **hp: BPCompensator(hidden=6, max_epochs=60, patience=20, **hp).fit([x], [y], valid=([xv], [yv]))
     ours = fit(r_input="log", encoding="onehot")
     assert ours.hparams["n_ids"] == 4 and ours.n_in == 5
-    rmse = lambda m: float(np.sqrt(np.mean((m.predict(xt) - yt) ** 2)))  # noqa: E731
+    rmse = lambda m: float(np.sqrt(np.mean((m.predict(xt) - yt) ** 2)))
     assert rmse(ours) < 0.25 * float(np.std(yt))  # ~0.55 N of ~4 N; the literal inputs get ~2.1 N here
     back = load_checkpoint(save_checkpoint(ours, tmp_path / "bp"))
     np.testing.assert_allclose(back.predict(xt), ours.predict(xt))

@@ -6,7 +6,11 @@ import pytest
 
 from scenes import load_scene
 from simulate.contact import load_field
-from simulate.contact.load_field import simulate_sensors, simulate_sensors_padded, world_groups
+from simulate.contact.load_field import (
+    simulate_sensors,
+    simulate_sensors_padded,
+    world_groups,
+)
 from simulate.contact.mujoco_warp import available
 
 MIX = [170, 320, 620, 3020]  # samples per episode of the default 2 / 1 / 0.5 / 0.1 Hz mix
@@ -17,13 +21,13 @@ def _lengths(runs):
 
 
 def test_world_groups_merge_small_groups_and_keep_large_ones_apart():
-    groups = lambda c: [(n, list(range(c))) for n in MIX]  # noqa: E731
+    groups = lambda c: [(n, list(range(c))) for n in MIX]
     assert _lengths(world_groups(groups(16))) == [MIX]  # a few worlds: one padded batch
     assert _lengths(world_groups(groups(32768))) == [[n] for n in MIX]  # GPU-filling groups: apart
     for c in (16, 1024, 8192, 32768):  # every group exactly once, in order
         assert [g for r in world_groups(groups(c)) for g in r] == groups(c)
     # the model's choice is never slower (in the model) than either extreme
-    t = lambda runs: sum(max(n for n, _ in r) * (load_field.STEP_S_FLOOR + sum(len(i) for _, i in r) / load_field.WORLD_STEPS_PER_S) for r in runs)  # noqa: E731
+    t = lambda runs: sum(max(n for n, _ in r) * (load_field.STEP_S_FLOOR + sum(len(i) for _, i in r) / load_field.WORLD_STEPS_PER_S) for r in runs)
     for c in (16, 1024, 8192, 32768):
         g = groups(c)
         assert t(world_groups(g)) <= min(t([g]), t([[x] for x in g])) + 1e-12

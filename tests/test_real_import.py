@@ -7,7 +7,13 @@ import pytest
 from typer.testing import CliRunner
 
 from piezotwin.cli import app
-from sensors.data.real_import import ImportLogError, import_logs, lupasic_pairs, read_calibration, read_log
+from sensors.data.real_import import (
+    ImportLogError,
+    import_logs,
+    lupasic_pairs,
+    read_calibration,
+    read_log,
+)
 from sensors.data.recording import Recording
 
 runner = CliRunner()
@@ -114,7 +120,12 @@ def test_import_whole_folder_one_episode_per_run(tmp_path):
 
 
 # ------------------------------------------------------------------ any column log (sensors/data/column_import.py)
-from sensors.data.column_import import LAYOUTS, import_columns, load_spec, read_weight_calibration  # noqa: E402
+from sensors.data.column_import import (
+    LAYOUTS,
+    import_columns,
+    load_spec,
+    read_weight_calibration,
+)
 
 SWEEP = REAL / "speed_sweep"
 TAMS = REAL.parent / "tams-array" / "calibration"

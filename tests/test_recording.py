@@ -14,7 +14,13 @@ import pytest
 
 from sensors.data import manifest as mf
 from sensors.data import recording as rc
-from sensors.data.recording import FORMAT, Channel, Recording, RecordingError, write_recording
+from sensors.data.recording import (
+    FORMAT,
+    Channel,
+    Recording,
+    RecordingError,
+    write_recording,
+)
 
 CONFIG = json.dumps({"family": "cnt_pdms", "sample_rate_hz": 100.0}, sort_keys=True)
 CONFIG_SHA = __import__("hashlib").sha256(CONFIG.encode()).hexdigest()
@@ -305,7 +311,7 @@ def test_natural_order_fast_path_equals_the_general_key():
     from sensors.data.manifest import _natural_order
     from sensors.data.recording import _natural_key
 
-    general = lambda ids: sorted(ids, key=lambda e: (_natural_key(e), e))  # noqa: E731
+    general = lambda ids: sorted(ids, key=lambda e: (_natural_key(e), e))
     rng = random.Random(1)
     same_shape = [f"shard-{rng.randrange(30):05d}.h5/ep-{rng.randrange(10**6):0{rng.choice([1, 6])}d}" for _ in range(3000)]
     cases = [same_shape, ["ep-10", "ep-9", "ep-09", "ep-1"], ["a2b", "a10b", "b1", "x"], ["s/e-99999999999999999999", "s/e-3"]]

@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-import simulate.generation.run as run
 from scenes import config_json, load_scene
 from sensors.data.manifest import shard_path
 from sensors.data.recording import Recording
+from simulate.generation import run
 
 FAST = ["protocol.frequencies_hz=[2.0]", "protocol.cycles=1", "pad.taxels_x=6", "pad.taxels_y=6",
         "generation.episodes=3", "generation.episodes_per_shard=3", "generation.root_seed=5"]

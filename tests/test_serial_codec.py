@@ -105,7 +105,7 @@ def test_frames_truncated_frames_then_intact_frame_issue_17():
 def test_frames_intact_frame_survives_any_truncated_neighbours(width):
     """Systematic: three frames that lost their last 1-3 bytes (delimiter included), then an intact frame,
     for 400 sequence numbers: the intact frame always decodes, with its values."""
-    for base in range(0, 400):
+    for base in range(400):
         for lost in (1, 2, 3):
             enc, vals = _frames(5, width, start=base)
             stream = enc[0] + b"".join(e[:-lost] for e in enc[1:4]) + enc[4]

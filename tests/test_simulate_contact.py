@@ -230,7 +230,12 @@ def test_sensor_chain_on_device_fields_equals_host_fields():
 def test_batched_waveforms_equal_per_episode(kind):
     """The controls of a batch are one array expression for sinusoid/hold (32k episodes on the GPU path):
     bit for bit the per-episode waveforms; other kinds go episode by episode."""
-    from simulate.protocols.indenter import target_waveform, target_waveforms, xy_waveform, xy_waveforms
+    from simulate.protocols.indenter import (
+        target_waveform,
+        target_waveforms,
+        xy_waveform,
+        xy_waveforms,
+    )
 
     extra = {"hold": ["protocol.kind=hold", "protocol.control=force"], "staircase": []}.get(kind, [])
     cfg = load_scene("fabric_1" if kind == "staircase" else "cnt_pdms", FAST + extra if kind != "staircase" else [])

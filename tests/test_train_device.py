@@ -8,7 +8,13 @@ import torch
 from typer.testing import CliRunner
 
 from learn.models import make_model
-from learn.train import TrainConfig, current_device, resolve_device, train_model, training_device
+from learn.train import (
+    TrainConfig,
+    current_device,
+    resolve_device,
+    train_model,
+    training_device,
+)
 from piezotwin.cli import app
 
 torch.set_num_threads(1)

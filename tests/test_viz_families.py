@@ -17,7 +17,6 @@ from typer.testing import CliRunner
 from scenes import load_scene
 from sensors.data.recording import Recording
 
-
 SMALL = (240, 176)
 SPECS = {
     "fabric": ("fabric_3", ["protocol.kind=hold", "protocol.ramp_s=1", "protocol.duration_s=3",

@@ -22,6 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 def run(family: str) -> Path:
     from characterize import machine
+
     from piezotwin.cmd_calibrate import CALIBRATIONS
 
     module, fn = CALIBRATIONS[family].split(":")

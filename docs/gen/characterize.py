@@ -14,7 +14,7 @@ import platform
 import subprocess
 import sys
 import time
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -35,7 +35,7 @@ def machine() -> dict:
     except OSError:
         commit = ""
     return {"host_platform": platform.platform(), "cpus": os.cpu_count(), "processor": platform.processor(),
-            "git_commit": commit, "date_utc": datetime.now(timezone.utc).strftime("%Y-%m-%d")}
+            "git_commit": commit, "date_utc": datetime.now(UTC).strftime("%Y-%m-%d")}
 
 
 def run(preset: str) -> Path:

@@ -24,8 +24,9 @@ import json
 import math
 import re
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "bench" / "results"
@@ -85,7 +86,7 @@ def pct(v: float | None, nd: int = 0) -> str:
 
 
 def table(header: list[str], rows: list[list[Any]]) -> str:
-    esc = lambda c: str(c).replace("|", "\\|").replace("\n", " ")  # noqa: E731
+    esc = lambda c: str(c).replace("|", "\\|").replace("\n", " ")
     out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     out += ["| " + " | ".join(esc(c) for c in r) + " |" for r in rows]
     return "\n".join(out) + "\n"
@@ -802,7 +803,7 @@ def _exp_headline(family: str) -> list[list[str]]:
                 key = "hyst_paper_mean" if all("hyst_paper_mean" in v["models"]["tcn"]["test"] for v in L.values()) else "hyst_full_mean"
                 worst = key == "hyst_paper_mean" and all("hyst_paper_worst" in v["models"][k]["test"]
                                                          for v in L.values() for k in ("tcn", "bp_lm"))
-                fig = (lambda t: f"{num(t[key])} ({num(t['hyst_paper_worst'])})") if worst else (lambda t: num(t[key], 2))  # noqa: E731
+                fig = (lambda t: f"{num(t[key])} ({num(t['hyst_paper_worst'])})") if worst else (lambda t: num(t[key], 2))
                 ours = " / ".join(f"{fig(v['models']['tcn']['test'])} vs {fig(v['models']['bp_lm']['test'])}" for v in L.values())
                 unit = "% of highest output, the paper's definition" if key == "hyst_paper_mean" else "% FSO"
                 rows.append([f"fabric compensation ({mode}): full-cycle hysteresis{', mean (worst) over test episodes' if worst else ''}, "
@@ -863,7 +864,7 @@ def _cnt_pdms_seed_mean_rows() -> list[list[str]]:
 
 def headline_rows() -> list[list[str]]:
     rows: list[list[str]] = []
-    link = lambda n: f"[`{n}`](bench/results/{n})"  # noqa: E731
+    link = lambda n: f"[`{n}`](bench/results/{n})"
     e2e = load(GPU_E2E)
     if e2e:
         r = max(e2e["end_to_end"], key=lambda r: r["samples_per_s"])

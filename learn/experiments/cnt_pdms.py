@@ -21,15 +21,31 @@ Modes: "full" = the preset's data and the paper's training budget (<= 200 epochs
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
-from learn.data import Sequence, dataset_fingerprint, dumps, group_by, load_sequences, stratified_split
+from learn.data import (
+    Sequence,
+    dataset_fingerprint,
+    dumps,
+    group_by,
+    load_sequences,
+    stratified_split,
+)
 from learn.experiments.common import (
-    batch_latency, evaluate, fit_model, fmt, make_data, md_table, raw_hysteresis, select_mode, single_thread,
+    batch_latency,
+    evaluate,
+    fit_model,
+    fmt,
+    make_data,
+    md_table,
+    raw_hysteresis,
+    select_mode,
+    single_thread,
 )
 
 KEY = "cnt_pdms"
@@ -291,7 +307,7 @@ def report(m: dict[str, Any]) -> str:
         if k not in R:
             continue
         t, p = R[k]["test"], P3.get(k)
-        pp = lambda i: fmt(p[i], 3 if i < 3 else 1) if p else "–"  # noqa: E731
+        pp = lambda i: fmt(p[i], 3 if i < 3 else 1) if p else "–"
         rows.append([LABELS[k], f"{fmt(t['mae'])} / {pp(0)}", f"{fmt(t['rmse'])} / {pp(1)}", f"{fmt(t['r2'])} / {pp(2)}",
                      f"{fmt(t.get('hyst_mean'), 1)} / {pp(3)}", f"{fmt(R[k]['latency']['median_ms'], 3)} / {pp(4)}",
                      f"{R[k]['fit_seconds']:.1f}"])

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
+from collections.abc import Sequence as Seq
 from pathlib import Path
-from typing import Any, Callable, Sequence as Seq
+from typing import Any
 
 import numpy as np
 import torch
@@ -16,7 +18,7 @@ from learn.models.base import Compensator
 
 HISTORY_CURVES = ("train_loss", "valid_loss")  # per-epoch curves: "loss_curve", not "training"
 
-__all__ = ["make_data", "select_mode", "evaluate", "streaming_latency", "batch_latency", "md_table", "fmt", "fit_model", "single_thread"]
+__all__ = ["batch_latency", "evaluate", "fit_model", "fmt", "make_data", "md_table", "select_mode", "single_thread", "streaming_latency"]
 
 
 def make_data(data_dir, cfg, log: Callable[[str], None]):
@@ -53,7 +55,7 @@ def evaluate(comp: Compensator, seqs: Seq[Sequence], drive: str | None = None) -
     ref = np.concatenate([s.y[:, 0] for s in seqs])
     est = np.concatenate([p[:, 0] for p in preds])
     out: dict[str, Any] = M.regression_metrics(ref, est)
-    out["n_samples"] = int(len(ref))
+    out["n_samples"] = len(ref)
     if drive is not None:
         cyc = [h for s, p in zip(seqs, preds) for h in M.loop_hysteresis(s.y[:, 0], p[:, 0], s.extra[drive])]
         cyc = [h for h in cyc if np.isfinite(h)]
@@ -150,7 +152,7 @@ def streaming_latency(comp: Compensator, x: np.ndarray, n: int = 300, warmup: in
         ts = np.asarray(ts[warmup:]) * 1e3
         diff = float(np.max(np.abs(np.stack(ys) - comp.predict(x))))
         return {"median_ms": float(np.median(ts)), "mean_ms": float(ts.mean()), "p99_ms": float(np.percentile(ts, 99)),
-                "n": int(len(ts)), "threads": threads, "stream_vs_batch_max_abs": diff}
+                "n": len(ts), "threads": threads, "stream_vs_batch_max_abs": diff}
     finally:
         torch.set_num_threads(old)
 

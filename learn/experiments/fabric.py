@@ -33,9 +33,10 @@ up the full range, as for 1 layer; a few minutes on 2 cores); "tiny" = 1 and 3 l
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -183,7 +184,7 @@ class TargetPolynomial:
         self.degree, self.f_scale = int(degree), float(f_scale)
         self.est = PolynomialRegression(self.degree, ridge=0.0)
 
-    def fit(self, F: np.ndarray, R: np.ndarray) -> "TargetPolynomial":
+    def fit(self, F: np.ndarray, R: np.ndarray) -> TargetPolynomial:
         self.est.fit(np.asarray(F, float)[:, None] / self.f_scale, np.asarray(R, float)[:, None])
         return self
 
@@ -234,7 +235,7 @@ def score(seqs: list[Sequence], preds: list[np.ndarray]) -> dict[str, Any]:
     ref = np.concatenate([s.y[:, 0] for s in seqs]) / KOHM
     est = np.concatenate([np.asarray(p).reshape(len(s), -1)[:, 0] for s, p in zip(seqs, preds)]) / KOHM
     out: dict[str, Any] = M.regression_metrics(ref, est)
-    out["n_observations"] = int(len(ref))
+    out["n_observations"] = len(ref)
     h = [hysteresis(s.extra["level"], np.asarray(p).reshape(len(s), -1)[:, 0]) for s, p in zip(seqs, preds)]
     full = [x["full_range"] for x in h if np.isfinite(x["full_range"])]
     paper = [x["full_range_paper"] for x in h if np.isfinite(x["full_range_paper"])]

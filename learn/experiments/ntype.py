@@ -39,14 +39,15 @@ window centres, fewer epochs for ours; "tiny" = seconds, for tests only.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
 from learn.data import dataset_fingerprint, dumps, load_sequences
-from learn.experiments.common import fit_model, fmt, md_table, make_data, select_mode
+from learn.experiments.common import fit_model, fmt, make_data, md_table, select_mode
 
 KEY = "ntype"
 # "paper": the paper's experiment (protocol kind element_loads, scenes/ntype_config.py PAPER_PROTOCOL: every

@@ -22,15 +22,22 @@ and our TCN, on the same held-out recordings; the paper's numbers beside ours.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
-from learn.data import Sequence, dataset_fingerprint, dumps, load_sequences, stratified_split
-from learn.experiments.common import fmt, md_table, single_thread
 from learn import metrics as M
+from learn.data import (
+    Sequence,
+    dataset_fingerprint,
+    dumps,
+    load_sequences,
+    stratified_split,
+)
+from learn.experiments.common import fmt, md_table, single_thread
 
 KEY = "velostat"
 # "resistance" (the true R_film + R_ITO) only for the readout diagnostic (readout_sensitivity), never a model input
@@ -462,7 +469,7 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
     unknown = [k for k in (models or []) if k not in md_models(md)]
     if unknown:
         raise ValueError(f"unknown model(s) {unknown}; known: {sorted(md_models(md))}")
-    want = lambda k: models is None or k in models or k == "mean"  # noqa: E731
+    want = lambda k: models is None or k in models or k == "mean"
     cfgs = scenes_of(md, list(overrides or []), seed)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -521,7 +528,7 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
 
     # --- units: Ward clustering of R(F) curves from the holds at whole-newton levels (calibrations and
     # staircases, wherever the decoded position puts them); the BP nets train on every training hold
-    curve_rec = lambda ss: [s for s in ss if s.meta.get("inner_kind") in CURVE_KINDS]  # noqa: E731
+    curve_rec = lambda ss: [s for s in ss if s.meta.get("inner_kind") in CURVE_KINDS]
     pts_tr = hold_points(tr if md.bp_all_holds else curve_rec(tr), tracker, cfg, rate)
     pts_va = hold_points(va if md.bp_all_holds else curve_rec(va), tracker, cfg, rate)
     raw_tr = hold_points(tr if md.bp_all_holds else curve_rec(tr), None, cfg, rate)
@@ -653,7 +660,7 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
         ref = np.concatenate([s.y[:, 0] for s in te])
         r = {"test": M.regression_metrics(ref, np.concatenate(preds[kind])),
              "holds": hold_errors(te, preds[kind], rate), "ae": ae_errors(te_ae, p_ae, rate)}
-        r["test"]["n_samples"] = int(len(ref))
+        r["test"]["n_samples"] = len(ref)
         if kind == "tcn":
             ens = comps["tcn"][0]
             r["fit_seconds"], r["hparams"] = comps["tcn"][1], ens.hparams

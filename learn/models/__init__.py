@@ -6,7 +6,15 @@ tcn (ours), bp (velostat paper), bp_lm (fabric paper, Levenberg-Marquardt), rbf 
 ``@register("name")`` in its own module, listed in BUILTIN_MODULES.
 """
 
-from learn.models.base import MODELS, Compensator, Streamer, edge_windows, load_builtin_models, make_model, register
+from learn.models.base import (
+    MODELS,
+    Compensator,
+    Streamer,
+    edge_windows,
+    load_builtin_models,
+    make_model,
+    register,
+)
 
 load_builtin_models()
 

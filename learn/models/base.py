@@ -15,15 +15,17 @@ numpy array, stored as safetensors). ``from_state`` rebuilds from those without 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import Any, Callable, ClassVar, Sequence as Seq
+from collections.abc import Callable
+from collections.abc import Sequence as Seq
+from typing import Any, ClassVar
 
 import numpy as np
 
 from learn.normalize import ZScore
 
-__all__ = ["Compensator", "Streamer", "register", "MODELS", "make_model", "edge_windows"]
+__all__ = ["MODELS", "Compensator", "Streamer", "edge_windows", "make_model", "register"]
 
-MODELS: dict[str, type["Compensator"]] = {}
+MODELS: dict[str, type[Compensator]] = {}
 
 # the modules whose classes register themselves with @register; make_model imports them on first use
 BUILTIN_MODULES = (
@@ -38,7 +40,7 @@ BUILTIN_MODULES = (
 )
 
 
-def load_builtin_models() -> dict[str, type["Compensator"]]:
+def load_builtin_models() -> dict[str, type[Compensator]]:
     """Import every built-in model module (each registers its classes) and return MODELS."""
     import importlib
 
@@ -47,10 +49,10 @@ def load_builtin_models() -> dict[str, type["Compensator"]]:
     return MODELS
 
 
-def register(kind: str) -> Callable[[type["Compensator"]], type["Compensator"]]:
+def register(kind: str) -> Callable[[type[Compensator]], type[Compensator]]:
     """Class decorator: make a compensator constructible by name (``make_model(kind, **hparams)``)."""
 
-    def deco(cls: type["Compensator"]) -> type["Compensator"]:
+    def deco(cls: type[Compensator]) -> type[Compensator]:
         if kind in MODELS and MODELS[kind] is not cls:
             raise ValueError(f"model kind {kind!r} already registered by {MODELS[kind].__qualname__}")
         cls.kind = kind
@@ -60,7 +62,7 @@ def register(kind: str) -> Callable[[type["Compensator"]], type["Compensator"]]:
     return deco
 
 
-def make_model(kind: str, **hparams: Any) -> "Compensator":
+def make_model(kind: str, **hparams: Any) -> Compensator:
     if kind not in MODELS:
         load_builtin_models()
     if kind not in MODELS:
@@ -118,7 +120,7 @@ class Compensator(ABC):
 
     def fit(self, xs: Seq[np.ndarray], ys: Seq[np.ndarray], valid: tuple[Seq[np.ndarray], Seq[np.ndarray]] | None = None,
             *, seed: int = 0, progress: bool = False, inputs: Seq[str] = (), targets: Seq[str] = (),
-            units: dict[str, str] | None = None) -> "Compensator":
+            units: dict[str, str] | None = None) -> Compensator:
         xs = [np.asarray(x, np.float64).reshape(len(x), -1) for x in xs]
         ys = [np.asarray(y, np.float64).reshape(len(y), -1) for y in ys]
         self.n_in, self.n_out = xs[0].shape[1], ys[0].shape[1]

@@ -137,7 +137,7 @@ class BPNetCompensator(Compensator):
         if zv is not None:
             Xv = np.concatenate([self._features(x) for x in zv[0]])
             yv = np.concatenate([v[:, 0] for v in zv[1]])
-            valid = lambda th: float(np.sum((yv - net.forward(th, Xv)) ** 2))  # noqa: E731
+            valid = lambda th: float(np.sum((yv - net.forward(th, Xv)) ** 2))
         else:
             valid = None
         best = None

@@ -18,7 +18,7 @@ import numpy as np
 
 from learn.models.base import Compensator, FnStreamer, Streamer, register
 
-__all__ = ["PolynomialRegression", "MeanCompensator", "LinearCompensator", "CubicCompensator"]
+__all__ = ["CubicCompensator", "LinearCompensator", "MeanCompensator", "PolynomialRegression"]
 
 
 class PolynomialRegression:
@@ -37,7 +37,7 @@ class PolynomialRegression:
     def get_params(self, deep: bool = True) -> dict[str, Any]:
         return {"degree": self.degree, "ridge": self.ridge}
 
-    def set_params(self, **p: Any) -> "PolynomialRegression":
+    def set_params(self, **p: Any) -> PolynomialRegression:
         for k, v in p.items():
             setattr(self, k, v)
         return self
@@ -47,7 +47,7 @@ class PolynomialRegression:
         cols = [np.ones((len(X), 1))] + [X**k for k in range(1, self.degree + 1)]
         return np.concatenate(cols, axis=1)
 
-    def partial_fit(self, X: np.ndarray, y: np.ndarray) -> "PolynomialRegression":
+    def partial_fit(self, X: np.ndarray, y: np.ndarray) -> PolynomialRegression:
         P = self.features(X)
         y = np.asarray(y, np.float64).reshape(len(P), -1)
         if self._xtx is None:
@@ -59,7 +59,7 @@ class PolynomialRegression:
         self._solve()
         return self
 
-    def fit(self, X: np.ndarray, y: np.ndarray) -> "PolynomialRegression":
+    def fit(self, X: np.ndarray, y: np.ndarray) -> PolynomialRegression:
         self._xtx = self._xty = None
         self.n_samples_seen_ = 0
         return self.partial_fit(X, y)
@@ -105,7 +105,7 @@ class _PolyCompensator(Compensator):
         self.est.fit(np.concatenate(zx), np.concatenate(zy))
         return {"n_samples": self.est.n_samples_seen_}
 
-    def partial_fit(self, x: np.ndarray, y: np.ndarray) -> "_PolyCompensator":
+    def partial_fit(self, x: np.ndarray, y: np.ndarray) -> _PolyCompensator:
         """Online update with more (physical-unit) data; the normalisation stays that of the first fit."""
         self._check_fitted()
         self.est.partial_fit(self.x_norm.apply(np.asarray(x).reshape(len(x), -1)),

@@ -28,7 +28,7 @@ import numpy as np
 import torch
 from torch import nn
 
-__all__ = ["ElementMLP", "invert_strain", "square_window", "mirror_x", "symmetric_frames", "SYMMETRY_OF_READING"]
+__all__ = ["SYMMETRY_OF_READING", "ElementMLP", "invert_strain", "mirror_x", "square_window", "symmetric_frames"]
 
 GRID = (6, 6)
 
@@ -131,7 +131,7 @@ class ElementMLP:
         keep = loaded | (rng.random(len(Y)) < self.h["rest_keep"])
         return A[keep], Y[keep]
 
-    def fit(self, R: list[np.ndarray], F: list[np.ndarray], seed: int = 0) -> "ElementMLP":
+    def fit(self, R: list[np.ndarray], F: list[np.ndarray], seed: int = 0) -> ElementMLP:
         h = self.h
         E = [invert_strain(r, self.rest_ohm, self.beta) for r in R]
         self.scale_ = float(np.concatenate(E).std()) or 1.0
@@ -178,7 +178,7 @@ class ElementMLP:
             net.load_state_dict(state)
             net.eval()
             self.nets.append(net)
-            self.history_.append({"epochs": ep + 1, "best_valid_loss": best, "n_rows": int(len(a))})
+            self.history_.append({"epochs": ep + 1, "best_valid_loss": best, "n_rows": len(a)})
         return self
 
     @torch.inference_mode()

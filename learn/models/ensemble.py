@@ -17,11 +17,19 @@ rebuilt exactly as it was fitted (the ensemble's own norms in config.json are me
 
 from __future__ import annotations
 
-from typing import Any, Sequence as Seq
+from collections.abc import Sequence as Seq
+from typing import Any
 
 import numpy as np
 
-from learn.models.base import MODELS, Compensator, Streamer, make_model, register, load_builtin_models
+from learn.models.base import (
+    MODELS,
+    Compensator,
+    Streamer,
+    load_builtin_models,
+    make_model,
+    register,
+)
 from learn.normalize import ZScore
 
 __all__ = ["Ensemble", "EnsembleStreamer"]
@@ -66,7 +74,7 @@ class Ensemble(Compensator):
     # ------------------------------------------------------------------ fit / predict
 
     def fit(self, xs, ys, valid=None, *, seed: int = 0, progress: bool = False, inputs: Seq[str] = (),
-            targets: Seq[str] = (), units: dict[str, str] | None = None) -> "Ensemble":
+            targets: Seq[str] = (), units: dict[str, str] | None = None) -> Ensemble:
         self.members = []
         for k in range(self.hparams["n_members"]):
             m = self._new_member()

@@ -18,7 +18,7 @@ from torch import nn
 from learn.models.base import Compensator, FnStreamer, Streamer, edge_windows, register
 from learn.train import TrainConfig, seeded, train_model
 
-__all__ = ["TorchCompensator", "MLPCompensator", "WindowRNNCompensator", "LSTMCompensator", "GRUCompensator"]
+__all__ = ["GRUCompensator", "LSTMCompensator", "MLPCompensator", "TorchCompensator", "WindowRNNCompensator"]
 
 TRAIN_DEFAULTS: dict[str, Any] = {
     "lr": 1e-3, "batch_size": 64, "max_epochs": 200, "patience": 15, "grad_clip": 1.0,

@@ -45,7 +45,7 @@ import numpy as np
 
 from learn.models.base import Compensator, FnStreamer, Streamer, register
 
-__all__ = ["KERNELS", "SOLVERS", "kernel_phi", "half_distance", "KMeans", "RecursiveLeastSquares", "RBFNetwork", "RBFCompensator", "sq_dist"]
+__all__ = ["KERNELS", "SOLVERS", "KMeans", "RBFCompensator", "RBFNetwork", "RecursiveLeastSquares", "half_distance", "kernel_phi", "sq_dist"]
 
 
 def sq_dist(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -107,7 +107,7 @@ class KMeans:
             d = np.minimum(d, sq_dist(X, C[i : i + 1])[:, 0])
         return C
 
-    def fit(self, X: np.ndarray) -> "KMeans":
+    def fit(self, X: np.ndarray) -> KMeans:
         X = np.asarray(X, np.float64).reshape(len(X), -1)
         rng = np.random.default_rng(self.seed)
         if self.max_points is not None and len(X) > self.max_points:
@@ -168,7 +168,7 @@ class RecursiveLeastSquares:
         self.W = np.zeros((n_features, n_outputs))
         self.n_samples_seen_ = 0
 
-    def partial_fit(self, H: np.ndarray, Y: np.ndarray) -> "RecursiveLeastSquares":
+    def partial_fit(self, H: np.ndarray, Y: np.ndarray) -> RecursiveLeastSquares:
         H = np.asarray(H, np.float64).reshape(len(H), -1)
         Y = np.asarray(Y, np.float64).reshape(len(H), -1)
         if self.P is None:
@@ -196,7 +196,7 @@ class RecursiveLeastSquares:
         self.n_samples_seen_ += len(H)
         return self
 
-    def fit(self, H: np.ndarray, Y: np.ndarray) -> "RecursiveLeastSquares":
+    def fit(self, H: np.ndarray, Y: np.ndarray) -> RecursiveLeastSquares:
         self.P = self.W = None
         return self.partial_fit(H, Y)
 
@@ -251,7 +251,7 @@ class RBFNetwork:
         km = KMeans(self.n_centres, self.kmeans_iter, seed=self.seed, max_points=self.kmeans_max_points)
         return km.fit(X).cluster_centers_
 
-    def fit(self, X: np.ndarray, Y: np.ndarray, centres: np.ndarray | None = None) -> "RBFNetwork":
+    def fit(self, X: np.ndarray, Y: np.ndarray, centres: np.ndarray | None = None) -> RBFNetwork:
         X = np.asarray(X, np.float64).reshape(len(X), -1)
         self.centres_ = np.asarray(centres, np.float64) if centres is not None else self.place_centres(X)
         self.rls_ = None
@@ -265,7 +265,7 @@ class RBFNetwork:
             return self
         return self.partial_fit(X, Y)
 
-    def partial_fit(self, X: np.ndarray, Y: np.ndarray) -> "RBFNetwork":
+    def partial_fit(self, X: np.ndarray, Y: np.ndarray) -> RBFNetwork:
         if self.solver == "exact":
             raise ValueError("solver 'exact' (eq. 12) is a batch solve: use fit")
         X = np.asarray(X, np.float64).reshape(len(X), -1)
@@ -306,9 +306,9 @@ class RBFCompensator(Compensator):
         h = self.hparams
         self.net = RBFNetwork(h["n_centres"], h["spread"], h["kernel"], delta=h["delta"], block=h["block"], seed=seed)
         self.net.fit(self._scale(Z), np.concatenate(zy))
-        return {"n_samples": int(len(Z)), "n_centres": int(len(self.net.centres_))}
+        return {"n_samples": len(Z), "n_centres": len(self.net.centres_)}
 
-    def partial_fit(self, x: np.ndarray, y: np.ndarray) -> "RBFCompensator":
+    def partial_fit(self, x: np.ndarray, y: np.ndarray) -> RBFCompensator:
         self._check_fitted()
         self.net.partial_fit(self._scale(self.x_norm.apply(np.asarray(x).reshape(len(x), -1))),
                              self.y_norm.apply(np.asarray(y).reshape(len(y), -1)))

@@ -67,7 +67,7 @@ class LogFeatures(nn.Module):
         if isinstance(z, torch.Tensor):
             raw = z[..., self.idx] * self.x_std[self.idx] + self.x_mean[self.idx]
             return torch.log(torch.clamp(raw, min=1e-12))
-        g = lambda t: t.detach().double().numpy()  # noqa: E731
+        g = lambda t: t.detach().double().numpy()
         raw = z[..., self.idx] * g(self.x_std)[self.idx] + g(self.x_mean)[self.idx]
         return np.log(np.maximum(raw, 1e-12))
 
@@ -82,7 +82,7 @@ class LogFeatures(nn.Module):
         return torch.cat([z, (self.raw_log(z) - self.l_mean) / self.l_std], dim=-1)
 
     def numpy(self, z: np.ndarray) -> np.ndarray:
-        g = lambda t: t.detach().double().numpy()  # noqa: E731
+        g = lambda t: t.detach().double().numpy()
         return np.concatenate([z, (self.raw_log(z) - g(self.l_mean)) / g(self.l_std)], axis=-1)
 
 
@@ -147,7 +147,7 @@ class TCNCompensator(TorchCompensator):
     def _play_u(self, z: np.ndarray) -> np.ndarray:
         """u: the z-scored ln of the first log channel (LogFeatures' statistics) of normalised inputs z [T, n_in]."""
         f = self.net.feat
-        g = lambda t: t.detach().double().numpy()  # noqa: E731
+        g = lambda t: t.detach().double().numpy()
         return (f.raw_log(np.asarray(z, np.float64)[:, :1 + max(f.idx)])[:, 0] - g(f.l_mean)[0]) / g(f.l_std)[0]
 
     def _augment(self, z: np.ndarray) -> np.ndarray:
@@ -204,7 +204,7 @@ class TCNStreamer(Streamer):
 
     def __init__(self, comp: TCNCompensator):
         net = comp.net
-        g = lambda t: t.detach().double().numpy()  # noqa: E731
+        g = lambda t: t.detach().double().numpy()
         self.xm, self.xs = comp.x_norm.mean, comp.x_norm.std
         self.feat = net.feat
         self.comp = comp

@@ -16,7 +16,8 @@
 
 from __future__ import annotations
 
-from typing import Any, Sequence as Seq
+from collections.abc import Sequence as Seq
+from typing import Any
 
 import numpy as np
 import torch
@@ -25,8 +26,17 @@ from torch import nn
 from learn.models.base import FnStreamer, Streamer, register
 from learn.models.neural import TRAIN_DEFAULTS, TorchCompensator, _f32
 
-__all__ = ["KMeans", "gj_criterion", "silhouette_samples", "silhouette_score", "semi_trapezoid", "CreepTracker",
-           "BPCompensator", "search_hidden", "PAPER_BOUNDS"]
+__all__ = [
+    "PAPER_BOUNDS",
+    "BPCompensator",
+    "CreepTracker",
+    "KMeans",
+    "gj_criterion",
+    "search_hidden",
+    "semi_trapezoid",
+    "silhouette_samples",
+    "silhouette_score",
+]
 
 PAPER_BOUNDS = (0.00612, 0.02374)  # eqs. 8-9: the paper's transitional band of delta
 
@@ -125,7 +135,7 @@ class KMeans:
                 break
         return best[1], best[2], hist, it
 
-    def fit(self, X) -> "KMeans":
+    def fit(self, X) -> KMeans:
         X = _as2d(X)
         if len(X) < self.n_clusters:
             raise ValueError(f"KMeans: {len(X)} samples for {self.n_clusters} clusters")
@@ -151,7 +161,7 @@ class KMeans:
             raise RuntimeError("KMeans: not fitted")
         return self._assign(_as2d(X), self.cluster_centers_)
 
-    def partial_fit(self, X) -> "KMeans":
+    def partial_fit(self, X) -> KMeans:
         """Online update (MacQueen): each sample moves its nearest centre by 1/n_k of the gap; the first
         call on an unfitted estimator is a full fit."""
         X = _as2d(X)
@@ -293,7 +303,7 @@ class CreepTracker:
         return np.concatenate([d[v] for d, v in (self.delta(r) for r in rs)])
 
     # -- estimator API
-    def fit(self, rs: Seq[np.ndarray], score: bool = True) -> "CreepTracker":
+    def fit(self, rs: Seq[np.ndarray], score: bool = True) -> CreepTracker:
         rs = [np.asarray(r, np.float64).ravel() for r in ([rs] if isinstance(rs, np.ndarray) and rs.ndim == 1 else rs)]
         if self.r_open is None:
             self.r_open = self.open_frac * max(float(r.max()) for r in rs)
@@ -304,7 +314,7 @@ class CreepTracker:
         self.silhouette_ = silhouette_score(d, self.kmeans.labels_) if score else None
         return self
 
-    def partial_fit(self, rs) -> "CreepTracker":
+    def partial_fit(self, rs) -> CreepTracker:
         """Online update of the stage clusters (and so of the memberships) with more recordings."""
         if self.kmeans is None:
             return self.fit(rs)
@@ -339,7 +349,7 @@ class CreepTracker:
         out = np.array([st.step(v) for v in np.asarray(r, np.float64).ravel()])
         return out[:, 0], out[:, 1].astype(int)
 
-    def stream(self) -> "CreepStreamer":
+    def stream(self) -> CreepStreamer:
         self._b()
         return CreepStreamer(self)
 
@@ -352,7 +362,7 @@ class CreepTracker:
                 "silhouette": self.silhouette_}
 
     @classmethod
-    def from_state(cls, s: dict[str, Any]) -> "CreepTracker":
+    def from_state(cls, s: dict[str, Any]) -> CreepTracker:
         t = cls(s["n_clusters"], s["smooth"], s["lag"], s["domain"], s["r_open"], bounds=tuple(s["bounds"]))
         t.silhouette_ = s.get("silhouette")
         return t
@@ -442,7 +452,7 @@ BP_ENCODINGS = ("index", "onehot")
 class _EncodedStreamer(Streamer):
     """Streams (id, R) samples through the BP net: the input transform, then the net's own streamer."""
 
-    def __init__(self, comp: "BPCompensator", inner: Streamer):
+    def __init__(self, comp: BPCompensator, inner: Streamer):
         self.comp, self.inner = comp, inner
 
     def reset(self) -> None:
@@ -487,7 +497,7 @@ class BPCompensator(TorchCompensator):
         oh[np.arange(len(x)), np.clip(np.rint(ident).astype(int), 0, n - 1)] = 1.0
         return np.column_stack([oh, rr])
 
-    def fit(self, xs, ys, valid=None, **kw) -> "BPCompensator":
+    def fit(self, xs, ys, valid=None, **kw) -> BPCompensator:
         if self.hparams["encoding"] == "onehot" and int(self.hparams["n_ids"]) <= 0:
             self.hparams["n_ids"] = int(max(np.rint(np.asarray(x)[:, 0]).max() for x in xs)) + 1
         xs = [self.encode(x) for x in xs]

@@ -86,7 +86,7 @@ def taxel_params(cfg: SceneConfig) -> TaxelParams:
     r = np.asarray(hyst.play_thresholds or [0.0], dtype=np.float64)
     w = np.asarray(hyst.play_weights or [0.0], dtype=np.float64)
     perc, mul = cfg.sensor.percolation, cfg.sensor.mullins
-    vol = lambda w: wt_to_volume_fraction(w, perc.filler_density_kg_per_m3, perc.matrix_density_kg_per_m3)  # noqa: E731
+    vol = lambda w: wt_to_volume_fraction(w, perc.filler_density_kg_per_m3, perc.matrix_density_kg_per_m3)
     net = network_params(
         dt, phi=vol(perc.filler_wt_fraction), phi_c=vol(perc.threshold_wt_fraction), exponent=perc.exponent,
         strain_gain=perc.strain_gain, gamma_s0=tun.gamma_s0, floor=perc.floor, formation_time_s=perc.formation_time_s,

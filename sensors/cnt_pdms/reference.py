@@ -41,7 +41,7 @@ class TaxelState:
     damage: np.ndarray  # Mullins-type network damage D (fresh sample: 0)
 
     @classmethod
-    def zeros(cls, n: int, p: TaxelParams) -> "TaxelState":
+    def zeros(cls, n: int, p: TaxelParams) -> TaxelState:
         z = np.zeros(n, np.float32)
         return cls(z.copy(), z.copy(), np.zeros((n, p.n_prony), np.float32), z.copy(), np.zeros((n, p.n_play), np.float32),
                    z.copy())

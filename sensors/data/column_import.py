@@ -28,14 +28,14 @@ import math
 import os
 import re
 from pathlib import Path
-from typing import Any, Literal, Optional
+from typing import Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from sensors.data.real_import import G, ImportLogError
 
-__all__ = ["ImportSpec", "LAYOUTS", "load_spec", "import_columns", "read_columns", "read_weight_calibration"]
+__all__ = ["LAYOUTS", "ImportSpec", "import_columns", "load_spec", "read_columns", "read_weight_calibration"]
 
 TIME_SCALE = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 _DELIMS = {"whitespace": None, "comma": ",", "semicolon": ";", "tab": "\t"}
@@ -52,8 +52,8 @@ class Calibration(_M):
 
     scale: float = 1.0
     offset: float = 0.0
-    points: Optional[list[tuple[float, float]]] = None  # [(raw, value), ...], >= 2, least-squares line
-    file: Optional[str] = None  # relative to the data folder: 'counts kg' pairs or 'no weight: C' / '20g weight: C'
+    points: list[tuple[float, float]] | None = None  # [(raw, value), ...], >= 2, least-squares line
+    file: str | None = None  # relative to the data folder: 'counts kg' pairs or 'no weight: C' / '20g weight: C'
     file_to_newton: bool = True  # a file gives mass; value = mass * g (N)
 
     @model_validator(mode="after")
@@ -71,7 +71,7 @@ class Column(_M):
     units: str = "1"
     role: Literal["signal", "time", "event"] = "signal"
     time_units: Literal["s", "ms", "us", "ns"] = "s"
-    calibration: Optional[Calibration] = None
+    calibration: Calibration | None = None
 
     @model_validator(mode="after")
     def _check(self):
@@ -88,13 +88,13 @@ class NameAttr(_M):
 class Stream(_M):
     name: str
     glob: str
-    key: Optional[str] = None  # regex on the path relative to the data folder; group 'key' (default: the stem)
+    key: str | None = None  # regex on the path relative to the data folder; group 'key' (default: the stem)
     columns: list[Column]
     delimiter: Literal["auto", "whitespace", "comma", "semicolon", "tab"] = "auto"
     comment: str = "#"
     header_lines: int = Field(0, ge=0)
-    sample_rate_hz: Optional[float] = Field(None, gt=0)
-    sample_period_range_s: Optional[tuple[float, float]] = None
+    sample_rate_hz: float | None = Field(None, gt=0)
+    sample_period_range_s: tuple[float, float] | None = None
     name_attrs: dict[str, NameAttr] = Field(default_factory=dict)
 
     @model_validator(mode="after")
@@ -135,7 +135,7 @@ class ImportSpec(_M):
     streams: list[Stream] = Field(min_length=1, max_length=2)
     input: str = "sensor"  # column name of the reading (first signal of its stream if not found)
     target: str = "force"
-    rate_hz: Optional[float] = Field(None, gt=0)  # common clock of two streams
+    rate_hz: float | None = Field(None, gt=0)  # common clock of two streams
     sensor_attrs: dict[str, Any] = Field(default_factory=dict)  # e.g. adc_bits, adc_samples_summed, units
 
     @model_validator(mode="after")
@@ -223,7 +223,7 @@ def read_weight_calibration(path: Path) -> list[tuple[float, float]]:
         lines = path.read_text(encoding="ascii").splitlines()
     except (OSError, UnicodeDecodeError) as exc:
         raise ImportLogError(f"{path}: cannot read ({exc})") from None
-    wre = re.compile(r"^\s*(no|(\d+(?:\.\d+)?)\s*(g|kg))\s+weight\s*:\s*([-+0-9.eE]+)\s*$", re.I)
+    wre = re.compile(r"^\s*(no|(\d+(?:\.\d+)?)\s*(g|kg))\s+weight\s*:\s*([-+0-9.eE]+)\s*$", re.IGNORECASE)
     for i, line in enumerate(lines, 1):
         s = line.strip()
         if not s or s.startswith("#"):

@@ -31,8 +31,9 @@ import hashlib
 import json
 import os
 import re
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -58,8 +59,8 @@ __all__ = [
     "is_shard_complete",
     "make_splits",
     "read_manifest",
-    "shard_path",
     "shard_files",
+    "shard_path",
     "shard_seed",
     "verify_manifest",
     "write_manifest",
@@ -236,7 +237,7 @@ def make_splits(
         perm[n_valid : n_valid + n_test],
         perm[n_valid + n_test :],
     )
-    pick = lambda idx: [ids[i] for i in np.sort(idx)]  # noqa: E731 - ids are in order: positions sort them
+    pick = lambda idx: [ids[i] for i in np.sort(idx)]
     return {"train": pick(train_idx), "valid": pick(valid_idx), "test": pick(test_idx)}
 
 
@@ -244,7 +245,7 @@ def make_splits(
 
 
 def _utc_now() -> str:
-    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds").replace("+00:00", "Z")
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds").replace("+00:00", "Z")
 
 
 def _dataset_sha256(shards: Sequence[Mapping[str, Any]]) -> str:

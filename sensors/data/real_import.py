@@ -181,8 +181,8 @@ def import_runs(
 
 
 def _import_pair(sensor_log: Path, force_log: Path, rate_hz, force_units: str, cal: dict | None, sensor_units: str):
-    from sensors.serial.capture import interp_onto
     from sensors.data.recording import Channel
+    from sensors.serial.capture import interp_onto
 
     sv, st = read_log(sensor_log, "value")
     fv, ft = read_log(force_log, "force")

@@ -37,17 +37,18 @@ import datetime as _dt
 import functools
 import hashlib
 import importlib.metadata
+import itertools
 import json
 import math
-import itertools
 import os
 import re
 import subprocess
 import sys
 from collections import OrderedDict
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator, Literal, Mapping
+from typing import Any, Literal
 
 import h5py
 import numpy as np
@@ -75,14 +76,14 @@ def _blosc2(cname: str) -> dict[str, Any]:
     return dict(_hdf5plugin.Blosc2(cname=cname, clevel=1, filters=_hdf5plugin.Blosc2.SHUFFLE))
 
 __all__ = [
-    "RecordingWriter",
-    "VOLATILE_ATTRS",
-    "content_sha256",
     "FORMAT",
     "FORMAT_VERSION",
+    "VOLATILE_ATTRS",
     "Channel",
     "Recording",
     "RecordingError",
+    "RecordingWriter",
+    "content_sha256",
     "generator_info",
     "read_recording_summary",
     "write_recording",
@@ -170,7 +171,7 @@ def _library_versions() -> dict[str, str]:
 
 
 def _utc_now() -> str:
-    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds").replace("+00:00", "Z")
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds").replace("+00:00", "Z")
 
 
 # --------------------------------------------------------------------------- attributes
@@ -276,7 +277,7 @@ def _canon(attrs: Mapping[str, Any]) -> bytes:
     return json.dumps(attrs, sort_keys=True, default=_canon_default, separators=(",", ":")).encode("utf-8")
 
 
-def _put(h: "hashlib._Hash", *parts: bytes | str) -> None:
+def _put(h: hashlib._Hash, *parts: bytes | str) -> None:
     """Length-prefixed parts: no two different sequences of parts feed the same bytes."""
     for part in parts:
         b = part.encode("utf-8") if isinstance(part, str) else part
@@ -284,7 +285,7 @@ def _put(h: "hashlib._Hash", *parts: bytes | str) -> None:
         h.update(b)
 
 
-def _channel_hash(h: "hashlib._Hash", name: str, data: np.ndarray, units: str, dim_names: tuple[str, ...],
+def _channel_hash(h: hashlib._Hash, name: str, data: np.ndarray, units: str, dim_names: tuple[str, ...],
                   description: str) -> None:
     a = np.ascontiguousarray(data)
     _put(h, "channel", name, units, json.dumps(list(dim_names)), description, a.dtype.str, json.dumps(list(a.shape)))
@@ -508,7 +509,7 @@ class RecordingWriter:
         self.n_episodes = 0
         self.tmp = self.path.with_name(self.path.name + ".tmp")
 
-    def __enter__(self) -> "RecordingWriter":
+    def __enter__(self) -> RecordingWriter:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         try:
             self._f = h5py.File(self.tmp, "w", track_order=True)
@@ -658,7 +659,7 @@ def _damage_is_error(fn):
     -> RecordingError naming the file, one line."""
 
     @functools.wraps(fn)
-    def wrapper(self: "Recording", *args: Any, **kwargs: Any) -> Any:
+    def wrapper(self: Recording, *args: Any, **kwargs: Any) -> Any:
         try:
             return fn(self, *args, **kwargs)
         except FileNotFoundError:
@@ -713,7 +714,7 @@ class Recording:
             raise RecordingError(f"{self.path}: recording has no /episodes group")
 
     # context manager
-    def __enter__(self) -> "Recording":
+    def __enter__(self) -> Recording:
         return self
 
     def __exit__(self, *exc) -> None:

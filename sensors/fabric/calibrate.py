@@ -12,11 +12,9 @@ we average 32 for the expectation) is 24.2 %; the presets hold both. `piezotwin 
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from dataclasses import dataclass, replace
-
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -198,7 +196,7 @@ def _with(cfg, stack: dict | None = None, set_mean: float | None = None):
     return c
 
 
-def run() -> "CalibrationResult":
+def run() -> CalibrationResult:
     """1 layer: alternate the stack-law fit (eq. 6) and the knit set's mean fraction (24.2 % by the paper's
     definition, 5-repeat average) until both hold; the set fraction is a property of the fabric, so 3, 6 and
     12 layers take the 1-layer value and fit their stack laws to eqs. 7-9. Rows: rms error of each fitted
@@ -247,7 +245,7 @@ def main() -> None:  # pragma: no cover - rewrites the presets' `stack:` lines
         fit = {k.rsplit(".", 1)[1]: v for k, v in fields.items() if k.startswith("sensor.stack.")}
         line = "  stack: {" + ", ".join(f"{k}: {v:.6g}" for k, v in fit.items()) + "}  # fit: piezotwin calibrate fabric --write"
         p = Path(path)
-        p.write_text(re.sub(r"^  stack: .*$", line, p.read_text(), count=1, flags=re.M))
+        p.write_text(re.sub(r"^  stack: .*$", line, p.read_text(), count=1, flags=re.MULTILINE))
         print(p.name, fit)
 
 

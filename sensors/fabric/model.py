@@ -17,7 +17,12 @@ from __future__ import annotations
 import numpy as np
 
 from sensors.base import ChannelSpec, LoadBatch, resolve_backend
-from sensors.fabric.reference import FabricState, fabric_chain_numpy, fabric_params, press_draws
+from sensors.fabric.reference import (
+    FabricState,
+    fabric_chain_numpy,
+    fabric_params,
+    press_draws,
+)
 
 OUTPUTS: dict[str, ChannelSpec] = {
     "force_taxel": ChannelSpec("N", ("time", "taxel"), "applied normal force per taxel (ground truth)"),

@@ -152,7 +152,7 @@ class FabricState:
     press: np.ndarray
 
     @classmethod
-    def zeros(cls, n: int, p: FabricParams) -> "FabricState":
+    def zeros(cls, n: int, p: FabricParams) -> FabricState:
         press = np.zeros((n, 5), np.float32)
         press[:, 2] = 1.0
         return cls(np.zeros((n, p.n_prony), np.float32), np.zeros((n, p.n_play), np.float32), press)

@@ -39,9 +39,10 @@ import struct
 import threading
 import time
 import zlib
+from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any
 
 import numpy as np
 
@@ -55,8 +56,8 @@ MAX_RECORD = 1 << 24
 
 __all__ = [
     "CaptureError",
-    "StreamSpec",
     "RawLog",
+    "StreamSpec",
     "build_recording",
     "capture",
     "decode_log",

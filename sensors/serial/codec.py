@@ -44,8 +44,8 @@ import struct
 from typing import NamedTuple
 
 __all__ = [
-    "PROTOCOLS",
     "FRAME_VERSION",
+    "PROTOCOLS",
     "Frame",
     "FrameDecoder",
     "PollDecoder",

@@ -28,14 +28,23 @@ The velostat model has no hysteresis (play) bank, so there are no hysteresis wei
 from __future__ import annotations
 
 import fnmatch
+from collections.abc import Sequence as Seq
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence as Seq
+from typing import Any
 
 import numpy as np
 
-__all__ = ["FitParams", "VelostatFit", "forward_reading", "params_from_config", "fit_recording", "load_runs",
-           "write_fitted_preset", "noise_estimate"]
+__all__ = [
+    "FitParams",
+    "VelostatFit",
+    "fit_recording",
+    "forward_reading",
+    "load_runs",
+    "noise_estimate",
+    "params_from_config",
+    "write_fitted_preset",
+]
 
 
 @dataclass
@@ -55,7 +64,7 @@ class FitParams:
                          np.log(self.tau_min_s), np.log(self.tau_max_s)])
 
     @classmethod
-    def from_theta(cls, th: Seq[float], n_creep: int) -> "FitParams":
+    def from_theta(cls, th: Seq[float], n_creep: int) -> FitParams:
         return cls(float(np.exp(th[0])), float(th[1]), float(np.exp(th[2])), float(np.exp(th[3])),
                    float(np.exp(th[4])), float(np.exp(th[5])), n_creep)
 
@@ -126,8 +135,8 @@ def noise_estimate(reading: np.ndarray, loaded: np.ndarray) -> float:
 
 def load_runs(recording: str | Path, *, input_channel: str = "sensor", target: str = "force", rate_hz: float = 20.0,
               episodes: str | None = None, min_force_n: float = 0.5) -> list[Run]:
-    from sensors.data.resample import resample
     from sensors.data.recording import Recording
+    from sensors.data.resample import resample
 
     runs = []
     with Recording(recording) as rec:
@@ -193,7 +202,7 @@ def fit_errors(fp: FitParams, m: Model, runs: Seq[Run], min_force_n: float) -> t
     return ({"rms_log": float(np.sqrt(np.mean(allr ** 2))),
              "rms_log_within_press": float(np.sqrt(np.mean(shape ** 2))),
              "median_abs_rel": float(np.median(np.abs(np.expm1(allr)))),
-             "n_samples": int(len(allr))}, per)
+             "n_samples": len(allr)}, per)
 
 
 BOUNDS = (np.array([-40.0, 0.3, np.log(1e-3), np.log(1e2), np.log(0.05), np.log(1.0)]),

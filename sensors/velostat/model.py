@@ -17,7 +17,12 @@ import numpy as np
 
 from scenes.config import SceneConfig
 from sensors.base import ChannelSpec, LoadBatch, resolve_backend
-from sensors.velostat.reference import FilmParams, ReadoutParams, film_chain_numpy, readout_numpy
+from sensors.velostat.reference import (
+    FilmParams,
+    ReadoutParams,
+    film_chain_numpy,
+    readout_numpy,
+)
 
 OUTPUTS: dict[str, ChannelSpec] = {
     "force": ChannelSpec("N", ("time",), "applied normal force: sum of the contact pressure (reference label)"),

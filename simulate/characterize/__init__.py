@@ -17,7 +17,7 @@ CHARACTERIZERS: dict[str, str] = {
 }
 
 
-def characterize(cfg: "SceneConfig", backend: str = "warp", device: str = "cpu") -> "Report":
+def characterize(cfg: SceneConfig, backend: str = "warp", device: str = "cpu") -> Report:
     import importlib
 
     fam = cfg.sensor.family

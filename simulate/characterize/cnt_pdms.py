@@ -15,14 +15,19 @@ The MuJoCo load fields do not depend on the sensor's material parameters, so `lo
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from scenes import SceneConfig
-from sensors.analysis import hysteresis_error_fso, loop_area, output_gap_span_pct, phase_lag_deg, third_gaps_fso
+from sensors.analysis import (
+    hysteresis_error_fso,
+    loop_area,
+    output_gap_span_pct,
+    phase_lag_deg,
+    third_gaps_fso,
+)
 from sensors.registry import make_sensor
 from simulate.characterize.report import Report, fmt
 from simulate.contact.load_field import run_episodes
@@ -273,7 +278,7 @@ def ceiling_r2(x: np.ndarray, y: np.ndarray, bins: int = CEILING_BINS) -> float:
     return float(1.0 - ((y - mean[idx]) ** 2).mean() / y.var())
 
 
-def calibrate() -> "CalibrationResult":
+def calibrate() -> CalibrationResult:
     from scipy.optimize import brentq
 
     from scenes import load_scene

@@ -21,12 +21,18 @@ import math
 import numpy as np
 
 from scenes import SceneConfig
-from sensors.fabric.calibrate import (MEAN_REPEAT_SEEDS, PAPER_CURVES, PAPER_HYSTERESIS_FSO_PCT, REPEAT_SEEDS,
-                                     characterization_series, cycle_gap)
+from sensors.fabric.calibrate import (
+    MEAN_REPEAT_SEEDS,
+    PAPER_CURVES,
+    PAPER_HYSTERESIS_FSO_PCT,
+    REPEAT_SEEDS,
+    characterization_series,
+    cycle_gap,
+)
 from sensors.registry import make_sensor
+from simulate.characterize.report import Report, fmt
 from simulate.contact.load_field import run_episodes
 from simulate.protocols.indenter import EpisodeProtocol, staircase_levels
-from simulate.characterize.report import Report, fmt
 
 
 def staircase_readings(cfg: SceneConfig, peaks: list[float], backend: str = "warp", device: str = "cpu",

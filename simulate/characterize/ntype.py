@@ -23,8 +23,8 @@ import numpy as np
 from scenes import SceneConfig
 from sensors.base import LoadBatch
 from sensors.registry import make_sensor
-from simulate.characterize.report import Report, fmt
 from sensors.taxels import taxel_area_m2, taxel_xy_m
+from simulate.characterize.report import Report, fmt
 
 PAPER = {"normal_kohm": (16.0, 25.0), "inclined_kohm": (32.0, 50.0), "force_range_n": (0.0, 4.8),
          "crosstalk": "significant within 1-2 cm", "rbfnn_err_pct": (2.62, 3.44, 1.82)}
@@ -92,7 +92,7 @@ def mujoco_dataset_stats(cfg: SceneConfig, episodes: int = 24, backend: str = "w
     res_all = out["resistance"].reshape(-1, 3) / 1e3
     loaded = np.abs(lab).max(1) > 0.5  # element-samples carrying a load (most of the 36 are idle at any time)
     res = res_all[loaded]
-    pct = lambda a: (float(np.percentile(a, 1)), float(np.percentile(a, 99)))  # noqa: E731
+    pct = lambda a: (float(np.percentile(a, 1)), float(np.percentile(a, 99)))
     return {
         "episodes": episodes, "samples": int(lab.shape[0] // cfg.sensor.element.n_elements),
         "shear_max_abs_error_n": float(err), "shear_target_max_n": float(np.abs(want).max()),
@@ -117,7 +117,7 @@ def paper_protocol_stats(cfg: SceneConfig, episodes: int = 10, backend: str = "w
     out = make_sensor(c, backend, device).run_load(batch, seeds)
     lab = out["force_element"].reshape(-1, 3)
     res = out["resistance"].reshape(-1, 3) / 1e3
-    pct = lambda a: (float(np.percentile(a, 1)), float(np.percentile(a, 99)))  # noqa: E731
+    pct = lambda a: (float(np.percentile(a, 1)), float(np.percentile(a, 99)))
     scans = {}
     from sensors.ntype.scan import scan_apparent
 

@@ -4,8 +4,9 @@ Every family's `characterize` returns one; the CLI prints it and writes the plot
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 
 @dataclass

@@ -24,9 +24,15 @@ from scenes import SceneConfig
 from sensors.base import LoadBatch
 from sensors.calibration import root_in_bracket
 from sensors.registry import make_sensor
-from simulate.protocols.indenter import EpisodeProtocol, target_waveform
 from simulate.characterize.report import Report, fmt
-from simulate.protocols.compression_tester import knots_staircase, knots_steps, ramp_s, site_xy_m, unit_centres_m
+from simulate.protocols.compression_tester import (
+    knots_staircase,
+    knots_steps,
+    ramp_s,
+    site_xy_m,
+    unit_centres_m,
+)
+from simulate.protocols.indenter import EpisodeProtocol, target_waveform
 
 if TYPE_CHECKING:
     from sensors.calibration import CalibrationResult
@@ -50,9 +56,9 @@ def _proto(cfg: SceneConfig, t, f, xy, duration_s: float) -> EpisodeProtocol:
 
 def ideal_load(cfg: SceneConfig, protos: list[EpisodeProtocol]) -> LoadBatch:
     """The commanded force at the commanded position, spread by simulate.contact.load_field (no MuJoCo)."""
+    from sensors.taxels import taxel_area_m2, taxel_xy_m
     from simulate.contact.load_field import load_field
     from simulate.contact.mjcf import contact_design
-    from sensors.taxels import taxel_area_m2, taxel_xy_m
 
     n = protos[0].n_samples
     t = np.arange(n) / cfg.sampling.sample_rate_hz
@@ -334,7 +340,7 @@ def fit_creep_amplitude(cfg: SceneConfig, target_n: float = PAPER_CREEP_ERROR_N)
     return root_in_bracket(g, 0.02, 3.0, xtol=1e-3)
 
 
-def calibrate(cfg: SceneConfig | None = None, parts: list[int] = PARTS) -> "CalibrationResult":
+def calibrate(cfg: SceneConfig | None = None, parts: list[int] = PARTS) -> CalibrationResult:
     """Fit sensor.creep.amplitude to the paper's creep error (Fig. 22a) and check the creep trends and the unit
     grouping; rows: targets beside results (see the block comment above)."""
     from scenes import load_scene

@@ -16,7 +16,7 @@ The taxel fields are then computed in vectorised numpy:
 
 from __future__ import annotations
 
-from typing import Iterator
+from collections.abc import Iterator
 
 import mujoco
 import mujoco.rollout
@@ -24,15 +24,15 @@ import numpy as np
 
 from scenes.config import SceneConfig
 from sensors.base import LoadBatch
-from simulate.contact.mjcf import build_mjcf, contact_design
-from simulate.protocols.indenter import EpisodeProtocol, target_waveforms, xy_waveforms
 from sensors.taxels import (
     interval_coverage,
-    spread_matrix,
     sphere_overlap,
+    spread_matrix,
     taxel_area_m2,
     taxel_xy_m,
 )
+from simulate.contact.mjcf import build_mjcf, contact_design
+from simulate.protocols.indenter import EpisodeProtocol, target_waveforms, xy_waveforms
 
 MAX_STEPS_PER_CHUNK = 4_000_000  # episodes x steps per rollout call (bounds the rollout's output memory)
 

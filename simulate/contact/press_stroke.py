@@ -30,9 +30,14 @@ import numpy as np
 
 from scenes.config import SceneConfig
 from sensors.base import LoadBatch
-from simulate.contact.mjcf import SENSORS_PER_INDENTER, shear_stiffness_n_per_m
-from simulate.protocols.indenter import EpisodeProtocol, press_stroke_force, press_stroke_xy, stack_indenters
 from sensors.taxels import interval_coverage, sphere_overlap, taxel_area_m2, taxel_xy_m
+from simulate.contact.mjcf import SENSORS_PER_INDENTER, shear_stiffness_n_per_m
+from simulate.protocols.indenter import (
+    EpisodeProtocol,
+    press_stroke_force,
+    press_stroke_xy,
+    stack_indenters,
+)
 
 MAX_STEPS_PER_CHUNK = 1_000_000  # episodes x physics steps per rollout call
 PARK_HEIGHT_M = 0.002  # inactive indenters float this far above the pad

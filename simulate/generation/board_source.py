@@ -4,7 +4,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sensors.serial.board import MEASURED, DeviceError, Source, as_2d, load_recording_source
+from sensors.serial.board import (
+    MEASURED,
+    DeviceError,
+    Source,
+    as_2d,
+    load_recording_source,
+)
 
 
 def load_source(source: str, channel: str | None = None, overrides: list[str] | None = None, seed: int = 0) -> Source:

@@ -13,9 +13,10 @@ the case of a press rig (no contact mechanics: the recorded force is the input, 
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -23,7 +24,7 @@ from scenes.randomize import Randomization, draw, draw_one
 from sensors.chain_fit import ChainParams, simulate_reading
 from sensors.data.manifest import episode_seed
 
-__all__ = ["press_protocol", "generate_chain", "episode"]
+__all__ = ["episode", "generate_chain", "press_protocol"]
 
 
 def _smooth(n: int) -> np.ndarray:

@@ -23,9 +23,9 @@ rerun resumes at the missing ones. Where /dev/shm has no room, the arrays travel
 from __future__ import annotations
 
 import os
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterator
 
 import numpy as np
 
@@ -259,8 +259,8 @@ def write_packed_shard(cfg: SceneConfig, out_dir: str, packed: PackedShard, sens
 
     from sensors.data.manifest import shard_entry
     from sensors.data.recording import Channel
-    from simulate.generation.shards import maybe_inject_fault
     from simulate.generation.run import config_sha256, shard_writer
+    from simulate.generation.shards import maybe_inject_fault
 
     maybe_inject_fault(packed.shard)
     attached = {name: _attach(name) for name in dict.fromkeys(packed.block_names)}  # the driver owns them
@@ -349,7 +349,11 @@ def iter_produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, 
 
     from sensors.data.manifest import episode_seed
     from sensors.warp_setup import host_staging
-    from simulate.generation.run import episode_attrs, episode_ids_of_shard, simulate_slices
+    from simulate.generation.run import (
+        episode_attrs,
+        episode_ids_of_shard,
+        simulate_slices,
+    )
 
     gids = [k for s in shards for k in episode_ids_of_shard(cfg, s)]
     owner = {k: s for s in shards for k in episode_ids_of_shard(cfg, s)}
@@ -411,17 +415,20 @@ def generate_feed(
     """Make the shards `todo` of cfg's dataset in `out`: simulate here, write in `writers` processes.
     Returns the writers' manifest entries by shard."""
     import multiprocessing as mp
+    import time
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
-
-    import time
 
     from sensors.registry import make_sensor
     from sensors.warp_setup import init_warp
     from simulate.contact.load_field import CONTACT_STAGES
-    from simulate.generation.shards import ShardFailedError, check_written
     from simulate.contact.mjcf import build_mjcf
-    from simulate.generation.run import config_sha256, episode_ids_of_shard, shard_sensor_attrs
+    from simulate.generation.run import (
+        config_sha256,
+        episode_ids_of_shard,
+        shard_sensor_attrs,
+    )
+    from simulate.generation.shards import ShardFailedError, check_written
 
     LAST_RUN_SECONDS.clear()
     seconds = LAST_RUN_SECONDS
@@ -499,7 +506,7 @@ def generate_feed(
                 except BrokenProcessPool:
                     broken.append(p)
                     continue
-                except Exception as exc:  # noqa: BLE001 - retried, then reported
+                except Exception as exc:
                     if attempts[p.shard] > max_retries:
                         raise ShardFailedError(f"shard {p.shard}: failed {attempts[p.shard]} time(s); last error: "
                                                f"{type(exc).__name__}: {exc} (complete shards are kept: rerun to resume)") from exc

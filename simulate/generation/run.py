@@ -7,19 +7,29 @@ rerun skips complete shards and regenerates the first missing one; files appear 
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterator
 
 import numpy as np
 
 from scenes import SceneConfig, config_json
-from sensors.base import SensorModel
-from sensors.registry import make_sensor
-from sensors.data.manifest import build_manifest, episode_seed, first_missing_shards, shard_path
+from sensors.base import LoadBatch, SensorModel
+from sensors.data.manifest import (
+    build_manifest,
+    episode_seed,
+    first_missing_shards,
+    shard_path,
+)
 from sensors.data.recording import Channel, RecordingWriter
-from sensors.base import LoadBatch
-from simulate.contact.load_field import CONTACT_STAGES, iter_load_batches, physics_engine, simulate_sensors_padded, world_groups
+from sensors.registry import make_sensor
+from simulate.contact.load_field import (
+    CONTACT_STAGES,
+    iter_load_batches,
+    physics_engine,
+    simulate_sensors_padded,
+    world_groups,
+)
 from simulate.contact.mjcf import build_mjcf
 from simulate.protocols.indenter import EpisodeProtocol, make_episode_protocol
 

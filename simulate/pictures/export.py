@@ -15,8 +15,8 @@ Layout::
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 from xml.sax.saxutils import quoteattr
 
 import numpy as np

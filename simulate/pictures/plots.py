@@ -15,8 +15,8 @@ a figure and `save()` writes a PNG and closes it. Any family, any experiment:
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Mapping, Sequence
 
 import numpy as np
 

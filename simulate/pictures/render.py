@@ -9,9 +9,9 @@ renders offscreen through EGL; with a display `show_window` opens an interactive
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 

@@ -167,7 +167,7 @@ def stack_indenters(inds: list[dict]) -> dict:
     """One indenter of E episodes as one dict of arrays shaped to broadcast against t [1, T] in
     `press_stroke_force` / `press_stroke_xy` (times and force [E, 1], positions [E, 1, 2]): the same law, the
     same operations element by element, for a batch."""
-    col = lambda k: np.array([ind[k] for ind in inds], float)  # noqa: E731
+    col = lambda k: np.array([ind[k] for ind in inds], float)
     return {"active": np.array([bool(ind["active"]) for ind in inds])[:, None], "force_n": col("force_n")[:, None],
             **{k: tuple(col(k).T[:, :, None]) for k in ("t_press_s", "t_stroke_s", "t_release_s")},
             **{k: col(k)[:, None, :] for k in ("xy_m", "stroke_xy_m")}}
@@ -297,10 +297,10 @@ def xy_waveform(proto: EpisodeProtocol, cfg: SceneConfig, t_s: np.ndarray) -> np
         xy += (0.5 * (1.0 - np.cos(np.pi * u)))[..., None] * np.asarray(proto.params["stroke_xy_m"], float)
     return xy
 
-from simulate.protocols import compression_tester as _velostat  # noqa: E402  (velostat registers its compression-tester kinds)
+from simulate.protocols import compression_tester as _velostat
 
 _velostat.register(WAVEFORMS, PARAM_DRAWS)
 
-from simulate.protocols import element_loads as _element_loads  # noqa: E402  (ntype: the paper's static element loads)
+from simulate.protocols import element_loads as _element_loads
 
 _element_loads.register(WAVEFORMS, PARAM_DRAWS)
