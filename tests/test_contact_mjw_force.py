@@ -59,3 +59,46 @@ def test_force_control_mjw_cpu_matches_c_mujoco(family):
 @pytest.mark.parametrize("family", ["fabric_1", "velostat"])
 def test_force_control_mjw_cuda_matches_c_mujoco(family, gpu_device):
     _compare(family, gpu_device, 32)
+
+
+def _velostat_feed_paths(device: str, n_episodes: int, monkeypatch) -> None:
+    """velostat through the GPU path's producer (`simulate_episodes` on MuJoCo Warp): the sensor fed the load field
+    left on the device (`VelostatSensor.run_device`) against the same physics with the field copied to the host
+    first (the session-8 path): every recorded channel bit for bit but force and contact_xy (float64 sums in
+    another order, rounded to float32: 1 ulp), and unit (the cell under those centroids: the same here)."""
+    from sensors.data.manifest import episode_seed
+    from sensors.velostat.model import VelostatSensor
+    from simulate.contact import load_field as contact
+    from simulate.generation import run
+
+    dev = "cpu" if device == "cpu" else "cuda"
+    cfg = load_scene("velostat", SHORT["velostat"] + ["generation.physics=mujoco_warp", f"generation.device={dev}",
+                                                      f"generation.episodes={n_episodes}"])
+    physics, real = [], contact.simulate_sensors  # one physics run for both paths
+    monkeypatch.setattr(contact, "simulate_sensors", lambda *a: physics[0] if physics else physics.append(real(*a)) or physics[0])
+    seeds = [episode_seed(cfg.generation.root_seed, k) for k in range(n_episodes)]
+    ids = [f"ep-{k:06d}" for k in range(n_episodes)]
+    sensor = run.make_sensor(cfg, "warp", contact.physics_engine(cfg)[1])
+    got = run.simulate_episodes(cfg, seeds, ids, sensor, indices=list(range(n_episodes)))
+    monkeypatch.setattr(VelostatSensor, "device_load", False)
+    ref = run.simulate_episodes(cfg, seeds, ids, sensor, indices=list(range(n_episodes)))
+    assert max(float(r.channels["force"].data.max()) for r in ref) > 1.0  # the presses reach newtons
+    for a, b in zip(got, ref):
+        assert list(a.channels) == list(b.channels)
+        for n, c in b.channels.items():
+            if n in ("force", "contact_xy"):
+                np.testing.assert_allclose(a.channels[n].data, c.data, rtol=2.4e-7, atol=0, err_msg=f"{b.ep_id} {n}")
+            else:
+                np.testing.assert_array_equal(a.channels[n].data, c.data, err_msg=f"{b.ep_id} {n}")
+
+
+@needs_mjw
+@pytest.mark.slow
+def test_velostat_device_sensor_path_equals_host_path_mjw_cpu(monkeypatch):
+    _velostat_feed_paths("cpu", 2, monkeypatch)
+
+
+@needs_mjw
+@pytest.mark.gpu
+def test_velostat_device_sensor_path_equals_host_path_cuda(gpu_device, monkeypatch):
+    _velostat_feed_paths(gpu_device, 16, monkeypatch)

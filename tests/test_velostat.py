@@ -187,3 +187,53 @@ def test_protocols_and_film_field(cfg):
     a, b = make_sensor(cfg, "numpy"), make_sensor(load_scene("velostat", ["sensor.film.field_seed=9"]), "numpy")
     assert not np.allclose(a.z_g, b.z_g)
     assert np.allclose(a.z_g, make_sensor(cfg, "numpy").z_g)  # one part per seed
+
+
+def _float64_field(cfg, rng, E, T):
+    """A float64 pressure field [E, T, N] as the load field makes it: a few loaded taxels per episode under
+    ramp-and-hold presses up to 150 kPa (values not exact in float32), the first samples and some frames unloaded,
+    and tiny negative values (-1e-12 Pa, rounding of the Winkler split) that the film and the sums clip."""
+    N = cfg.pad.n_taxels
+    pr = np.zeros((E, T, N))
+    t = np.arange(T)
+    for e in range(E):
+        idx = rng.choice(N, 5, replace=False)
+        pr[e][:, idx] = np.minimum(t / 17.0, 1.0)[:, None] * rng.uniform(1e3, 1.5e5, 5) * (1 + 1e-9 * rng.random((T, 5)))
+        pr[e, :8] = 0.0
+        pr[e, T // 2 : T // 2 + 5] = 0.0
+    pr[:, :, 0] -= 1e-12
+    return pr
+
+
+def test_device_path_equals_host_path():
+    """The GPU path (`run_device`: film input, force and centroid made from the float64 field where it lies, only
+    the (E, T, <= 3) outputs copied back) on Warp's CPU device equals `run` on the host copy of the field: bit for
+    bit but force and contact_xy (float64 sums in another order, then rounded to float32: within 1 float32 ulp)."""
+    import warp as wp
+
+    from sensors.velostat.kernels import frame_sums_device
+    from sensors.velostat.reference import force_centroid_numpy
+
+    cfg = load_scene("velostat")
+    s = make_sensor(cfg, "warp", "cpu")
+    E, T = 3, 90
+    pr = _float64_field(cfg, np.random.default_rng(5), E, T)
+    seeds = [4, 5, 6]
+    host = s.run(pr, seeds)
+    dev = s.run_device(wp.array(pr.reshape(E * T, -1), dtype=wp.float64, device="cpu"), seeds, (E, T))
+    assert list(dev) == list(host)
+    assert np.isnan(host["contact_xy"]).any() and np.isfinite(host["contact_xy"]).any()
+    for k in host:
+        if k in ("force", "contact_xy"):
+            np.testing.assert_allclose(dev[k], host[k], rtol=2.4e-7, atol=0, err_msg=k)
+            np.testing.assert_array_equal(np.isnan(dev[k]), np.isnan(host[k]), err_msg=k)
+        else:
+            np.testing.assert_array_equal(dev[k], host[k], err_msg=k)
+    # the frame-sums kernel against its numpy reference: float64 values to 1e-12, the film input exactly
+    p32, sums = frame_sums_device(wp.array(pr.reshape(E * T, -1), dtype=wp.float64, device="cpu"), s.xy, s.area)
+    fz, cxy = force_centroid_numpy(pr, s.xy, s.area)
+    np.testing.assert_array_equal(p32.numpy().reshape(E, T, -1), pr.astype(np.float32))
+    got = sums.numpy().reshape(E, T, 3)
+    np.testing.assert_allclose(got[..., 0], fz, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(got[..., 1:], cxy, rtol=1e-12, atol=1e-15)
+    assert fz.max() > 10.0  # the presses reach newtons: a loaded field was compared

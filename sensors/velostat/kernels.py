@@ -4,6 +4,8 @@ film kernels: one thread per (episode, taxel), the time loop inside the kernel w
 registers (aging: theta, a, p_prev; spectrum: the K terms) (TECH-NOTES: looping over time in one launch beats one launch per step); layout [E, T, N].
 readout kernel: one thread per (episode, sample), a loop over the taxels (parallel contact paths),
 then noise, clipping and ADC quantisation.
+frame-sums kernel (GPU path, load field left on the device): one thread per (episode, sample), a loop over the
+taxels: the float32 film input and the float64 force and contact centroid of `reference.force_centroid_numpy`.
 """
 
 # no `from __future__ import annotations`: Warp must see the closure types as real objects
@@ -178,18 +180,72 @@ def velostat_readout(
         out_vadc[3 * s + c] = (float(code) + 0.5) * lsb
 
 
+@wp.kernel(enable_backward=False)
+def velostat_frame_sums(
+    pressure: wp.array2d(dtype=wp.float64),  # [E*T, N] (Pa), the load field on the device
+    x: wp.array(dtype=wp.float64),  # [N] taxel centres (m)
+    y: wp.array(dtype=wp.float64),
+    area: wp.float64,  # taxel cell area (m^2)
+    p32: wp.array(dtype=wp.float32),  # [E*T*N] out: the film's input, float32(pressure) (numpy's astype)
+    sums: wp.array2d(dtype=wp.float64),  # [E*T, 3] out: force (N), centroid x, y (m; NaN unloaded)
+):
+    f = wp.tid()
+    n_taxels = pressure.shape[1]
+    base = f * n_taxels
+    s = wp.float64(0.0)
+    sx = wp.float64(0.0)
+    sy = wp.float64(0.0)
+    for n in range(n_taxels):
+        v = pressure[f, n]
+        p32[base + n] = wp.float32(v)
+        p = wp.max(v, wp.float64(0.0))
+        s += p
+        sx += p * x[n]
+        sy += p * y[n]
+    fz = s * area
+    sums[f, 0] = fz
+    if fz > wp.float64(0.0):
+        sums[f, 1] = sx * area / fz
+        sums[f, 2] = sy * area / fz
+    else:
+        nan = wp.float64(wp.nan)
+        sums[f, 1] = nan
+        sums[f, 2] = nan
+
+
+def frame_sums_device(pressure: wp.array, xy: np.ndarray, area: float, p32: wp.array | None = None):
+    """A float64 load field on the device, flat (E T, N) -> (float32 film input [E*T*N], [E*T, 3] float64
+    force and contact centroid), both on its device (`velostat_frame_sums`)."""
+    dev = pressure.device
+    F, N = pressure.shape
+    p32 = wp.empty(F * N, dtype=wp.float32, device=dev) if p32 is None else p32
+    sums = wp.empty((F, 3), dtype=wp.float64, device=dev)
+    xs = wp.array(np.ascontiguousarray(xy[:, 0], np.float64), dtype=wp.float64, device=dev)
+    ys = wp.array(np.ascontiguousarray(xy[:, 1], np.float64), dtype=wp.float64, device=dev)
+    wp.launch(velostat_frame_sums, dim=F, inputs=[pressure, xs, ys, wp.float64(area), p32, sums], device=dev)
+    return p32, sums
+
+
 def run_film_warp(pressure: np.ndarray, p: FilmParams, device: str = "cpu", state: np.ndarray | None = None):
     """pressure [E, T, N] -> conductance [E, T, N] float32, final state [E*N, K]."""
     init_warp()
     device = resolve_device(device)
     E, T, N = pressure.shape
+    pr = wp.array(np.ascontiguousarray(pressure, np.float32).reshape(-1), dtype=wp.float32, device=device)
+    out, st_d = run_film_device(pr, (E, T, N), p, device, state)
+    return out.numpy().reshape(E, T, N), st_d.numpy()
+
+
+def run_film_device(pr: wp.array, shape: tuple[int, int, int], p: FilmParams, device: str,
+                    state: np.ndarray | None = None, out: wp.array | None = None):
+    """float32 pressure [E*T*N] on `device` -> (conductance [E*T*N], final state [E*N]) on the device."""
+    E, T, N = shape
+    out = wp.empty(E * T * N, dtype=wp.float32, device=device) if out is None else out
     if p.model == "aging":
-        return _run_aging_warp(pressure, p, device, state)
+        return _run_aging_warp(pr, shape, p, device, state, out)
     kern, vec_k = film_kernel(p.n_creep)
     st = np.zeros((E * N, p.n_creep), np.float32) if state is None else np.asarray(state, np.float32)
     st_d = wp.array(st, dtype=vec_k, device=device)
-    pr = wp.array(np.ascontiguousarray(pressure, np.float32).reshape(-1), dtype=wp.float32, device=device)
-    out = wp.empty(E * T * N, dtype=wp.float32, device=device)
     w1 = ((1.0 - p.decay) * p.weight).astype(np.float32)
     wp.launch(
         kern, dim=E * N, device=device,
@@ -198,15 +254,13 @@ def run_film_warp(pressure: np.ndarray, p: FilmParams, device: str = "cpu", stat
                 vec_k(*p.decay.astype(np.float32)), vec_k(*w1), float(1.0 / p.p_c_pa), float(1.0 / p.p_ref_pa),
                 float(p.exponent), st_d, out],
     )
-    return out.numpy().reshape(E, T, N), st_d.numpy()
+    return out, st_d
 
 
-def _run_aging_warp(pressure: np.ndarray, p: FilmParams, device, state: np.ndarray | None):
-    E, T, N = pressure.shape
+def _run_aging_warp(pr: wp.array, shape: tuple[int, int, int], p: FilmParams, device, state: np.ndarray | None, out: wp.array):
+    E, T, N = shape
     st = np.zeros((E * N, 3), np.float32) if state is None else np.asarray(state, np.float32)
     st_d = wp.array(st, dtype=wp.vec3, device=device)
-    pr = wp.array(np.ascontiguousarray(pressure, np.float32).reshape(-1), dtype=wp.float32, device=device)
-    out = wp.empty(E * T * N, dtype=wp.float32, device=device)
     wp.launch(
         velostat_film_aging, dim=E * N, device=device,
         inputs=[pr, T, N, wp.array(p.g_ref_s.astype(np.float32), dtype=wp.float32, device=device),
@@ -215,29 +269,40 @@ def _run_aging_warp(pressure: np.ndarray, p: FilmParams, device, state: np.ndarr
                 float(np.float32(1.0 / p.dt_s)), float(1.0 / p.renewal_pa), float(p.cutoff_s),
                 float(p.recovery_decay), st_d, out],
     )
-    return out.numpy().reshape(E, T, N), st_d.numpy()
+    return out, st_d
 
 
 def run_readout_warp(cond: np.ndarray, noise_v: np.ndarray, r: ReadoutParams, device: str = "cpu") -> dict[str, np.ndarray]:
     init_warp()
     device = resolve_device(device)
     E, T, N = cond.shape
+    c = wp.array(np.ascontiguousarray(cond, np.float32).reshape(-1), dtype=wp.float32, device=device)
+    return run_readout_device(c, (E, T, N), noise_v, r, device)
+
+
+def run_readout_device(cond: wp.array, shape: tuple[int, int, int], noise_v: np.ndarray, r: ReadoutParams,
+                       device: str) -> dict[str, np.ndarray]:
+    """Conductance [E*T*N] float32 on `device`, noise [E, T, 3] (V) -> the decoded outputs (`finish`); only the
+    (E, T, <= 3) outputs come back to the host (through page-locked buffers inside `host_staging`)."""
+    from sensors.warp_setup import scratch, to_host
+
+    E, T, N = shape
 
     def arr(a, dtype=wp.float32):
         return wp.array(np.ascontiguousarray(a, np.float32).reshape(-1), dtype=dtype, device=device)
 
     S = E * T
-    out_r = wp.empty(2 * S, dtype=wp.float32, device=device)
-    out_v = wp.empty(3 * S, dtype=wp.float32, device=device)
-    out_c = wp.empty(3 * S, dtype=wp.int32, device=device)
-    out_a = wp.empty(3 * S, dtype=wp.float32, device=device)
+    out_r = scratch("velostat r", 2 * S, wp.float32, device)
+    out_v = scratch("velostat v", 3 * S, wp.float32, device)
+    out_c = scratch("velostat code", 3 * S, wp.int32, device)
+    out_a = scratch("velostat vadc", 3 * S, wp.float32, device)
     full = 2**r.adc_bits
     wp.launch(
         velostat_readout, dim=S, device=device,
-        inputs=[arr(cond), arr(noise_v), N, arr(r.r_force_ohm), arr(r.v_x), arr(r.r_x_ohm), arr(r.v_y), arr(r.r_y_ohm),
+        inputs=[cond, arr(noise_v), N, arr(r.r_force_ohm), arr(r.v_x), arr(r.r_x_ohm), arr(r.v_y), arr(r.r_y_ohm),
                 float(r.current_a), float(r.compliance_v), float(1.0 / r.input_resistance_ohm),
                 float(np.float32(r.adc_range_v / full)), int(full), float(r.adc_range_v), out_r, out_v, out_c, out_a],
     )
-    rr = out_r.numpy().reshape(E, T, 2)
-    return finish(rr[..., 0], rr[..., 1], out_v.numpy().reshape(E, T, 3), out_c.numpy().reshape(E, T, 3),
-                  out_a.numpy().reshape(E, T, 3), r)
+    rr = to_host(out_r, "velostat r").reshape(E, T, 2)
+    return finish(rr[..., 0], rr[..., 1], to_host(out_v, "velostat v").reshape(E, T, 3),
+                  to_host(out_c, "velostat code").reshape(E, T, 3), to_host(out_a, "velostat vadc").reshape(E, T, 3), r)

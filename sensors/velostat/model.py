@@ -21,6 +21,7 @@ from sensors.velostat.reference import (
     FilmParams,
     ReadoutParams,
     film_chain_numpy,
+    force_centroid_numpy,
     readout_numpy,
 )
 
@@ -172,6 +173,7 @@ class VelostatSensor:
 
     family = "velostat"
     outputs = OUTPUTS
+    device_load = True  # run_load takes taxel fields left on the device (LoadBatch, GPU path; warp backend)
 
     def __init__(self, cfg: SceneConfig, backend: str = "warp", device: str = "cpu"):
         device = resolve_backend(backend, device)
@@ -193,7 +195,43 @@ class VelostatSensor:
         ).astype(np.float32)
 
     def run_load(self, load: LoadBatch, seeds: list[int]) -> dict[str, np.ndarray]:
-        return self.run(load.pressure_pa, seeds)
+        if load.fields_on_device and self.backend == "warp":
+            return self.run_device(load.pressure_pa, seeds, load.target.shape)
+        return self.run(load.on_host().pressure_pa, seeds)
+
+    def run_device(self, pressure, seeds: list[int], frames: tuple[int, int]) -> dict[str, np.ndarray]:
+        """The GPU path of `run`: pressure a float64 Warp array (E T, N) on this sensor's device (the load field
+        left there); the film input, force and contact centroid are made there (`velostat_frame_sums`), the film
+        and readout run on it, and only the (E, T, <= 3) outputs come back. Same outputs as `run` on the same
+        field: bit for bit but force and contact_xy, whose float64 sums run in taxel order instead of numpy's
+        pairwise order (float32 rounding of the same float64 values)."""
+        import warp as wp
+
+        from sensors.velostat.kernels import frame_sums_device, run_film_device, run_readout_device
+        from sensors.warp_setup import scratch, to_host
+
+        E, T = frames
+        N = pressure.shape[1]
+        if N != self.n_taxels:
+            raise ValueError(f"pressure has {N} taxels; the pad has {self.n_taxels}")
+        if len(seeds) != E:
+            raise ValueError(f"need one seed per episode ({E}); got {len(seeds)}")
+        dev = self.device
+        size = E * T * N
+        p32, sums = frame_sums_device(pressure, self.xy, self.area, scratch("velostat p32", size, wp.float32, dev))
+        cond, _ = run_film_device(p32, (E, T, N), self.fp, dev, out=scratch("velostat cond", size, wp.float32, dev))
+        ro = run_readout_device(cond, (E, T, N), self.noise(seeds, T), self.rp, dev)
+        s = to_host(sums, "velostat sums").reshape(E, T, 3)
+        cxy = s[..., 1:]
+        out = {
+            "force": s[..., 0].astype(np.float32),
+            "contact_xy": cxy.astype(np.float32),
+            "unit": self.unit_of(cxy),
+        }
+        out.update(ro)
+        out["adc"] = out["adc"].astype(np.int16 if self.rp.adc_bits <= 15 else np.int32)
+        out.pop("touch")
+        return out
 
     def conductance(self, pressure: np.ndarray) -> np.ndarray:
         """pressure [E,T,N] -> film conductance [E,T,N] (S) by the selected backend."""
@@ -218,11 +256,7 @@ class VelostatSensor:
             from sensors.velostat.kernels import run_readout_warp
 
             ro = run_readout_warp(cond, noise, self.rp, self.device)
-        p = np.clip(np.asarray(pressure, np.float64), 0, None)
-        fz = p.sum(-1) * self.area
-        with np.errstate(invalid="ignore", divide="ignore"):
-            cxy = np.einsum("etn,nk->etk", p, self.xy) * self.area / fz[..., None]
-        cxy[fz <= 0] = np.nan
+        fz, cxy = force_centroid_numpy(pressure, self.xy, self.area)
         out = {
             "force": fz.astype(np.float32),
             "contact_xy": cxy.astype(np.float32),

@@ -165,6 +165,17 @@ def readout_numpy(cond: np.ndarray, noise_v: np.ndarray, r: ReadoutParams) -> di
     return finish(r_film, r_true, volts, code, v_adc, r)
 
 
+def force_centroid_numpy(pressure: np.ndarray, xy: np.ndarray, area: float) -> tuple[np.ndarray, np.ndarray]:
+    """pressure [E, T, N] (Pa) -> normal force [E, T] (N) = sum of max(p, 0) x taxel area, and the
+    pressure-weighted contact centroid [E, T, 2] (m; NaN unloaded), in float64 (the recorded labels)."""
+    p = np.clip(np.asarray(pressure, np.float64), 0, None)
+    fz = p.sum(-1) * area
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cxy = np.einsum("etn,nk->etk", p, xy) * area / fz[..., None]
+    cxy[fz <= 0] = np.nan
+    return fz, cxy
+
+
 def finish(r_film, r_true, volts, code, v_adc, r: ReadoutParams) -> dict[str, np.ndarray]:
     """Decode the ADC voltages: measured resistance, touch flag, decoded position (NaN without touch)."""
     r_film = np.minimum(r_film, f32(1e12)).astype(f32)  # a vanishing contact is an open circuit
