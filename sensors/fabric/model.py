@@ -56,6 +56,67 @@ def multimeter_numpy(r_ohm: np.ndarray, seeds: list[int], mm, sample_rate_hz: fl
     return {"counts": counts[:, k], "range": rng_fs[:, k], "reading": (counts * res)[:, k]}
 
 
+def force_of(load: LoadBatch) -> np.ndarray:
+    """Force per taxel [E, T, N] float32 (N) of a load batch: max(pressure, 0) x taxel area."""
+    return (np.clip(load.on_host().pressure_pa, 0.0, None) * load.taxel_area_m2).astype(np.float32)
+
+
+class FabricStream:
+    """The sensor chain of E episodes of T samples fed in time chunks, the chain's state carried from one chunk to
+    the next (the GPU feed hands each chunk of a long batch of worlds on while the later samples still step);
+    `finish` gives what `FabricSensor.run` gives for the whole episodes, bit for bit (run is this with one chunk):
+    every output is per sample but the multimeter, which runs on the whole (E, T) resistance at the end."""
+
+    def __init__(self, sensor: FabricSensor, seeds: list[int], n_samples: int):
+        self.s, self.seeds, self.T = sensor, list(seeds), int(n_samples)
+        E, N = len(seeds), sensor.n_taxels
+        self.force_taxel = np.empty((E, self.T, N), np.float32)
+        self.x = np.empty((E, self.T, N), np.float32)
+        self.r = np.empty((E, self.T))
+        draws = press_draws(self.seeds, sensor.p, E)
+        if sensor.backend == "numpy":
+            self.state, self.draws = None, draws
+        else:
+            from sensors.fabric.kernels import FabricChainWarp
+
+            self.chain = FabricChainWarp(sensor.p, E, N, sensor.device)
+            self.chain.set_draws(draws)
+
+    def feed(self, load: LoadBatch, t0: int) -> None:
+        """The load batch of samples t0 .. t0 + its length of the E episodes."""
+        self.feed_force(force_of(load), t0)
+
+    def feed_force(self, force_taxel_n: np.ndarray, t0: int) -> None:
+        E, T, N = force_taxel_n.shape
+        if N != self.s.n_taxels:
+            raise ValueError(f"load has {N} taxels; the pad has {self.s.n_taxels}")
+        if E != len(self.seeds):
+            raise ValueError(f"need one seed per episode ({E}); got {len(self.seeds)}")
+        t1 = t0 + T
+        drive = np.ascontiguousarray(force_taxel_n * np.float32(N), np.float32)
+        if self.s.backend == "numpy":
+            x, g, self.state = fabric_chain_numpy(drive, self.s.p, self.state, self.draws)
+        else:
+            x, g = self.chain.run(drive)
+        self.force_taxel[:, t0:t1] = force_taxel_n
+        self.x[:, t0:t1] = x
+        self.r[:, t0:t1] = 1.0 / g.astype(np.float64).sum(-1) + self.s.cfg.sensor.stack.lead_resistance_ohm
+
+    def finish(self) -> dict[str, np.ndarray]:
+        """The outputs (see OUTPUTS) of the whole episodes, each [E, T, ...]."""
+        cfg, r, ft = self.s.cfg, self.r, self.force_taxel
+        dmm = multimeter_numpy(r, self.seeds, cfg.sensor.multimeter, cfg.sampling.sample_rate_hz)
+        return {
+            "force_taxel": ft,
+            "force": ft.astype(np.float64).sum(-1).astype(np.float32),
+            "load_effective": self.x,
+            "resistance": r[..., None].astype(np.float32),
+            "dmm_counts": dmm["counts"][..., None],
+            "dmm_range_ohm": dmm["range"][..., None].astype(np.float32),
+            "resistance_measured": dmm["reading"][..., None].astype(np.float32),
+        }
+
+
 class FabricSensor:
     """Batched fabric stack. Shapes: E episodes, T samples, N taxels, C = 1 channel (whole sample)."""
 
@@ -72,8 +133,7 @@ class FabricSensor:
         self.taxel_area_m2 = cfg.pad.size_x_m * cfg.pad.size_y_m / self.n_taxels
 
     def run_load(self, load: LoadBatch, seeds: list[int]) -> dict[str, np.ndarray]:
-        force_taxel = np.clip(load.pressure_pa, 0.0, None) * load.taxel_area_m2
-        return self.run(force_taxel.astype(np.float32), seeds)
+        return self.run(force_of(load), seeds)
 
     def chain(self, load_n: np.ndarray, state: FabricState | None = None,
               seeds: list[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -94,22 +154,13 @@ class FabricSensor:
     def run(self, force_taxel_n: np.ndarray, seeds: list[int]) -> dict[str, np.ndarray]:
         """force_taxel_n [E,T,N] (N per taxel) -> outputs (see OUTPUTS), each [E, T, ...]."""
         E, T, N = force_taxel_n.shape
-        if N != self.n_taxels:
-            raise ValueError(f"load has {N} taxels; the pad has {self.n_taxels}")
-        if len(seeds) != E:
-            raise ValueError(f"need one seed per episode ({E}); got {len(seeds)}")
-        x, g = self.chain(np.ascontiguousarray(force_taxel_n * np.float32(N), np.float32), seeds=seeds)
-        r = 1.0 / g.astype(np.float64).sum(-1) + self.cfg.sensor.stack.lead_resistance_ohm
-        dmm = multimeter_numpy(r, seeds, self.cfg.sensor.multimeter, self.cfg.sampling.sample_rate_hz)
-        return {
-            "force_taxel": force_taxel_n.astype(np.float32),
-            "force": force_taxel_n.astype(np.float64).sum(-1).astype(np.float32),
-            "load_effective": x.astype(np.float32),
-            "resistance": r[..., None].astype(np.float32),
-            "dmm_counts": dmm["counts"][..., None],
-            "dmm_range_ohm": dmm["range"][..., None].astype(np.float32),
-            "resistance_measured": dmm["reading"][..., None].astype(np.float32),
-        }
+        st = self.stream(seeds, T)
+        st.feed_force(force_taxel_n, 0)
+        return st.finish()
+
+    def stream(self, seeds: list[int], n_samples: int) -> FabricStream:
+        """The chain over E = len(seeds) episodes of n_samples, fed in time chunks (`FabricStream`)."""
+        return FabricStream(self, seeds, n_samples)
 
     def attrs(self) -> dict:
         s = self.cfg.sensor

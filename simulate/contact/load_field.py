@@ -129,12 +129,14 @@ def physics_engine(cfg: SceneConfig) -> tuple[str, str]:
 
 
 def simulate_sensors(
-    cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1, alloc=None,
+    cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1, alloc=None, progress=None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Run the episodes; returns sensordata (E, T, nsensordata) at the sample times and target (E, T).
     Stepping: C MuJoCo's rollout on `threads` threads, or MuJoCo Warp worlds (`physics_engine`).
     alloc(shape) -> float64 array: where the sensordata goes (default np.zeros; the GPU feed's physics
-    process passes a view of a shared-memory block, so the worlds' output needs no second copy)."""
+    process passes a view of a shared-memory block, so the worlds' output needs no second copy).
+    progress(k): called as samples 0 .. k - 1 of every episode are in the sensordata (MuJoCo Warp: chunk by
+    chunk as the worlds step; C MuJoCo: once, at the end)."""
     engine, device = physics_engine(cfg)
     n = episode_length(protocols)
     sub = cfg.sampling.substeps
@@ -149,7 +151,7 @@ def simulate_sensors(
         states0, sens0 = _initial_states(m, cfg, protocols, episode_controls(cfg, protocols, nstep, slice(0, 1))[0][:, 0])
         qpos0 = states0[:, 1 : 1 + m.nq]  # full-physics state = (time, qpos, qvel, ...)
         out = worlds_for(m, mjcf, E, device, box_primitive=box_primitive_for(cfg.protocol.control)).run(qpos0, lambda sl, eps: episode_controls(cfg, protocols[eps], nstep, sl)[0], sens0, sub, n,
-                                                 out=None if alloc is None else alloc((E, n, m.nsensordata)))
+                                                 out=None if alloc is None else alloc((E, n, m.nsensordata)), progress=progress)
     else:
         ctrl, _ = episode_controls(cfg, protocols, nstep)
         states0, sens0 = _initial_states(m, cfg, protocols, ctrl[:, 0])
@@ -163,6 +165,8 @@ def simulate_sensors(
             b = min(E, a + chunk)
             _, sd = mujoco.rollout.rollout(m, data_arg, states0[a:b], ctrl[a:b], nstep=nstep)
             out[a:b, 1:] = sd[:, rows]
+        if progress is not None:  # the rollout runs blocks of whole episodes: all samples at once
+            progress(n)
     return out, sample_targets(cfg, protocols, n)
 
 
@@ -331,17 +335,21 @@ def iter_load_batches(
         yield sl, load_batch(cfg, sens[sl], target[sl], device_fields)
 
 
-def load_batch(cfg: SceneConfig, sens: np.ndarray, target: np.ndarray, device_fields: str | None = None) -> LoadBatch:
+def load_batch(cfg: SceneConfig, sens: np.ndarray, target: np.ndarray, device_fields: str | None = None,
+               fields: tuple | None = None) -> LoadBatch:
     """LoadBatch of episodes from their sensordata (E, T, nsensordata) and target (E, T): pose and net force
     from the MJCF sensors, the taxel fields by `load_field` (numpy) or, on the MuJoCo Warp path, by Warp
-    kernels on the physics device (kept there as flat Warp arrays when device_fields names that device)."""
+    kernels on the physics device (kept there as flat Warp arrays when device_fields names that device).
+    fields: (deformation, pressure, shear) made already (the GPU feed's time chunks), not computed again."""
     top = cfg.pad.thickness_m
     q = sens[..., _POS]
     pos_world = q + np.array([0.0, 0.0, top])
     f_pad = sens[..., _FORCE]  # force on the pad, global frame
     force = np.concatenate([f_pad[..., :2], -f_pad[..., 2:3]], axis=-1)
     engine, device = physics_engine(cfg)
-    if engine == "mujoco_warp":  # the GPU path: the numpy field would be the host's largest cost
+    if fields is not None:
+        deform, pressure, shear = fields
+    elif engine == "mujoco_warp":  # the GPU path: the numpy field would be the host's largest cost
         from simulate.contact.load_field_kernels import load_field_warp
 
         deform, pressure, shear = load_field_warp(cfg, q, force, device, to_host=device_fields != device)

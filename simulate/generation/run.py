@@ -102,6 +102,13 @@ def simulate_slices(
         for n, idx in run:
             done = physics[n] if physics is not None else None if padded is None else padded.pop(n)
             per = min(SENSOR_SLICE, max(1, -(-len(idx) // max(1, pieces))))
+            if isinstance(done, Streamed):  # load field and sensor chain run already, in time chunks
+                for a in range(0, len(idx), per):
+                    sl = slice(a, min(len(idx), a + per))
+                    part = idx[sl]
+                    yield part, [protos[i] for i in part], channel_arrays(
+                        _episodes(done.batch, sl), {k: v[sl] for k, v in done.outputs.items()}, cfg, sensor)
+                continue
             for sl, batch in iter_load_batches(cfg, [protos[i] for i in idx], threads, per if gpu else None, on_device, done):
                 part = idx[sl]
                 out = run_sensor(cfg, sensor, batch if on_device else batch.on_host(), [seeds[i] for i in part],
@@ -133,10 +140,22 @@ def episode_protocols(cfg: SceneConfig, seeds: list[int], indices: list[int] | N
     return out
 
 
+@dataclass
+class Streamed:
+    """A length group's load batch (fields on the host) and sensor outputs, made in time chunks while its worlds
+    stepped (the GPU feed, `simulate.generation.feed.Stream`); `simulate_slices` only slices them."""
+
+    batch: LoadBatch
+    outputs: dict[str, np.ndarray]
+
+
 def _episode_slice(batch: LoadBatch, j: int) -> LoadBatch:
+    return _episodes(batch, slice(j, j + 1))
+
+
+def _episodes(batch: LoadBatch, e: slice) -> LoadBatch:
     from dataclasses import replace
 
-    e = slice(j, j + 1)
     return replace(batch, target=batch.target[e], indenter_pos_m=batch.indenter_pos_m[e], contact_force_n=batch.contact_force_n[e],
                    contact_points=batch.contact_points[e], deformation_m=batch.deformation_m[e], pressure_pa=batch.pressure_pa[e],
                    shear_pa=batch.shear_pa[e])
