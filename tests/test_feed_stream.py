@@ -106,3 +106,52 @@ def test_stream_on_mujoco_warp_cpu_equals_unstreamed(tmp_path, monkeypatch):
             for ep in ra.episode_ids:
                 for ch in ra.channels(ep):
                     assert ra.read(ep, ch).tobytes() == rb.read(ep, ch).tobytes(), (ep, ch)
+
+
+@pytest.mark.gpu
+def test_stream_as_the_worlds_step_equals_the_groups_own_run(gpu_device, monkeypatch):
+    """MuJoCo Warp on the device under test, the stream advanced from the worlds' own progress calls (small
+    chunks: several per episode) while they step; against the plain path on the same sensordata (one physics run
+    for both: GPU atomics need not repeat bit for bit): every channel bit for bit."""
+    pytest.importorskip("mujoco_warp")
+    from simulate.contact import load_field as contact
+    from simulate.contact import mujoco_warp as contact_mjw
+
+    dev = "cpu" if gpu_device == "cpu" else "cuda"
+    cfg = load_scene("fabric_1", SHORT + ["generation.physics=mujoco_warp", f"generation.device={dev}"])
+    sensor = run.make_sensor(cfg, "warp", contact.physics_engine(cfg)[1])
+    gids = [0, 1, 2]
+    seeds = [episode_seed(cfg.generation.root_seed, k) for k in gids]
+    protos = run.episode_protocols(cfg, seeds, gids)
+    (n, idx), = run.length_groups(protos)
+    monkeypatch.setattr(contact_mjw, "CHUNK_BYTES", 3 * 4 * 500)  # a few samples per chunk
+    made, streams, calls = [], {}, []
+
+    def alloc(shape):
+        made.append(shared_memory.SharedMemory(create=True, size=8 * (int(np.prod(shape)) + shape[0] * shape[1])))
+        streams[n] = feed.Stream(cfg, sensor, made[0].name, shape, idx, [seeds[i] for i in idx])
+        return np.ndarray(shape, np.float64, buffer=made[0].buf)
+
+    def progress(k):
+        calls.append(k)
+        streams[n].advance(k)
+
+    sens, target = contact.simulate_sensors(cfg, protos, 1, alloc, progress)
+    assert len(calls) > 3 and calls[-1] == n  # handed on chunk by chunk
+    np.ndarray(target.shape, np.float64, buffer=made[0].buf, offset=sens.nbytes)[...] = target
+    layout = [(0, sens.dtype.str, sens.shape), (sens.nbytes, "<f8", target.shape)]
+    physics = (sens.copy(), target.copy())
+    sens = None
+    pool = feed.BlockPool()
+    try:
+        got = _channels(feed.produce(cfg, [0, 1], sensor, stepped=(protos, {n: (made[0].name, layout)}), pool=pool,
+                                     streams=streams), pool)
+        made[0].close()
+        monkeypatch.setattr(contact, "simulate_sensors", lambda *a: physics)
+        ref = run.simulate_episodes(cfg, seeds, [f"ep-{k:06d}" for k in gids], sensor, indices=gids)
+        assert max(float(r.channels["force"].data.max()) for r in ref) > 1.0
+        for r in ref:
+            for name, c in r.channels.items():
+                np.testing.assert_array_equal(got[r.ep_id][name], c.data, err_msg=f"{r.ep_id} {name}")
+    finally:
+        pool.close()

@@ -1,0 +1,39 @@
+#!/usr/bin/env bash
+# The device calls of session 9 (issue 16: velostat's sensor stage on the device, fabric's first batch streamed
+# while it steps), run from the worktree copy on the H100 machine with the packages unpacked in /root/site:
+# `bash bench/h100_s9.sh A|F|M`. Logs and result files go to $OUT as one tar (at most 8 files come back).
+export PYTHONPATH=/root/site:. PYTHONUNBUFFERED=1 OMP_NUM_THREADS=4
+set -o pipefail
+nvidia-smi --query-gpu=name,driver_version,clocks.sm,clocks.mem --format=csv,noheader
+mkdir -p $OUT/r/logs
+cli() {  # family, episodes, tag: the plain CLI, then MuJoCo Warp stepping the same worlds alone (merged into its file)
+    python3 bench/bench_user_cli.py --families $1 --episodes $2 --tag $3 --timeout 280 2>&1 | tee $OUT/r/logs/user-cli-$3.log | tail -4
+    if [ "$4" != "noalone" ]; then
+        timeout 200 python3 bench/bench_mjw_alone.py --family $1 --episodes $2 --tag $3 2>&1 | grep -v "^Module" | tee -a $OUT/r/logs/user-cli-$3.log | tail -3
+    fi
+    cp bench/results/user-cli-$3.json $OUT/r/
+}
+pack() { tar czf $OUT/results-$1.tgz -C $OUT/r . ; rm -rf $OUT/r; }
+case "$1" in
+A)  # pytest -m gpu on the final code (compiles MuJoCo Warp's kernels for every family's scene: the CLI runs after
+    # are warm), then the plain CLI of velostat (its sensor stage on the device now) with MuJoCo Warp alone
+    timeout ${2:-300} python3 -m pytest -q -m gpu -p no:cacheprovider 2>&1 | grep -v "^Module" | tee $OUT/r/logs/pytest-gpu-h100-s9.log | tail -12
+    echo "pytest rc $?" | tee -a $OUT/r/logs/pytest-gpu-h100-s9.log
+    cli velostat ${3:-8192} h100-s9-velostat
+    pack A ;;
+F)  # the plain CLI of fabric_1 (its first batch's sensor chain streamed while the worlds step) with MuJoCo Warp alone
+    cli fabric_1 ${2:-8192} h100-s9-fabric
+    pack F ;;
+M)  # compact 6 x 6 mixed 0.1-2 Hz end to end (same command as -s7-mix-final / -s8-mix; cnt_pdms on the convex
+    # collider again), then the transduction chain on CUDA
+    timeout 330 python3 bench/bench_gpu_pipeline.py --parts e2e --workers 8 --shards-per-worker 2 \
+        --override "protocol.frequencies_hz=[0.1,0.5,1.0,2.0]" --tag h100-s9-mix 2>&1 | tee $OUT/r/logs/gpu-pipeline-h100-s9-mix.log | tail -3
+    cp bench/results/gpu-pipeline-h100-s9-mix.json $OUT/r/
+    timeout 150 python3 bench/bench_transduction.py --cuda-only --gpu-episodes 256 --tag h100-s9 2>&1 | tee $OUT/r/logs/transduction-h100-s9.log | tail -4
+    cp bench/results/transduction-h100-s9.json $OUT/r/
+    pack M ;;
+N)  # if time allows: ntype and cnt_pdms plain CLI
+    cli ntype ${2:-4096} h100-s9-ntype noalone
+    cli cnt_pdms ${3:-4096} h100-s9-cnt noalone
+    pack N ;;
+esac
