@@ -32,6 +32,15 @@ M)  # compact 6 x 6 mixed 0.1-2 Hz end to end (same command as -s7-mix-final / -
     timeout 150 python3 bench/bench_transduction.py --cuda-only --gpu-episodes 256 --tag h100-s9 2>&1 | tee $OUT/r/logs/transduction-h100-s9.log | tail -4
     cp bench/results/transduction-h100-s9.json $OUT/r/
     pack M ;;
+B)  # second machine, final code (the recorded taxel fields rounded to float32 on the device and copied back through
+    # page-locked buffers): pytest -m gpu, then the plain CLI of velostat with MuJoCo Warp alone
+    timeout ${2:-300} python3 -m pytest -q -m gpu -p no:cacheprovider 2>&1 | grep -v "^Module" | tee $OUT/r/logs/pytest-gpu-h100-s9-final.log | tail -12
+    echo "pytest rc $?" | tee -a $OUT/r/logs/pytest-gpu-h100-s9-final.log
+    cli velostat ${3:-8192} h100-s9-velostat-f32
+    pack B ;;
+C)  # final code: the plain CLI of cnt_pdms (15 x 15 fields recorded) and fabric_1
+    cli cnt_pdms ${2:-4096} h100-s9-cnt-f32 noalone
+    pack C ;;
 N)  # if time allows: ntype and cnt_pdms plain CLI
     cli ntype ${2:-4096} h100-s9-ntype noalone
     cli cnt_pdms ${3:-4096} h100-s9-cnt noalone

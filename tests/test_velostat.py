@@ -225,7 +225,7 @@ def test_device_path_equals_host_path():
     assert np.isnan(host["contact_xy"]).any() and np.isfinite(host["contact_xy"]).any()
     for k in host:
         if k in ("force", "contact_xy"):
-            np.testing.assert_allclose(dev[k], host[k], rtol=2.4e-7, atol=0, err_msg=k)
+            np.testing.assert_allclose(dev[k], host[k], rtol=2.4e-7, atol=1e-12, err_msg=k)
             np.testing.assert_array_equal(np.isnan(dev[k]), np.isnan(host[k]), err_msg=k)
         else:
             np.testing.assert_array_equal(dev[k], host[k], err_msg=k)

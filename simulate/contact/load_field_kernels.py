@@ -148,3 +148,25 @@ def load_field_warp(cfg: SceneConfig, pos_rel_m: np.ndarray, force_n: np.ndarray
         if not to_host:
             return deform, pressure, shear
         return deform.numpy().reshape(E, T, N), pressure.numpy().reshape(E, T, N), shear.numpy().reshape(E, T, N, 2)
+
+
+@wp.kernel
+def _to_f32(src: wp.array(dtype=wp.float64), dst: wp.array(dtype=wp.float32)):
+    i = wp.tid()
+    dst[i] = wp.float32(src[i])
+
+
+def fields_f32_to_host(fields: dict[str, wp.array], shapes: dict[str, tuple[int, ...]]) -> dict[str, np.ndarray]:
+    """Taxel fields left on the device (float64 Warp arrays) -> float32 numpy arrays of `shapes` (name -> shape):
+    rounded on the device (numpy's astype(float32), bit for bit), then copied back through the page-locked
+    buffers of `sensors.warp_setup.to_host` (inside `host_staging`: valid until that field's next copy). Half the
+    bytes of the float64 fields, and no host pass over them (bench/README.md, session 9)."""
+    from sensors.warp_setup import scratch, to_host
+
+    out = {}
+    for name, arr in fields.items():
+        flat = arr.reshape(-1) if arr.ndim > 1 else arr
+        dst = scratch(f"field {name} f32", flat.shape[0], wp.float32, str(arr.device))
+        wp.launch(_to_f32, dim=flat.shape[0], inputs=[flat, dst], device=arr.device)
+        out[name] = to_host(dst, f"field {name}").reshape(shapes[name])
+    return out

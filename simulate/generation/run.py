@@ -113,7 +113,7 @@ def simulate_slices(
                 part = idx[sl]
                 out = run_sensor(cfg, sensor, batch if on_device else batch.on_host(), [seeds[i] for i in part],
                                  [protos[i] for i in part])
-                batch = batch.on_host() if _records_fields(cfg) else batch
+                batch = recorded_fields_on_host(cfg, batch)
                 yield part, [protos[i] for i in part], channel_arrays(batch, out, cfg, sensor)
 
 
@@ -192,6 +192,28 @@ def physics_runs(cfg: SceneConfig, protos: list[EpisodeProtocol]) -> list[list[t
     return world_groups(groups)
 
 
+def recorded_fields_on_host(cfg: SceneConfig, batch: LoadBatch) -> LoadBatch:
+    """The batch with the taxel fields that generation.record keeps as float32 numpy arrays (the others empty):
+    a batch whose fields are on the device gets them rounded there and copied back through page-locked buffers
+    (`fields_f32_to_host`: the same float32 values as the host's astype, half the bytes and no host pass); a
+    host batch is returned as it is."""
+    if not batch.fields_on_device:
+        return batch
+    from dataclasses import replace
+
+    from simulate.contact.load_field_kernels import fields_f32_to_host
+
+    keep = cfg.generation.record
+    E, T = batch.target.shape
+    names = {"deformation": "deformation_m", "pressure": "pressure_pa", "shear": "shear_pa"}
+    shapes = {"deformation": (E, T, -1), "pressure": (E, T, -1), "shear": (E, T, -1, 2)}
+    want = [k for k in names if keep is None or k in keep]
+    got = fields_f32_to_host({k: getattr(batch, names[k]) for k in want}, {k: shapes[k] for k in want})
+    empty = {"deformation": np.empty((E, T, 0), np.float32), "pressure": np.empty((E, T, 0), np.float32),
+             "shear": np.empty((E, T, 0, 2), np.float32)}
+    return replace(batch, **{names[k]: got.get(k, empty[k]) for k in names})
+
+
 def _records_fields(cfg: SceneConfig) -> bool:
     keep = cfg.generation.record
     return keep is None or bool({"deformation", "pressure", "shear"} & set(keep))
@@ -206,9 +228,9 @@ def channel_arrays(batch: LoadBatch, out: dict[str, np.ndarray], cfg: SceneConfi
         "target": lambda: batch.target.astype(f32),
         "position": lambda: batch.indenter_pos_m.astype(f32),
         "contact_force": lambda: batch.contact_force_n.astype(f32),
-        "deformation": lambda: batch.deformation_m.astype(f32),
-        "pressure": lambda: batch.pressure_pa.astype(f32),
-        "shear": lambda: batch.shear_pa.astype(f32),
+        "deformation": lambda: batch.deformation_m.astype(f32, copy=False),  # float32 already on the GPU path
+        "pressure": lambda: batch.pressure_pa.astype(f32, copy=False),
+        "shear": lambda: batch.shear_pa.astype(f32, copy=False),
     }
     keep = cfg.generation.record
     ch = {}
