@@ -393,3 +393,27 @@ def test_reread_matches_the_readout_and_contact_age():
     assert np.std(half) < 0.7 * np.std(e)
     t = np.array([0, 1, 1, 1, 0, 0, 1, 1], bool)
     np.testing.assert_allclose(contact_age_s(t, 10.0), [0, 0.1, 0.2, 0.3, 0, 0, 0.1, 0.2])
+
+
+def test_unit_spread_ratios_and_layout():
+    """unit_spread: R ratios at equal force, and the layout of the spread over the units (roughness 0 for a smooth
+    surface along the index, ~1 for the same levels scattered at random; the share between film domains)."""
+    from learn.experiments.velostat import unit_spread
+
+    levels = np.arange(1.0, 16.0)
+    u = np.arange(36)
+    law = levels[None] ** -1.05
+    smooth = 1e4 * np.exp(0.02 * u)[:, None] * law  # ln R rises 0.02 per unit index
+    s = unit_spread(u, smooth, levels, 6)
+    assert s["levels_n"]["1"]["max_over_min"] == pytest.approx(np.exp(0.02 * 35))
+    assert s["levels_n"]["15"]["std_ln_r"] == pytest.approx(0.02 * np.std(u))
+    assert s["roughness_index"] < 0.01
+    perm = np.random.default_rng(0).permutation(36)
+    rough = [unit_spread(u, smooth[np.random.default_rng(k).permutation(36)], levels, 6)["roughness_index"] for k in range(20)]
+    assert 0.8 < np.mean(rough) < 1.2
+    dom = u // 12  # three domains of 12 units, one level each: all the spread lies between the domains
+    s = unit_spread(u, 1e4 * np.exp(0.5 * dom)[:, None] * law, levels, 6, domain=dom)
+    assert s["domains"] == 3 and s["between_domain_share"] == pytest.approx(1.0)
+    assert s["levels_n"]["5"]["max_over_min"] == pytest.approx(np.exp(1.0))
+    s = unit_spread(u, smooth[perm], levels, 6, domain=np.zeros(36, int))
+    assert s["between_domain_share"] == pytest.approx(0.0, abs=1e-12)

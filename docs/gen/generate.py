@@ -759,6 +759,17 @@ def experiment(family: str) -> str:
                        f"Run `piezotwin experiment {family} --quick -o runs/{family}-quick` and commit its `metrics.json` "
                        f"(with a \"machine\" key) as `bench/results/experiments/{family}-quick.json`.")
     out = []
+    if family == "velostat":  # issue 14's targets, one column per recorded mode (quick, full)
+        import importlib
+
+        if str(ROOT) not in sys.path:
+            sys.path.insert(0, str(ROOT))
+        runs = {(m or {}).get("mode", p.stem): m for p in files if (m := load(p)) and "findings" in m}
+        runs = dict(sorted(runs.items(), key=lambda kv: ("tiny", "quick", "full").index(kv[0])
+                           if kv[0] in ("tiny", "quick", "full") else 3))
+        if runs:
+            out.append("### Issue 14 targets by run\n\n"
+                       + importlib.import_module("learn.experiments.velostat").targets_table(runs) + "\n")
     for p in files:
         m = load(p)
         if m is None:

@@ -304,6 +304,58 @@ def cluster_units(units: np.ndarray, curves: np.ndarray, n_units: int, centres: 
     return {"Z": Z, "k": int(k), "labels": lab, "ids": ids, "merge_heights": sorted(Z[:, 2].tolist(), reverse=True)[:15]}
 
 
+SPREAD_LEVELS_N = (1.0, 5.0, 10.0, 15.0)
+
+
+def unit_spread(units: np.ndarray, curves: np.ndarray, levels: np.ndarray, units_x: int,
+                domain: np.ndarray | None = None) -> dict[str, Any]:
+    """How far the units' static R(F) curves sit apart, and how that spread is laid out over the film (the
+    literal chain's scalar unit index, eq. 14, must map it with one input). Per level of SPREAD_LEVELS_N: the
+    std of ln R over the units, R max / min and the median |ln R_i / R_j| over unit pairs (as a ratio). Layout
+    on ln R at every level (curves [U, L] of `units`, numbered iy * units_x + ix): roughness = mean squared ln-R
+    step between neighbours / (2 var ln R), 1 for units scattered at random, -> 0 for a smooth surface; along
+    the literal index (u, u + 1) and between grid neighbours (right, down). With `domain` (film domain of each
+    unit, [n_units]) the share of the ln R variance that lies between the domains."""
+    units = np.asarray(units, int)
+    lr = np.log(np.asarray(curves, float))
+    out: dict[str, Any] = {"n_units": len(units), "levels_n": {}}
+    if len(units) < 3:
+        return out
+    for f in SPREAD_LEVELS_N:
+        k = int(np.argmin(np.abs(levels - f)))
+        v = lr[:, k]
+        d = np.abs(v[:, None] - v[None])[np.triu_indices(len(v), 1)]
+        out["levels_n"][f"{f:g}"] = {"std_ln_r": float(v.std()), "max_over_min": float(np.exp(v.max() - v.min())),
+                                     "median_pair_ratio": float(np.exp(np.median(d)))}
+    pos = {int(u): i for i, u in enumerate(units)}
+    var = float(lr.var(axis=0).mean())
+
+    def rough(pairs):
+        st = [((lr[pos[a]] - lr[pos[b]]) ** 2).mean() for a, b in pairs if a in pos and b in pos]
+        return float(np.mean(st) / (2 * var)) if st and var > 0 else float("nan")
+    out["roughness_index"] = rough([(u, u + 1) for u in pos])
+    out["roughness_grid"] = rough([(u, u + 1) for u in pos if (u + 1) % units_x] + [(u, u + units_x) for u in pos])
+    if domain is not None:
+        dom = np.asarray(domain, int)[units]
+        means = {d: lr[dom == d].mean(axis=0) for d in np.unique(dom)}
+        between = np.mean([(means[d] - lr.mean(axis=0)) ** 2 for d in dom], axis=0).mean()
+        out["domains"] = int(len(means))
+        out["between_domain_share"] = float(between / var) if var > 0 else float("nan")
+    return out
+
+
+def unit_domains(cfg) -> np.ndarray:
+    """Film domain under each calibration unit's centre (the simulator's truth, for unit_spread only)."""
+    from sensors.taxels import taxel_xy_m
+    from sensors.velostat.model import film_domains
+    from simulate.protocols.compression_tester import unit_centres_m
+
+    f = cfg.sensor.film
+    _, dom = film_domains(cfg, int(cfg.generation.root_seed if f.field_seed is None else f.field_seed))
+    xy = taxel_xy_m(cfg)
+    return dom[np.argmin(((unit_centres_m(cfg)[:, None] - xy[None]) ** 2).sum(-1), axis=1)]
+
+
 def nearest_with_data(units: np.ndarray, centres: np.ndarray) -> np.ndarray:
     """Unit -> itself when it has training data, else the nearest unit (by centre) that has."""
     d = np.linalg.norm(centres[:, None] - centres[units][None], axis=-1)
@@ -543,7 +595,8 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
     cl = cluster_units(units, curves, n_units, centres)
     near = nearest_with_data(units, centres)
     clustering = {"units_with_data": units.tolist(), "k_elbow": cl["k"], "ward_kinds": list(WARD_KINDS), "ids": cl["ids"].tolist(),
-                  "merge_heights": cl["merge_heights"], "n_points_train": len(pts_tr), "n_points_valid": len(pts_va)}
+                  "merge_heights": cl["merge_heights"], "n_points_train": len(pts_tr), "n_points_valid": len(pts_va),
+                  "unit_spread": unit_spread(units, curves, levels, cfg.sensor.units_x, unit_domains(cfg))}
     log(f"Ward: {len(units)} units with curves, elbow {cl['k']} clusters; BP on {len(pts_tr)} / {len(pts_va)} holds")
 
     # --- BP nets (hidden search 3..12) and the chains
@@ -771,6 +824,52 @@ def findings(R: dict, creep: dict, cl: dict, bp: dict | None = None) -> dict[str
     return out
 
 
+def targets_table(runs: dict[str, dict[str, Any]]) -> str:
+    """Issue 14's velostat targets of the experiment, one column per recorded run (mode -> metrics.json), each
+    cell the measured value and met / not met. The characterization's targets (R at full load vs speed, hold creep
+    vs speed and force) are in `piezotwin characterize velostat`'s table."""
+    yes = lambda ok: "met" if ok else "**not met**"
+
+    def cell(m: dict[str, Any], key: str) -> str:
+        F, C, K = m.get("findings", {}), m.get("creep", {}), m.get("clustering", {})
+        try:
+            if key == "band":
+                kp = F["kmeans_paper_reading"]
+                return f"{kp['band_ratio'][0]:.2f}x / {kp['band_ratio'][1]:.2f}x ({yes(kp['band_within_2x'])})"
+            if key == "sil":
+                lit = C["paper_reading"]["silhouette"]
+                return f"{C['silhouette']:.3f} ({yes(C['silhouette'] >= 0.8)}); eq. 3 as printed {lit:.3f} ({yes(lit >= 0.8)})"
+            if key == "ward":
+                return f"{K['k_elbow']} ({yes(4 <= K['k_elbow'] <= 6)})"
+            if key == "drift":
+                ct = F["creep_target"]
+                return f"{100 * ct['removed_frac']:.1f} % ({yes(ct['met'])})"
+            if key == "literal":
+                return "; ".join(f"{k.split('_')[1]} index {v['test_holds_rmse']:.2f} / {v['ae_max']:.2f} N ({yes(v['met'])})"
+                                 for k, v in F["literal_bound"].items())
+            if key == "literal_train":
+                return " / ".join(f"{m['bp_search'][k]['train_rmse']:.2f}" for k in F["literal_bound"]) + " N (paper < 1 N)"
+            if key == "ours":
+                lost = [f"{met} to {k}" for met, d in F["ours_vs_every_paper_model"].items() for k, v in d.items() if not v]
+                return yes(F["ours_beats_every_paper_model_on_every_metric"]) + (f" (loses {', '.join(lost)})" if lost else "")
+            if key == "time":
+                w = m["machine"]["wall_s"]
+                return f"{w / 60:.1f} min" + (f" ({yes(w < 600)})" if m.get("mode") == "quick" else "")
+        except (KeyError, TypeError, IndexError):
+            return "–"
+        return "–"
+    rows = [("K-means band (eq. 3 as printed) within 2x of 0.00612 / 0.02374", "band"),
+            ("silhouette >= 0.8 (0.5 s delta period; eq. 3 as printed)", "sil"),
+            ("Ward elbow 4-6 groups", "ward"),
+            ("creep compensation removes >= 50 % of the hold drift (R, Figs. 9-10)", "drift"),
+            ("literal chain: BP test RMSE < 2 N and worst A-E point < 2 N (sect. 4.2, 5.4)", "literal"),
+            ("literal chain train RMSE, unit / cluster index", "literal_train"),
+            ("ours beats every paper chain on every metric", "ours"),
+            ("wall time, 2 shared cores (quick: < 10 min)", "time")]
+    modes = list(runs)
+    return md_table(["target", *modes], [[name, *(cell(runs[md], key) for md in modes)] for name, key in rows])
+
+
 def plots(out: Path, tracker, tr, cl, units, curves, levels, te, preds, results, dpi: int = 110) -> None:
     import matplotlib
 
@@ -923,6 +1022,16 @@ def report(m: dict[str, Any]) -> str:
     L.append(f"{len(K['units_with_data'])} of 36 units have calibration curves in the training split; elbow at "
              f"**{K['k_elbow']} clusters** (paper: about {P['clusters']}). Largest merge distances: "
              + ", ".join(f"{h:.0f}" for h in K["merge_heights"][:8]) + " ohm.")
+    us = K.get("unit_spread", {})
+    if us.get("levels_n"):
+        L.append("Unit-to-unit spread of the static curves (Ward's curves; the paper gives none, Fig. 19: \"not "
+                 "completely smooth and exists wrinkles\"): at " + ", ".join(
+                     f"{f} N std ln R {v['std_ln_r']:.2f}, R max / min {v['max_over_min']:.1f}x, median pair "
+                     f"{v['median_pair_ratio']:.2f}x" for f, v in us["levels_n"].items())
+                 + f". Layout (roughness 1 = units scattered at random, 0 = a smooth surface): along the literal "
+                 f"unit index {us['roughness_index']:.2f}, between grid neighbours {us['roughness_grid']:.2f}"
+                 + (f"; {100 * us['between_domain_share']:.0f} % of the ln R variance lies between the film's "
+                    f"{us['domains']} domains." if "between_domain_share" in us else "."))
     L += ["", "BP hidden-node search (validation RMSE, N):", ""]
     for k, b in m["bp_search"].items():
         L.append(f"- {LABELS[k]}: " + ", ".join(f"{h}: {v:.3f}" for h, v in b["valid_rmse_by_hidden"].items())
