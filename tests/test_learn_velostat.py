@@ -417,3 +417,31 @@ def test_unit_spread_ratios_and_layout():
     assert s["levels_n"]["5"]["max_over_min"] == pytest.approx(np.exp(1.0))
     s = unit_spread(u, smooth[perm], levels, 6, domain=np.zeros(36, int))
     assert s["between_domain_share"] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_kmeans_by_speed_slow_ramps_lower_the_loading_band():
+    """kmeans_by_speed groups the staircases by loading speed; on a 1-10 N staircase of R ~ F^-1 with log-time creep
+    in each 10 s hold, R moves per period in proportion to the ramp speed, so the loading band of the slow
+    staircases sits below the fast ones' and their stages overlap more (lower silhouette)."""
+    from learn.data import Sequence
+    from learn.experiments.velostat import MODES, kmeans_by_speed
+
+    rate = 10.0
+
+    def staircase(v_n_per_s: float, seed: int) -> np.ndarray:
+        f, t_hold = [], []
+        for lv in range(1, 11):
+            ramp = np.arange(lv - 1 + v_n_per_s / rate, lv, v_n_per_s / rate)
+            f += list(ramp) + [lv] * int(10 * rate)
+            t_hold += [0.0] * len(ramp) + list(np.arange(1, int(10 * rate) + 1) / rate)
+        f, t_hold = np.maximum(np.asarray(f), 0.05), np.asarray(t_hold)
+        r = 1e4 / f * (1 - 0.05 * np.log1p(t_hold / 0.5))  # creep lowers R through each hold
+        return r * (1 + 1e-3 * np.random.default_rng(seed).standard_normal(len(r)))
+    seqs = [Sequence(x=staircase(v, k)[:, None], y=np.zeros((1, 1)), inputs=["r"], targets=["f"], units={},
+                     meta={"speed_mm_per_min": mm})
+            for k, (v, mm) in enumerate([(0.1, 1.0), (0.1, 1.0), (1.0, 6.0)])]
+    out = kmeans_by_speed(seqs, MODES["quick"].tracker, 0)
+    assert [(b["speed_mm_per_min"], b["n_recordings"]) for b in out] == [(1.0, 2), (6.0, 1)]
+    slow, fast = out
+    assert slow["kmeans_bounds"][1] < fast["kmeans_bounds"][1]
+    assert slow["silhouette"] < fast["silhouette"]
