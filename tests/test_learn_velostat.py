@@ -277,6 +277,16 @@ def test_experiment_velostat_quick(quick_run):
     # the literal cluster chain trained through sect. 4.2's 500 epochs meets the paper's test-RMSE bound (< 2 N)
     assert m["bp_search"]["literal_cluster"]["test_holds_rmse"] < 2.0
     assert m["findings"]["literal_input_crowding"]["share_10_15n"] < 0.05
+    # the units' spread the literal unit index must map (the paper bounds none): resistivity domains 1 -/+ 0.65
+    # (an estimate) hold most of it, shuffled over the film, so neighbours along the literal index are nearly
+    # as far apart as random units (roughness ~1) and R at equal force spans several times over the units
+    us = m["clustering"]["unit_spread"]
+    assert 0.3 < us["levels_n"]["10"]["std_ln_r"] < 0.5 and us["levels_n"]["10"]["max_over_min"] > 3.0
+    assert us["between_domain_share"] > 0.6 and us["roughness_index"] > 0.5
+    # the K-means of Fig. 6 per loading speed: slow ramps overlap the creep stage (lower band and silhouette)
+    bs = m["creep"]["by_speed"]
+    assert bs[0]["speed_mm_per_min"] < bs[-1]["speed_mm_per_min"]
+    assert bs[0]["silhouette"] < bs[-1]["silhouette"] and bs[0]["kmeans_bounds"][1] < bs[-1]["kmeans_bounds"][1]
 
 
 @pytest.mark.slow
