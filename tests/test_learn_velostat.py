@@ -455,3 +455,30 @@ def test_kmeans_by_speed_slow_ramps_lower_the_loading_band():
     slow, fast = out
     assert slow["kmeans_bounds"][1] < fast["kmeans_bounds"][1]
     assert slow["silhouette"] < fast["silhouette"]
+
+
+def test_targets_table_marks_each_target_from_the_findings():
+    """targets_table: one column per run, each target met / not met by the issue's thresholds; a partial run (no
+    TCN) says ours was not tested."""
+    from learn.experiments.velostat import targets_table
+
+    def run(sil, k, removed, partial=False):
+        m = {"mode": "x", "creep": {"silhouette": sil, "paper_reading": {"silhouette": 0.55}},
+             "clustering": {"k_elbow": k}, "machine": {"wall_s": 300.0},
+             "findings": {"kmeans_paper_reading": {"band_ratio": [1.3, 2.5], "band_within_2x": False},
+                          "creep_target": {"removed_frac": removed, "met": removed >= 0.5},
+                          "literal_bound": {"literal_unit": {"test_holds_rmse": 1.5, "ae_max": 2.5, "met": False}},
+                          "ours_vs_every_paper_model": {"rmse": {"raw_bp": True}}, "ours_beats_every_paper_model_on_every_metric": True},
+             "bp_search": {"literal_unit": {"train_rmse": 2.0}}, "models": {} if partial else {"tcn": {}}}
+        if partial:
+            m["partial"] = "chains only"
+        return m
+    t = targets_table({"quick": run(0.83, 4, 0.496), "full": run(0.69, 3, 0.52, partial=True)}).splitlines()
+    assert t[0] == "| target | quick | full |"
+    row = {r.split(" | ")[0].strip("| "): r.split(" | ")[1:] for r in t[2:]}
+    assert row["silhouette >= 0.8 (0.5 s delta period; eq. 3 as printed)"][0].startswith("0.830 (met)")
+    assert row["silhouette >= 0.8 (0.5 s delta period; eq. 3 as printed)"][1].startswith("0.690 (**not met**)")
+    assert row["Ward elbow 4-6 groups"] == ["4 (met)", "3 (**not met**) |"]
+    assert row["creep compensation removes >= 50 % of the hold drift (R, Figs. 9-10)"] == ["49.6 % (**not met**)", "52.0 % (met) |"]
+    assert "(**not met**)" in row["K-means band (eq. 3 as printed) within 2x of 0.00612 / 0.02374"][0]
+    assert row["ours beats every paper chain on every metric"] == ["met", "not tested (partial run) |"]

@@ -899,6 +899,8 @@ def targets_table(runs: dict[str, dict[str, Any]]) -> str:
             if key == "literal_train":
                 return " / ".join(f"{m['bp_search'][k]['train_rmse']:.2f}" for k in F["literal_bound"]) + " N (paper < 1 N)"
             if key == "ours":
+                if "tcn" not in m.get("models", {}):
+                    return "not tested (partial run)" if m.get("partial") else "–"
                 lost = [f"{met} to {k}" for met, d in F["ours_vs_every_paper_model"].items() for k, v in d.items() if not v]
                 return yes(F["ours_beats_every_paper_model_on_every_metric"]) + (f" (loses {', '.join(lost)})" if lost else "")
             if key == "time":
