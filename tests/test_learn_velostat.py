@@ -484,3 +484,23 @@ def test_targets_table_marks_each_target_from_the_findings():
     assert row["creep compensation removes >= 50 % of the hold drift (R, Figs. 9-10)"] == ["49.6 % (**not met**)", "52.0 % (met) |"]
     assert "(**not met**)" in row["K-means band (eq. 3 as printed) within 2x of 0.00612 / 0.02374"][0]
     assert row["ours beats every paper chain on every metric"] == ["met", "not tested (partial run) |"]
+
+
+def test_ae_runs_hold_every_staircase_to_15n():
+    """Sect. 5.4 presses each site 1-15 N: at every loading speed of the preset the A-E staircase reaches 15 N and
+    holds its 5 s inside the quick and full runs' A-E episodes (the quick run's 110 s cut 1 mm/min before 15 N)."""
+    from learn.experiments.velostat import MODES, scenes_of
+    from sensors.data.manifest import episode_seed
+    from simulate.protocols.indenter import make_episode_protocol
+
+    for mode in ("quick", "full"):
+        cfg = scenes_of(MODES[mode], [], 0)["ae"]
+        speeds = set()
+        for k in range(cfg.generation.episodes):
+            p = make_episode_protocol(cfg, episode_seed(cfg.generation.root_seed, k), k).params
+            t, f = np.asarray(p["knots_t_s"]), np.asarray(p["knots_f_n"])
+            top = np.flatnonzero(f == 15.0)
+            assert len(top) == 2 and t[top[1]] - t[top[0]] == pytest.approx(5.0)
+            assert t[top[1]] <= cfg.protocol.duration_s + 1e-9, (mode, k, p["speed_m_per_s"])
+            speeds.add(round(p["speed_m_per_s"] * 6e4, 3))
+        assert min(speeds) == pytest.approx(min(cfg.protocol.loading_speeds_m_per_s) * 6e4)
