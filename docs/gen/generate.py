@@ -764,6 +764,17 @@ def experiment(family: str) -> str:
                        f"Run `piezotwin experiment {family} --quick -o runs/{family}-quick` and commit its `metrics.json` "
                        f"(with a \"machine\" key) as `bench/results/experiments/{family}-quick.json`.")
     out = []
+    if family == "velostat":  # issue 14's targets, one column per recorded mode (quick, full)
+        import importlib
+
+        if str(ROOT) not in sys.path:
+            sys.path.insert(0, str(ROOT))
+        runs = {(m or {}).get("mode", p.stem): m for p in files if (m := load(p)) and "findings" in m}
+        runs = dict(sorted(runs.items(), key=lambda kv: ("tiny", "quick", "full").index(kv[0])
+                           if kv[0] in ("tiny", "quick", "full") else 3))
+        if runs:
+            out.append("### Issue 14 targets by run\n\n"
+                       + importlib.import_module("learn.experiments.velostat").targets_table(runs) + "\n")
     for p in files:
         m = load(p)
         if m is None:
@@ -829,9 +840,13 @@ def _exp_headline(family: str) -> list[list[str]]:
                              " / ".join(num(e[f"E_{c}"]) for c in comps) + " vs " + " / ".join(num(best.get(f"E_{c}")) for c in comps), src])
             elif family == "velostat":
                 R = m["models"]
-                r = R["tcn"]
                 paper = [k for k in ("raw_bp", "paper_unit", "paper_cluster", "literal_unit", "literal_cluster") if k in R]
                 b = min(paper, key=lambda k: R[k]["test"]["rmse"])
+                if "tcn" not in R and m.get("partial"):  # a run stopped before ours was tested: the chains alone
+                    rows.append([f"velostat paper chains ({mode}, partial: ours not tested): test RMSE / worst A-E point, "
+                                 f"best paper chain ({b})", f"{num(R[b]['test']['rmse'])} / {num(R[b]['ae'].get('max_abs_n'))} N", src])
+                    continue
+                r = R["tcn"]
                 rows.append([f"velostat compensation ({mode}): test RMSE / worst A-E point, ours vs best paper chain ({b})",
                              f"{num(r['test']['rmse'])} / {num(r['ae'].get('max_abs_n'))} N vs "
                              f"{num(R[b]['test']['rmse'])} / {num(R[b]['ae'].get('max_abs_n'))} N", src])
