@@ -31,6 +31,10 @@ paper's, and our two models on the same folds (elem_mlp: ours, beats the best RB
            relative error is undefined), averaged over the 10 folds like the paper; MAE too. On the paper's
            task also eq. 14 as printed (E_all: every component over its own F, none left out) beside it.
   report   report.md, metrics.json, spread.png, windows.png, scatter.png, checkpoints/map_cnn/ (last fold).
+  cost     the RLS output weights of every sweep are solved in closed form (RLS of forgetting factor 1 from
+           P0 = I / delta is the ridge solution, Haykin; learn/models/rbf.py sweep_predict, Cholesky) on one
+           distance matrix per fold and network, not sample by sample: the recorded numbers moved by <= 1.5e-6
+           relative (bench/results/experiments/ntype-quick.json, CHANGELOG "ntype, session 9").
 
 Modes: "full" = the preset's 3000 samples, 1000 window centres; "quick" = 60 episodes (1200 samples), 800
 window centres, fewer epochs for ours; "tiny" = seconds, for tests only.

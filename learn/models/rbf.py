@@ -9,6 +9,9 @@ Scikit-learn-style estimators, numpy only:
                                   lam < 1, exponentially weighted least squares
   RBFNetwork(n_centres, spread)   fit = k-means centres + RLS from scratch; partial_fit = more RLS updates
                                   (centres fixed after the first call); predict
+  sweep_predict(d2_train, ...)    RBFNetwork's fit + predict on fixed centres for a whole spread sweep, from one
+                                  distance matrix, RLS in closed form (ridge_weights, Cholesky) and eq. 12
+                                  (exact_weights): what the ntype experiment's Tables 1 / 3 run
 
 Spread conventions (``kernel``), d = ||X - X_j|| in input units:
   "eq9"     the paper's eq. 9 as printed, phi = exp(-||X - X_j|| / (2 sigma_j^2)) with sigma_j "the spread
