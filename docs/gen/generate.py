@@ -833,7 +833,8 @@ def _exp_headline(family: str) -> list[list[str]]:
                 name, best = min(cands, key=lambda c: sum(c[1][f"E_{k}"] for k in comps)) if cands else ("–", {})
                 run = mode if not m.get("seed") else f"{mode}, seed {m['seed']}"
                 if e is None:  # a run of the paper's methods alone (--models rbf_col,rbf_win), e.g. another seed
-                    rows.append([f"ntype force estimation ({run}, paper's methods only): E_Fx / E_Fy / E_Fz (%), best paper model ({name})",
+                    only = "paper's methods only" if m["models"].get("rbf_win") else "Table 1 only"
+                    rows.append([f"ntype force estimation ({run}, {only}): E_Fx / E_Fy / E_Fz (%), best paper model ({name})",
                                  " / ".join(num(best.get(f"E_{c}")) for c in comps), src])
                     continue
                 rows.append([f"ntype force estimation ({run}): E_Fx / E_Fy / E_Fz (%), element MLP (ours) vs best paper model ({name})",

@@ -31,6 +31,10 @@ paper's, and our two models on the same folds (elem_mlp: ours, beats the best RB
            relative error is undefined), averaged over the 10 folds like the paper; MAE too. On the paper's
            task also eq. 14 as printed (E_all: every component over its own F, none left out) beside it.
   report   report.md, metrics.json, spread.png, windows.png, scatter.png, checkpoints/map_cnn/ (last fold).
+  cost     the RLS output weights of every sweep are solved in closed form (RLS of forgetting factor 1 from
+           P0 = I / delta is the ridge solution, Haykin; learn/models/rbf.py sweep_predict, Cholesky) on one
+           distance matrix per fold and network, not sample by sample: the recorded numbers moved by <= 1.5e-6
+           relative (bench/results/experiments/ntype-quick.json, CHANGELOG "ntype, session 9").
 
 Modes: "full" = the preset's 3000 samples, 1000 window centres; "quick" = 60 episodes (1200 samples), 800
 window centres, fewer epochs for ours; "tiny" = seconds, for tests only.
@@ -311,7 +315,7 @@ def run(
 def _run(md: Mode, mode: str, out: Path, data: Path, seqs: list, fp: dict, folds: list[np.ndarray], want: set[str],
          seed: int, progress: bool, log: Callable[[str], None], task: str = "press_stroke") -> dict[str, Any]:
     from learn.models.element_mlp import SYMMETRY_OF_READING, ElementMLP
-    from learn.models.rbf import KMeans, RBFNetwork, half_distance, sq_dist
+    from learn.models.rbf import KMeans, half_distance, sq_dist, sweep_predict
 
     units = seqs[0].units
     literal = task == "paper"  # eq. 14 as printed (every component / its own F) beside ours: the paper's task only
@@ -330,8 +334,6 @@ def _run(md: Mode, mode: str, out: Path, data: Path, seqs: list, fp: dict, folds
     gaps: dict[str, list] = {}  # median distance (paper units) from a test input to its nearest RBF centre, per fold
     cond: dict[str, dict[str, dict[str, float]]] = {}  # eq. 12's Phi condition number, first fold: reading -> spread -> component
 
-    def gap(At: np.ndarray, C: np.ndarray) -> float:
-        return float(np.median(np.sqrt(sq_dist(At, C).min(1))))
     keep_pred: dict[str, Any] = {}
     timing: dict[str, float] = {"rbf_col": 0.0, "rbf_win": 0.0, "elem_mlp": 0.0, "map_cnn": 0.0}
     t_all = time.perf_counter()
@@ -348,22 +350,37 @@ def _run(md: Mode, mode: str, out: Path, data: Path, seqs: list, fp: dict, folds
             t0 = time.perf_counter()
             preds = {s: np.zeros_like(Yte) for s in spreads}
             alt = {k: {s: np.zeros_like(Yte) for s in spreads} for k in md.alt_kernels}
+            # the readings of the sweep by kernel: (None = the headline, md.kernel with RLS) or an alt reading
+            by_kernel: dict[str, list[tuple[str | None, str]]] = {md.kernel: [(None, "rls")]}
+            for k in md.alt_kernels:
+                kern, sol = split_reading(k)
+                by_kernel.setdefault(kern, []).append((k, sol))
             for c in range(3):
+                Xc, Tc, Yc = Ntr[..., c], Nte[..., c], Ytr[..., c]
                 if md.centres_col is None or md.centres_col >= len(Ntr):  # N = the training samples (sect. 3.1)
-                    C = Ntr[..., c]
+                    C = Xc
                 else:
-                    C = KMeans(md.centres_col, md.kmeans_iter, seed=seed + fi).fit(Ntr[..., c]).cluster_centers_
-                gaps.setdefault(f"rbf_col_{COMPONENTS[c]}", []).append(gap(Nte[..., c], C))
-                for s in spreads:
-                    net = RBFNetwork(len(C), s, md.kernel, seed=seed + fi).fit(Ntr[..., c], Ytr[..., c], centres=C)
-                    preds[s][..., c] = net.predict(Nte[..., c])
-                    for k in md.alt_kernels:
-                        kern, sol = split_reading(k)
-                        Ck = Ntr[..., c] if sol == "exact" else C  # eq. 12: one unit per training sample
-                        net = RBFNetwork(len(Ck), s, kern, seed=seed + fi, solver=sol).fit(Ntr[..., c], Ytr[..., c], centres=Ck)
-                        alt[k][s][..., c] = net.predict(Nte[..., c])
-                        if sol == "exact" and fi == 0:  # how well eq. 12's Phi is conditioned (first fold)
-                            cond.setdefault(k, {}).setdefault(str(s), {})[COMPONENTS[c]] = phi_condition(kern, s, Ntr[..., c])
+                    C = KMeans(md.centres_col, md.kmeans_iter, seed=seed + fi).fit(Xc).cluster_centers_
+                # one distance matrix per component for every spread and reading (RBFNetwork's fit + predict on
+                # these centres, the RLS in closed form: learn/models/rbf.py sweep_predict)
+                d2 = {"rls": (sq_dist(Xc, C), sq_dist(Tc, C))}
+                d2["exact"] = d2["rls"] if C is Xc else (sq_dist(Xc, Xc), sq_dist(Tc, Xc))  # eq. 12: one unit per sample
+                gaps.setdefault(f"rbf_col_{COMPONENTS[c]}", []).append(float(np.median(np.sqrt(d2["rls"][1].min(1)))))
+                for kern, names in by_kernel.items():
+                    sols = sorted({sol for _, sol in names})
+                    groups = [tuple(sols)] if C is Xc else [(sol,) for sol in sols]
+                    for g in groups:
+                        sp = sweep_predict(d2[g[0]][0], Yc, d2[g[0]][1], kern, spreads, solvers=g)
+                        for name, sol in names:
+                            if sol not in g:
+                                continue
+                            for s in spreads:
+                                (preds if name is None else alt[name])[s][..., c] = sp[sol][s]
+                    if fi == 0:  # how well eq. 12's Phi is conditioned (first fold)
+                        for name, sol in names:
+                            if sol == "exact":
+                                for s in spreads:
+                                    cond.setdefault(name, {}).setdefault(str(s), {})[COMPONENTS[c]] = phi_condition(kern, s, Xc)
             for s in spreads:
                 res_col[s].append(component_errors(Yte, preds[s], md.min_abs_ref, literal))
                 for k in md.alt_kernels:
@@ -382,11 +399,12 @@ def _run(md: Mode, mode: str, out: Path, data: Path, seqs: list, fp: dict, folds
                 A = window_inputs(Ntr, w, pad)[rows]
                 At = window_inputs(Nte, w, pad)
                 C = KMeans(md.centres_win, md.kmeans_iter, seed=seed + fi).fit(A).cluster_centers_
-                gaps.setdefault(f"rbf_w{w}", []).append(gap(At, C))
+                d2_te = sq_dist(At, C)
+                gaps.setdefault(f"rbf_w{w}", []).append(float(np.median(np.sqrt(d2_te.min(1)))))
+                sp = sweep_predict(sq_dist(A, C), Ytr_rows[rows], d2_te, md.kernel, spreads)["rls"]
                 wp = {}
                 for s in spreads:
-                    net = RBFNetwork(md.centres_win, s, md.kernel, seed=seed + fi).fit(A, Ytr_rows[rows], centres=C)
-                    p = net.predict(At).reshape(Yte.shape)
+                    p = sp[s].reshape(Yte.shape)
                     res_win[w][s].append(component_errors(Yte, p, md.min_abs_ref, literal))
                     wp[s] = p
                 if last:
@@ -543,6 +561,8 @@ def findings(results: dict[str, Any], spreads: list[float], windows: list[int], 
         F["table1_best_spread"] = float(b)
         F["table1_interior_optimum"] = bool(float(b) not in (min(spreads), max(spreads)))
         F["table1_mean_error_by_spread"] = {s: _mean3(v) for s, v in t1.items()}
+        # each component's own best spread (the headline above is the best of the three components' mean)
+        F["table1_best_spread_by_component"] = {c: float(min(t1, key=lambda s: t1[s][f"E_{c}"])) for c in COMPONENTS}
         at = t1.get(str(float(PAPER_BEST_SPREAD)))
         if at:  # MAE / mean relative error over the same loaded components: the force size of eq. 14's average
             F["implied_force_n_at_spread7"] = {c: at[f"MAE_loaded_{c}"] / (at[f"E_{c}"] / 100.0) for c in COMPONENTS}
@@ -728,7 +748,9 @@ def _task_report(m: dict[str, Any], h: str = "##", plots_dir: str = "") -> str:
     lines += [f"{h} The paper's qualitative findings, checked", ""]
     if "table1_best_spread" in F:
         lines.append(f"- Interior optimum spread (Table 1): **{'yes' if F['table1_interior_optimum'] else 'no'}**, best spread "
-                     f"{F['table1_best_spread']:g} (paper 7).")
+                     f"{F['table1_best_spread']:g} (paper 7)" + ("; each component's own best spread: " + ", ".join(
+                         f"{c} {v:g}" for c, v in F["table1_best_spread_by_component"].items())
+                         if "table1_best_spread_by_component" in F else "") + ".")
     if "window_best_spread" in F:
         lines.append("- Best spread per window: " + ", ".join(f"w{w}: {s:g}" + ("" if F["window_interior_optimum"][w] else " (edge)")
                                                               for w, s in F["window_best_spread"].items()) + ".")

@@ -9,6 +9,9 @@ Scikit-learn-style estimators, numpy only:
                                   lam < 1, exponentially weighted least squares
   RBFNetwork(n_centres, spread)   fit = k-means centres + RLS from scratch; partial_fit = more RLS updates
                                   (centres fixed after the first call); predict
+  sweep_predict(d2_train, ...)    RBFNetwork's fit + predict on fixed centres for a whole spread sweep, from one
+                                  distance matrix, RLS in closed form (ridge_weights, Cholesky) and eq. 12
+                                  (exact_weights): what the ntype experiment's Tables 1 / 3 run
 
 Spread conventions (``kernel``), d = ||X - X_j|| in input units:
   "eq9"     the paper's eq. 9 as printed, phi = exp(-||X - X_j|| / (2 sigma_j^2)) with sigma_j "the spread
@@ -45,13 +48,19 @@ import numpy as np
 
 from learn.models.base import Compensator, FnStreamer, Streamer, register
 
-__all__ = ["KERNELS", "SOLVERS", "KMeans", "RBFCompensator", "RBFNetwork", "RecursiveLeastSquares", "half_distance", "kernel_phi", "sq_dist"]
+__all__ = ["KERNELS", "SOLVERS", "KMeans", "RBFCompensator", "RBFNetwork", "RecursiveLeastSquares", "exact_weights",
+           "half_distance", "kernel_phi", "ridge_weights", "sq_dist", "sweep_predict"]
 
 
-def sq_dist(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """[N, F], [K, F] -> [N, K] squared Euclidean distances (clipped at 0)."""
-    d = (a * a).sum(1)[:, None] - 2.0 * a @ b.T + (b * b).sum(1)[None, :]
-    return np.maximum(d, 0.0)
+def sq_dist(a: np.ndarray, b: np.ndarray, aa: np.ndarray | None = None) -> np.ndarray:
+    """[N, F], [K, F] -> [N, K] squared Euclidean distances (clipped at 0): ||a||^2 - 2 a.b + ||b||^2, built in
+    place (bit for bit the same as the out-of-place expression: doubling is exact and x - y = x + (-y) in IEEE
+    arithmetic). aa: (a * a).sum(1), when the caller reuses it over many b."""
+    d = a @ b.T
+    d *= -2.0
+    d += ((a * a).sum(1) if aa is None else aa)[:, None]
+    d += (b * b).sum(1)[None, :]
+    return np.maximum(d, 0.0, out=d)
 
 
 KERNELS = ("eq9", "matlab", "sigma")
@@ -65,10 +74,69 @@ def kernel_gamma(kernel: str, spread: float) -> float:
     return math.log(2.0) / spread**2 if kernel == "matlab" else 0.5 / spread**2
 
 
-def kernel_phi(kernel: str, spread: float, d2: np.ndarray) -> np.ndarray:
-    """Hidden-unit outputs from squared distances d2 under `kernel` (see the module docstring)."""
+def kernel_phi(kernel: str, spread: float, d2: np.ndarray, d: np.ndarray | None = None) -> np.ndarray:
+    """Hidden-unit outputs from squared distances d2 under `kernel` (see the module docstring). d: sqrt(d2), when
+    the caller reuses it over many spreads ("eq9" only; same bits)."""
     g = kernel_gamma(kernel, spread)
-    return np.exp(-g * np.sqrt(d2)) if kernel == "eq9" else np.exp(-g * d2)
+    if kernel == "eq9":
+        return np.exp(-g * (np.sqrt(d2) if d is None else d))
+    return np.exp(-g * d2)
+
+
+def ridge_weights(H: np.ndarray, Y: np.ndarray, delta: float = 1e-3) -> np.ndarray:
+    """Output weights of RLS with forgetting factor 1 started from P0 = I / delta, after all rows of H [N, K],
+    in closed form: W = (H^T H + delta I)^-1 H^T Y (Haykin, Adaptive Filter Theory, ch. 10: RLS of lam = 1 is
+    the exponentially unweighted, delta-regularised least squares), solved by Cholesky. Equal to
+    ``RecursiveLeastSquares(delta).fit(H, Y).W`` within round-off (tests/test_learn_ntype.py), at K^3 / 3 +
+    N K^2 flops instead of the block recursion's ~3 N K^2 + (N / block) K^3."""
+    from scipy.linalg import cho_factor, cho_solve
+
+    H = np.asarray(H, np.float64)
+    A = H.T @ H
+    A[np.diag_indices_from(A)] += float(delta)
+    return cho_solve(cho_factor(A, lower=True, overwrite_a=True, check_finite=False),
+                     H.T @ np.asarray(Y, np.float64).reshape(len(H), -1), check_finite=False)
+
+
+def exact_weights(Phi: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    """Eq. 12 of the ntype paper, w = Phi^-1 d (Phi [N, N] over the training inputs, symmetric positive definite
+    in exact arithmetic for the kernels here): by Cholesky, by LU where round-off has broken definiteness."""
+    from scipy.linalg import LinAlgError, cho_factor, cho_solve
+
+    Y = np.asarray(Y, np.float64).reshape(len(Phi), -1)
+    try:
+        return cho_solve(cho_factor(np.asarray(Phi, np.float64), lower=True, check_finite=False), Y, check_finite=False)
+    except LinAlgError:
+        return np.linalg.solve(Phi, Y)
+
+
+def sweep_predict(d2_train: np.ndarray, Y: np.ndarray, d2_test: np.ndarray, kernel: str, spreads, *,
+                  solvers: tuple[str, ...] = ("rls",), bias: bool = True, delta: float = 1e-3
+                  ) -> dict[str, dict[float, np.ndarray]]:
+    """One RBF network per spread and solver on fixed centres, from the squared distances of the training inputs
+    (d2_train [N, K]) and of the test inputs (d2_test [M, K]) to the centres, computed once for the whole sweep
+    (and the hidden outputs once per spread for all solvers): {solver: {spread: predictions [M, O]}}.
+    "rls": RLS in closed form (ridge_weights) on the hidden outputs plus a constant unit when ``bias``, i.e.
+    RBFNetwork(K, spread, kernel, bias, delta).fit(X, Y, centres).predict(X_test) within round-off; "exact":
+    eq. 12 (exact_weights, no bias), which needs the centres to be the training inputs (d2_train [N, N])."""
+    bad = [s for s in solvers if s not in SOLVERS]
+    if bad:
+        raise ValueError(f"solver must be one of {SOLVERS}, got {bad}")
+    if "exact" in solvers and d2_train.shape[0] != d2_train.shape[1]:
+        raise ValueError("solver 'exact' (eq. 12) needs one centre per training sample")
+    d_tr = np.sqrt(d2_train) if kernel == "eq9" else None
+    d_te = np.sqrt(d2_test) if kernel == "eq9" else None
+    out: dict[str, dict[float, np.ndarray]] = {k: {} for k in solvers}
+    for s in spreads:
+        H, Ht = kernel_phi(kernel, s, d2_train, d_tr), kernel_phi(kernel, s, d2_test, d_te)
+        if "exact" in solvers:
+            out["exact"][s] = Ht @ exact_weights(H, Y)
+        if "rls" in solvers:
+            if bias:
+                H = np.concatenate([H, np.ones((len(H), 1))], 1)
+                Ht = np.concatenate([Ht, np.ones((len(Ht), 1))], 1)
+            out["rls"][s] = Ht @ ridge_weights(H, Y, delta)
+    return out
 
 
 def half_distance(kernel: str, spread: float) -> float:
@@ -98,13 +166,14 @@ class KMeans:
     def _plusplus(self, X: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         n, k = len(X), self.n_clusters
         C = np.empty((k, X.shape[1]))
+        xx = (X * X).sum(1)
         C[0] = X[rng.integers(n)]
-        d = sq_dist(X, C[:1])[:, 0]
+        d = sq_dist(X, C[:1], xx)[:, 0]
         for i in range(1, k):
             tot = d.sum()
             j = rng.choice(n, p=d / tot) if tot > 0 else rng.integers(n)
             C[i] = X[j]
-            d = np.minimum(d, sq_dist(X, C[i : i + 1])[:, 0])
+            d = np.minimum(d, sq_dist(X, C[i : i + 1], xx)[:, 0])
         return C
 
     def fit(self, X: np.ndarray) -> KMeans:
@@ -116,8 +185,9 @@ class KMeans:
         self.n_clusters = k
         C = self._plusplus(X, rng)
         scale = max(float(np.var(X, axis=0).sum()), 1e-300)
+        xx = (X * X).sum(1)
         for it in range(self.max_iter):
-            d = sq_dist(X, C)
+            d = sq_dist(X, C, xx)
             lab = d.argmin(1)
             counts = np.bincount(lab, minlength=k)
             new = np.zeros_like(C)
@@ -132,7 +202,7 @@ class KMeans:
             if shift <= self.tol * scale:
                 break
         self.n_iter_ = it + 1
-        d = sq_dist(X, C)
+        d = sq_dist(X, C, xx)
         self.labels_ = d.argmin(1)
         self.inertia_ = float(d[np.arange(len(X)), self.labels_].sum())
         self.cluster_centers_ = C
