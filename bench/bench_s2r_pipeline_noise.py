@@ -97,8 +97,8 @@ def main(argv=None):
     a = ap.parse_args(argv)
     bm = json.loads((a.base / "metrics.json").read_text())
     out = json.loads(a.out.read_text()) if a.out.is_file() else {"runs": {}, "pretrain": {}}
-    out.update(command="python bench/bench_s2r_pipeline_noise.py " + shlex.join(sys.argv[1:] if argv is None else argv),
-               real=a.real, test_episodes=a.test_episodes, base=str(a.base), base_command=bm.get("command"))
+    cmd = "python bench/bench_s2r_pipeline_noise.py " + shlex.join(sys.argv[1:] if argv is None else argv)
+    out.update(command=cmd, commands=[*out.get("commands", []), cmd], real=a.real, test_episodes=a.test_episodes, base=str(a.base), base_command=bm.get("command"))
     params, fj = C.load_params(a.base / "fit.json")
     rand = Randomization.model_validate(fj["randomization"])
 
