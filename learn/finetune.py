@@ -23,6 +23,13 @@ dense layer) and a learnable affine of the normalised input (scale a, shift b pe
 saved. With one to a few real runs (a few thousand samples) this is tens of parameters instead of
 thousands. ``none`` retrains every layer (same small learning rate), for comparison.
 
+Methods (``method``): ``plain`` trains the policy's parameters from the pre-trained weights; ``l2sp`` adds
+L2-SP's penalty alpha/2 ||w - w0||^2 over the retrained pre-trained weights w0 (and beta/2 ||(a - 1, b)||^2 on the
+new input affine) to the training loss (Li, Grandvalet & Davoine 2018, ICML, "Explicit inductive bias for transfer
+learning with convolutional networks", eq. of L2-SP); ``lpft`` first fits the head (policy ``head``, early stopped),
+then every layer of the policy from there (Kumar et al. 2022, ICLR, "Fine-tuning can distort pretrained features
+and underperform out-of-distribution": linear probing, then fine-tuning). Eighth round of issue 15 (CHANGELOG).
+
 Early stopping uses held-out real data: whole runs (`split_runs`), or, in `piezotwin sim2real`, the last
 presses of each training run (`split_tail`: the same sensor, cut between presses). The pre-trained weights
 are the first candidate (fine-tuning that never improves on them returns them).
@@ -48,13 +55,17 @@ from learn.normalize import ZScore
 from sensors.data.resample import resample
 
 __all__ = [
+    "FINETUNE_METHODS",
     "FREEZE_POLICIES",
+    "L2SP_ALPHA",
+    "L2SP_BETA",
     "VALID_TAIL_FRACTION",
     "InputMap",
     "RealSplit",
     "apply_map",
     "finetune",
     "head_parameter_names",
+    "l2sp_penalty",
     "load_recording",
     "resample",
     "restandardise",
@@ -64,6 +75,11 @@ __all__ = [
 ]
 
 FREEZE_POLICIES = ("head", "none")
+FINETUNE_METHODS = ("plain", "l2sp", "lpft")
+# estimate: alpha 0.1 and beta 0.01 are the values Li et al. (2018) settled on for L2-SP (chosen there by cross-validation
+# over 1e-3 ... 1 on image tasks, loss = mean per sample, as our MSE); taken as given, never tuned on these data
+L2SP_ALPHA = 0.1
+L2SP_BETA = 0.01
 TRANSFORMS = ("log", "none")
 
 
@@ -248,6 +264,20 @@ def restandardise(comp: Compensator, seqs: Seq[Sequence]) -> Compensator:
     return c
 
 
+def l2sp_penalty(module: nn.Module, alpha: float, beta: float = 0.0, new: Seq[str] = ()) -> Callable[[], torch.Tensor]:
+    """L2-SP (Li, Grandvalet & Davoine 2018): alpha/2 sum ||w - w0||^2 over the trainable parameters of ``module`` as
+    they are now (w0, the anchor: the pre-trained weights), except those named in ``new``, which get beta/2 ||w -
+    w0||^2 toward their starting values (the paper's beta term on a new layer; ours, the input affine, starts at
+    the identity). Returns the penalty as a function of the current weights."""
+    named = [(n, p) for n, p in module.named_parameters() if p.requires_grad]
+    anchor = [(p, p.detach().clone(), float(beta if n in set(new) else alpha)) for n, p in named]
+
+    def penalty() -> torch.Tensor:
+        return sum(0.5 * w * torch.sum((p - p0) ** 2) for p, p0, w in anchor if w > 0.0) + torch.zeros(())
+
+    return penalty
+
+
 def _torch_only(comp: Compensator) -> None:
     if getattr(comp, "net", None) is None or not hasattr(comp, "_examples"):
         raise ValueError(f"model {comp.kind!r} has no neural layers to fine-tune (use a tcn, mlp, gru or lstm checkpoint)")
@@ -256,7 +286,8 @@ def _torch_only(comp: Compensator) -> None:
 def finetune(comp: Compensator, train: Seq[Sequence], valid: Seq[Sequence], *, policy: str = "head",
              lr: float = 3e-4, max_epochs: int = 300, patience: int = 30, batch_size: int | None = None,
              seed: int = 0, progress: bool = False, norm: str = "real",
-             rehearsal: Seq[Sequence] = ()) -> tuple[Compensator, dict[str, Any]]:
+             rehearsal: Seq[Sequence] = (), method: str = "plain", l2sp_alpha: float = L2SP_ALPHA,
+             l2sp_beta: float = L2SP_BETA) -> tuple[Compensator, dict[str, Any]]:
     """Fine-tune a copy of ``comp`` on mapped real runs; returns (compensator, info). See the module docstring.
 
     ``norm``: ``real`` re-estimates the input z-score on the real training runs (step 3 of the input map);
@@ -266,9 +297,21 @@ def finetune(comp: Compensator, train: Seq[Sequence], valid: Seq[Sequence], *, p
     subset-dependent amount); the learnable input affine absorbs a gain/offset either way.
     ``rehearsal``: simulated episodes (same input map) added to the training examples (the pre-training
     distribution kept in view while adapting: limits forgetting when the real runs are few); early
-    stopping still on the real valid runs only."""
+    stopping still on the real valid runs only.
+    ``method``: ``plain``, ``l2sp`` (``l2sp_alpha``, ``l2sp_beta``) or ``lpft`` (see the module docstring)."""
     if norm not in ("real", "checkpoint"):
         raise ValueError(f"norm must be 'real' or 'checkpoint'; got {norm!r}")
+    if method not in FINETUNE_METHODS:
+        raise ValueError(f"fine-tuning method must be one of {', '.join(FINETUNE_METHODS)}; got {method!r}")
+    if method == "lpft":
+        kw = dict(lr=lr, max_epochs=max_epochs, patience=patience, batch_size=batch_size, seed=seed, rehearsal=rehearsal)
+        lp, lp_info = finetune(comp, train, valid, policy="head", norm=norm, **kw)
+        # stage 2 starts from the probed net (its input affine folded into the z-score, which it keeps)
+        c, info = finetune(lp, train, valid, policy=policy, norm="checkpoint", **kw)
+        info.update(method="lpft", valid_mse_z_before=lp_info["valid_mse_z_before"],
+                    linear_probe={k: lp_info[k] for k in ("epochs", "best_epoch", "best_loss", "n_trainable")})
+        c.history = {k: v for k, v in info.items() if k not in ("train_loss", "valid_loss")}
+        return c, info
     from learn.train import TrainConfig, train_model
 
     if policy not in FREEZE_POLICIES:
@@ -294,7 +337,9 @@ def finetune(comp: Compensator, train: Seq[Sequence], valid: Seq[Sequence], *, p
     cfg = TrainConfig(lr=lr, batch_size=int(batch_size or c.hparams.get("batch_size", 32)), max_epochs=max_epochs,
                       patience=patience, grad_clip=1.0, seed=seed)
     # the pre-trained weights stay a candidate: no step that worsens the validation loss is kept
-    hist = train_model(wrapped, tr, va, cfg, progress=progress, description=f"finetune[{policy}]", keep_initial=True)
+    pen = l2sp_penalty(wrapped, float(l2sp_alpha), float(l2sp_beta), new=("a", "b")) if method == "l2sp" else None
+    hist = train_model(wrapped, tr, va, cfg, progress=progress, description=f"finetune[{policy}]", keep_initial=True,
+                       penalty=pen)
     a = wrapped.a.detach().double().numpy()
     b = wrapped.b.detach().double().numpy()
     # fold z' = a (x - m) / s + b into the z-score: mean m - b s / a, std s / a
@@ -306,7 +351,8 @@ def finetune(comp: Compensator, train: Seq[Sequence], valid: Seq[Sequence], *, p
     n_trainable = sum(p.numel() for n, p in c.net.named_parameters() if n not in frozen) + 2 * c.n_in
     info = {"policy": policy, "frozen": frozen, "trained": sorted(set(n for n, _ in c.net.named_parameters()) - set(frozen)) + ["input affine a, b"],
             "n_trainable": int(n_trainable), "n_parameters": int(sum(p.numel() for p in c.net.parameters())),
-            "lr": lr, "norm": norm, "n_rehearsal_episodes": len(rehearsal), "valid_mse_z_before": before, "input_affine": {"a": a.tolist(), "b": b.tolist()},
+            "lr": lr, "norm": norm, "method": method,
+            **({"l2sp_alpha": float(l2sp_alpha), "l2sp_beta": float(l2sp_beta)} if method == "l2sp" else {}), "n_rehearsal_episodes": len(rehearsal), "valid_mse_z_before": before, "input_affine": {"a": a.tolist(), "b": b.tolist()},
             "n_train_runs": len(train), "n_valid_runs": len(valid), **hist.to_json()}
     c.history = {k: v for k, v in info.items() if k not in ("train_loss", "valid_loss")}
     return c, info

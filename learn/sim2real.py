@@ -256,8 +256,13 @@ S2R_BUDGET = {  # the default budget of `piezotwin sim2real` (2 CPU cores, <= 15
     "pretrain_patience": 12, "finetune_epochs": 120, "finetune_patience": 20, "lr": 2e-3, "policy": "none",
     "finetune_norm": "checkpoint", "rehearsal": 0.0, "n_train_seeds": 3, "time_budget_s": 900.0, "valid_tail": 0.25,
     "press_slope": False, "rated_force_n": None, "run_level": False, "fit_threshold": False,
-    "creep_linear": False,
+    "creep_linear": False, "finetune_method": "plain", "l2sp_alpha": 0.1, "l2sp_beta": 0.01, "pipeline_seed": 0,
 }
+# finetune_method: plain | l2sp | lpft (learn.finetune; L2-SP's alpha / beta: learn.finetune.L2SP_ALPHA, an estimate);
+# eighth round, adopted only by the rule written before scoring (CHANGELOG)
+# pipeline_seed: varies the generation draw and the pre-training (its simulated split, init and batch order) with the
+# fit, the learning curve's run order and the fine-tuning / scratch seeds held: root seed + 100 x pipeline_seed for
+# steps 2-3 (0: the recorded runs); measures the pipeline's spread (bench/bench_s2r_pipeline_noise.py)
 # creep_linear: the chain's creep force proportional to the load (linear creep; F_c held at its bound;
 # sensors.chain_fit.fit_chain), seventh round, adopted only by the rule written before scoring (CHANGELOG)
 # fit_threshold: fit the chain's threshold force F_0 (F_eff = F - F_0, the force the curved mount carries before the
@@ -280,7 +285,46 @@ S2R_BUDGET = {  # the default budget of `piezotwin sim2real` (2 CPU cores, <= 15
 # stopping; at 3e-4 the fine-tuning stopped on the valid runs (best epochs ~20) with the pre-trained net's 2x
 # over-prediction (bench/results/s2r-diagnosis-*.json) only partly unlearned.
 FINETUNE_KEYS = ("finetune_epochs", "finetune_patience", "lr", "policy", "finetune_norm", "rehearsal", "n_train_seeds",
-                 "time_budget_s", "valid_tail")
+                 "time_budget_s", "valid_tail", "finetune_method", "l2sp_alpha", "l2sp_beta")
+
+
+def pipeline_seed(seed: int, B: dict) -> int:
+    """The seed of steps 2-3 (generation, pre-training): the root seed, moved by 100 per pipeline seed."""
+    return int(seed) + 100 * int(B.get("pipeline_seed") or 0)
+
+
+def generate_step(p, rand, gen_f: Path, B: dict, seed: int, progress: Callable[[int], None] | None = None) -> None:
+    """Step 2: the randomized simulated episodes around the fitted chain ``p``."""
+    from simulate.generation.chain_gen import generate_chain
+
+    generate_chain(p, rand, gen_f, n_episodes=int(B["n_episodes"]), root_seed=pipeline_seed(seed, B),
+                   duration_s=float(B["episode_s"]), rate_hz=float(B["fit_rate_hz"]), progress=progress)
+
+
+def pretrain_step(gen_f: Path, ck: Path, model: str, B: dict, seed: int, progress: bool = False) -> dict[str, Any]:
+    """Step 3: pre-train ``model`` on the simulated episodes; writes the checkpoint ``ck`` whole (tmp + rename)."""
+    from learn.checkpoint import save_checkpoint
+    from learn.models.base import make_model
+
+    s = pipeline_seed(seed, B)
+    seqs = FT.apply_map(FT.load_recording(gen_f, ["sensor"], ["force"]), "log")
+    sp = _split(seqs, s)
+    comp = make_model(model, max_epochs=int(B["pretrain_epochs"]), patience=int(B["pretrain_patience"]))
+    t0 = time.perf_counter()
+    comp.fit([q.x for q in sp["train"]], [q.y for q in sp["train"]], valid=([q.x for q in sp["valid"]], [q.y for q in sp["valid"]]),
+             seed=s, progress=progress, inputs=["sensor"], targets=["force"], units=seqs[0].units)
+    hist = getattr(comp, "history", {}) or {}
+    sim_rmse = FT.rmse_on(comp, sp["valid"])
+    tmp = ck.with_name(ck.name + ".tmp")
+    save_checkpoint(comp, tmp, extra={"input_map": {"channel": "sensor", "transform": "log", "rate_hz": float(B["fit_rate_hz"])},
+                                       "sim_valid_rmse": sim_rmse})
+    if ck.exists():
+        import shutil
+
+        shutil.rmtree(ck)
+    tmp.replace(ck)
+    return {"sim_valid_rmse": sim_rmse, "seconds": time.perf_counter() - t0, "epochs": hist.get("epochs"),
+            "best_epoch": hist.get("best_epoch")}
 
 
 def isotonic_decreasing(x: np.ndarray, y: np.ndarray, n_knots: int = 200) -> tuple[np.ndarray, np.ndarray]:
@@ -402,11 +446,9 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
     import fnmatch
     import json
 
-    from learn.checkpoint import load_checkpoint, save_checkpoint
-    from learn.models.base import make_model
+    from learn.checkpoint import load_checkpoint
     from scenes.randomize import Randomization
     from sensors import chain_fit as C
-    from simulate.generation.chain_gen import generate_chain
 
     B = {**S2R_BUDGET, **(budget or {})}
     out = Path(out_dir)
@@ -417,7 +459,9 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
     key = {"family": family, "recording": str(Path(recording).resolve()), "test": test_glob,
            "budget": {k: v for k, v in B.items() if k not in FINETUNE_KEYS}, "seed": seed, "model": model}
     if state.get("key") != key:
-        state = {"key": key, "done": {}}
+        # the fit does not depend on the pipeline seed (steps 2-3 only): kept when nothing else changed
+        same_fit = _fit_key(state.get("key")) == _fit_key(key) and "fit" in state.get("done", {})
+        state = {"key": key, "done": {"fit": state["done"]["fit"]} if same_fit else {}}
     rate = float(B["fit_rate_hz"])
     t_all = time.perf_counter()
 
@@ -471,33 +515,16 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
         gen_f = out / "sim.h5"
         if "generate" not in state["done"] or not gen_f.is_file():
             task = bar.add_task("2/4 randomized generation", total=int(B["n_episodes"]))
-            generate_chain(p, rand, gen_f, n_episodes=int(B["n_episodes"]), root_seed=seed, duration_s=float(B["episode_s"]),
-                           rate_hz=rate, progress=lambda k: bar.update(task, completed=k))
+            generate_step(p, rand, gen_f, B, seed, progress=lambda k: bar.update(task, completed=k))
             mark("generate", {"file": str(gen_f), "n_episodes": int(B["n_episodes"])})
         # 3. pre-train
         ck = out / "checkpoints" / "pretrained"
         if "pretrain" not in state["done"] or not (ck / "config.json").is_file():
             task = bar.add_task("3/4 pre-training", total=1)
-            seqs = FT.apply_map(FT.load_recording(gen_f, ["sensor"], ["force"]), "log")
-            sp = _split(seqs, seed)
-            comp = make_model(model, max_epochs=int(B["pretrain_epochs"]), patience=int(B["pretrain_patience"]))
-            t0 = time.perf_counter()
-            comp.fit([s.x for s in sp["train"]], [s.y for s in sp["train"]], valid=([s.x for s in sp["valid"]], [s.y for s in sp["valid"]]),
-                     seed=seed, progress=progress, inputs=["sensor"], targets=["force"], units=seqs[0].units)
-            hist = getattr(comp, "history", {}) or {}
-            sim_rmse = FT.rmse_on(comp, sp["valid"])
-            tmp = ck.with_name("pretrained.tmp")
-            save_checkpoint(comp, tmp, extra={"input_map": {"channel": "sensor", "transform": "log", "rate_hz": rate},
-                                               "sim_valid_rmse": sim_rmse})
-            if ck.exists():
-                import shutil
-
-                shutil.rmtree(ck)
-            tmp.replace(ck)
+            info = pretrain_step(gen_f, ck, model, B, seed, progress=progress)
             bar.update(task, completed=1)
-            mark("pretrain", {"sim_valid_rmse": sim_rmse, "seconds": time.perf_counter() - t0,
-                              "epochs": hist.get("epochs"), "best_epoch": hist.get("best_epoch")})
-            log(f"pre-trained: simulated valid RMSE {sim_rmse:.3f} N, epochs {hist.get('epochs')} (best {hist.get('best_epoch')})")
+            mark("pretrain", info)
+            log(f"pre-trained: simulated valid RMSE {info['sim_valid_rmse']:.3f} N, epochs {info['epochs']} (best {info['best_epoch']})")
         base = load_checkpoint(ck)
         # 4. fine-tune, baselines, learning curve
         task = bar.add_task("4/4 fine-tuning + baselines", total=1)
@@ -521,6 +548,13 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
     (out / "metrics.json").write_text(dumps(m))
     _s2r_report(out, m)
     return m
+
+
+def _fit_key(key: dict | None) -> Any:
+    """The part of the steps 1-3 key the fit depends on (everything but the pipeline seed)."""
+    if not key:
+        return None
+    return {**key, "budget": {k: v for k, v in key.get("budget", {}).items() if k != "pipeline_seed"}}
 
 
 def _timing(done: dict[str, Any], wall4: float, cpu4: float, B: dict) -> dict[str, Any]:
@@ -585,7 +619,11 @@ def _mean_metrics(runs: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
-def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target, rate, tick, log, sim=()) -> dict[str, Any]:
+def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target, rate, tick, log, sim=(),
+                   scratch: bool = True) -> dict[str, Any]:
+    """Step 4: zero-shot, two-point, and the learning curve of fine-tuned / scratch / static curve. ``scratch``
+    False leaves the scratch nets out (their rows None: a bench comparing fine-tuning methods, which scratch
+    does not depend on)."""
     seqs = FT.apply_map(FT.load_recording(recording, [input_channel], [target], rate_hz=rate), "log")
     # every run outside the test glob is a training run (added along the learning curve in curve_order); early
     # stopping uses the last presses of the budget's own runs (FT.split_tail), never a run of another series/cover
@@ -603,7 +641,8 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
     # training seeds: fine-tuned and scratch each the mean over the same fixed seeds (fixed in the budget)
     seeds = [int(seed) + int(k) for k in range(int(B["n_train_seeds"]))]
     kw = dict(policy=B["policy"], lr=B["lr"], max_epochs=int(B["finetune_epochs"]), patience=int(B["finetune_patience"]),
-              norm=B["finetune_norm"])
+              norm=B["finetune_norm"], method=B.get("finetune_method", "plain"), l2sp_alpha=float(B.get("l2sp_alpha", FT.L2SP_ALPHA)),
+              l2sp_beta=float(B.get("l2sp_beta", FT.L2SP_BETA)))
     sizes = sorted({k for k in (1, 2, 4) if k < len(sp.train)} | {len(sp.train)})
     n_steps = len(sizes) + 1
     res: dict[str, Any] = {}
@@ -633,36 +672,48 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
                 if fi is None or ci["best_loss"] < fi["best_loss"]:
                     ft, fi, reh_ratio = c, ci, r
             sc = FT.train_from_scratch(base.kind, base.hparams, heads, tails, seed=sd, max_epochs=int(B["finetune_epochs"]),
-                                       patience=int(B["finetune_patience"]))
+                                       patience=int(B["finetune_patience"])) if scratch else None
             fts.append(score(ft))
-            scs.append(score(sc))
-            fv, sv = FT.rmse_on(ft, tails), FT.rmse_on(sc, tails)  # N, on the training runs' validation tails
+            if sc is not None:
+                scs.append(score(sc))
+            fv = FT.rmse_on(ft, tails)  # N, on the training runs' validation tails
+            sv = FT.rmse_on(sc, tails) if sc is not None else None
             infos.append({"seed": sd, "finetune_epochs": fi["epochs"], "finetune_best_epoch": fi["best_epoch"],
                           "finetune_valid_mse_z_before": fi["valid_mse_z_before"], "finetune_valid_mse_z_best": fi["best_loss"],
                           "finetune_valid_rmse_n": fv, "scratch_valid_rmse_n": sv,
+                          "finetune_valid_error_split_n": error_split(ft, tails),
+                          **({"linear_probe": fi["linear_probe"]} if "linear_probe" in fi else {}),
                           "rehearsal": reh_ratio, "scratch_epochs": (getattr(sc, "history", {}) or {}).get("epochs")})
         st = StaticCurve(tr)  # the curve sees every labelled real sample the others see (heads and tails)
-        row = {"n_runs": k, "runs": [s.key for s in tr], "finetuned": _mean_metrics(fts), "scratch": _mean_metrics(scs),
-               "static_curve": score(st), "seeds": infos}
+        row = {"n_runs": k, "runs": [s.key for s in tr], "finetuned": _mean_metrics(fts),
+               "scratch": _mean_metrics(scs) if scs else None, "static_curve": score(st), "seeds": infos,
+               "pretrained_valid_rmse_n": FT.rmse_on(base, tails), "pretrained_valid_error_split_n": error_split(base, tails)}
         lc.append(row)
+        sc_txt = f"{row['scratch']['rmse']:.3f} +- {row['scratch']['rmse_sd']:.3f} N" if scs else "not run"
         log(f"  {k} real run(s): fine-tuned {row['finetuned']['rmse']:.3f} +- {row['finetuned']['rmse_sd']:.3f} N, scratch "
-            f"{row['scratch']['rmse']:.3f} +- {row['scratch']['rmse_sd']:.3f} N, static curve {row['static_curve']['rmse']:.3f} N "
-            f"(mean +- sd over {len(seeds)} seeds)")
+            f"{sc_txt}, static curve {row['static_curve']['rmse']:.3f} N (mean +- sd over {len(seeds)} seeds)")
         tick(i + 2, n_steps)
     last = lc[-1]
     for k in ("finetuned", "scratch", "static_curve"):
         res[k] = last[k]
     for k in res:
-        res[k]["rmse_pct_full_scale"] = 100 * res[k]["rmse"] / full
+        if res[k] is not None:
+            res[k]["rmse_pct_full_scale"] = 100 * res[k]["rmse"] / full
     res["zero_shot"]["two_point_gain"]["rmse_pct_full_scale"] = 100 * res["zero_shot"]["two_point_gain"]["rmse"] / full
-    curve = [{"n_runs": r["n_runs"], "runs": r["runs"], **{f"{k}_rmse": r[k]["rmse"] for k in ("finetuned", "scratch", "static_curve")},
-              "finetuned_rmse_sd": r["finetuned"]["rmse_sd"], "scratch_rmse_sd": r["scratch"]["rmse_sd"],
-              "finetuned_rmse_seeds": r["finetuned"]["rmse_seeds"], "scratch_rmse_seeds": r["scratch"]["rmse_seeds"],
+    def sc_(r, k):
+        return r["scratch"][k] if r["scratch"] is not None else None
+
+    curve = [{"n_runs": r["n_runs"], "runs": r["runs"], "finetuned_rmse": r["finetuned"]["rmse"], "scratch_rmse": sc_(r, "rmse"),
+              "static_curve_rmse": r["static_curve"]["rmse"],
+              "finetuned_rmse_sd": r["finetuned"]["rmse_sd"], "scratch_rmse_sd": sc_(r, "rmse_sd"),
+              "finetuned_rmse_seeds": r["finetuned"]["rmse_seeds"], "scratch_rmse_seeds": sc_(r, "rmse_seeds"),
               "finetuned_valid_rmse": float(np.mean([x["finetune_valid_rmse_n"] for x in r["seeds"]])),
-              "scratch_valid_rmse": float(np.mean([x["scratch_valid_rmse_n"] for x in r["seeds"]])),
+              "scratch_valid_rmse": float(np.mean([x["scratch_valid_rmse_n"] for x in r["seeds"]])) if scratch else None,
+              "pretrained_valid_rmse": r["pretrained_valid_rmse_n"], "pretrained_valid_error_split_n": r["pretrained_valid_error_split_n"],
               "seeds": r["seeds"]} for r in lc]
     tg = {
-        "finetuned_beats_scratch_and_static_every_budget": all(r["finetuned_rmse"] < min(r["scratch_rmse"], r["static_curve_rmse"]) for r in curve),
+        "finetuned_beats_scratch_and_static_every_budget": all(r["finetuned_rmse"] < min(r["scratch_rmse"], r["static_curve_rmse"]) for r in curve)
+        if scratch else None,
         "one_run_within_1.3x_all_runs": curve[0]["finetuned_rmse"] <= 1.3 * curve[-1]["finetuned_rmse"],
         "pooled_le_12pct": res["finetuned"]["rmse_pct_full_scale"] <= 12.0,
         "zero_shot_two_point_le_25pct": res["zero_shot"]["two_point_gain"]["rmse_pct_full_scale"] <= 25.0,
@@ -672,6 +723,40 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
             "validation": f"early stopping on the last presses of each training run of the budget (about {100 * float(B['valid_tail']):.0f} % "
                           "of its samples, cut between presses; learn.finetune.split_tail); the pre-trained weights are the first candidate",
             "input_map": "x = ln(reading) at %g Hz; the simulated reading is in the real board's units" % rate}
+
+
+def paired_improvement(ref: Seq[float], cand: Seq[float]) -> dict[str, Any]:
+    """The eighth round's adoption statistic (CHANGELOG, written before scoring): over K pipeline seeds, the paired
+    differences d_p = cand_p - ref_p of the validation-tail RMSE (both on the same pre-trained net); ``improves``
+    when their mean is below minus their standard error sd(d) / sqrt(K) (K >= 2)."""
+    r, c = np.asarray(ref, float), np.asarray(cand, float)
+    if r.shape != c.shape or r.ndim != 1 or len(r) < 2:
+        raise ValueError(f"need two equal-length lists of >= 2 values (pipeline seeds); got {r.shape} and {c.shape}")
+    d = c - r
+    se = float(np.std(d, ddof=1) / np.sqrt(len(d)))
+    return {"k": len(d), "ref_mean": float(r.mean()), "cand_mean": float(c.mean()), "diff": d.tolist(),
+            "diff_mean": float(d.mean()), "diff_se": se, "improves": bool(d.mean() < -se)}
+
+
+def error_split(comp, seqs: Seq[Sequence]) -> dict[str, float]:
+    """Where a net's force error sits (N): ``level``, the rms over presses of each press's mean error on its
+    plateau (>= 90 % of its peak: a gain / level miss), and ``shape``, the rms of the rest within those plateaus
+    (creep, dynamics); ``total`` the rms over all samples. Presses as sensors.chain_fit.presses_of."""
+    from sensors.chain_fit import presses_of
+
+    lev, shp, allr = [], [], []
+    for s in seqs:
+        f = s.y[:, 0]
+        e = comp.predict(s.x)[:, 0] - f
+        allr.append(e)
+        for sl in presses_of(f, max(0.1 * float(f.max()), 1e-9)):
+            h = sl.start + np.flatnonzero(f[sl] >= 0.9 * f[sl].max())
+            if len(h):
+                lev.append(float(np.mean(e[h])))
+                shp.append(e[h] - np.mean(e[h]))
+    rms = lambda a: float(np.sqrt(np.mean(np.square(a)))) if len(a) else float("nan")
+    return {"level": rms(np.array(lev)), "shape": rms(np.concatenate(shp)) if shp else float("nan"),
+            "total": rms(np.concatenate(allr)), "n_presses": len(lev)}
 
 
 def _s2r_report(out: Path, m: dict[str, Any]) -> None:

@@ -148,6 +148,7 @@ def train_model(
     progress: bool = True,
     description: str = "train",
     keep_initial: bool = False,
+    penalty: Callable[[], torch.Tensor] | None = None,
 ) -> TrainHistory:
     """Train ``net`` so that ``net(x) ~ y`` in MSE; returns the history; leaves the best weights loaded.
 
@@ -156,6 +157,8 @@ def train_model(
     ``keep_initial``: the weights the net arrives with are a candidate too (epoch -1, their validation loss
     before any step): fine-tuning that never improves on the pre-trained net returns it unchanged instead of
     the first epoch's weights.
+    ``penalty``: a term added to each batch's training loss (e.g. L2-SP's pull toward the pre-trained weights,
+    learn.finetune); the validation loss that stops early stays the plain MSE.
     """
     from rich.console import Console
     from rich.progress import (
@@ -191,7 +194,7 @@ def train_model(
                 xb, yb = xt[idx], yt[idx]
                 opt.zero_grad(set_to_none=True)
                 loss = nn.functional.mse_loss(net(xb), yb)
-                loss.backward()
+                (loss + penalty() if penalty is not None else loss).backward()
                 if cfg.grad_clip:
                     nn.utils.clip_grad_norm_(net.parameters(), cfg.grad_clip)
                 opt.step()

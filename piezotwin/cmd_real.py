@@ -204,6 +204,10 @@ def sim2real(
                              "the force a curved mount carries before the film is loaded) on a board without a readout floor.")] = False,
     creep_linear: Annotated[bool, typer.Option("--creep-linear", help="Linear creep: the fitted creep force "
                             "proportional to the load (the steady law stays a power law).")] = False,
+    finetune_method: Annotated[str | None, typer.Option("--finetune-method", help="plain, l2sp (L2-SP, Li et al. 2018) "
+                               "or lpft (LP-FT, Kumar et al. 2022); default: the budget's.")] = None,
+    pipeline_seed: Annotated[int, typer.Option("--pipeline-seed", help="Redraw the generation and the pre-training "
+                             "(root seed + 100 x this) with the fit, the run order and the fine-tuning seeds held.")] = 0,
 ) -> None:
     """Real -> sim -> real: fit the chain, generate randomized data around it, pre-train, fine-tune, report."""
     from learn.sim2real import S2R_BUDGET, run_sim2real
@@ -228,6 +232,16 @@ def sim2real(
         b["fit_threshold"] = True
     if creep_linear:
         b["creep_linear"] = True
+    if finetune_method is not None:
+        from learn.finetune import FINETUNE_METHODS
+
+        if finetune_method not in FINETUNE_METHODS:
+            fail(f"--finetune-method must be one of {', '.join(FINETUNE_METHODS)} (got {finetune_method!r})")
+        b["finetune_method"] = finetune_method
+    if pipeline_seed:
+        if not 0 <= pipeline_seed < 10**6:
+            fail(f"--pipeline-seed must be in [0, 1e6) (got {pipeline_seed})")
+        b["pipeline_seed"] = int(pipeline_seed)
     try:
         import shlex
         import sys

@@ -210,3 +210,51 @@ def test_split_tail_cuts_each_run_between_presses():
     assert h.key == "run[head]" and t.key == "run[tail]"
     with pytest.raises(ValueError):
         FT.split_tail([s], 1.0)
+
+
+def test_l2sp_penalty_pulls_toward_the_pretrained_weights(ckpt):
+    """L2-SP (Li et al. 2018): the penalty is alpha/2 ||w - w0||^2 (beta on the named new parameters), zero at the
+    anchor; fine-tuning with it ends nearer the pre-trained weights than plain fine-tuning from the same start."""
+    base = load_checkpoint(ckpt)
+    lin = torch.nn.Linear(3, 2)
+    pen = FT.l2sp_penalty(lin, alpha=0.5, beta=2.0, new=("bias",))
+    assert float(pen().detach()) == 0.0
+    w0, b0 = lin.weight.detach().clone(), lin.bias.detach().clone()
+    with torch.no_grad():
+        lin.weight.add_(0.1)
+        lin.bias.sub_(0.2)
+    assert float(pen().detach()) == pytest.approx(0.5 * 0.5 * 6 * 0.01 + 0.5 * 2.0 * 2 * 0.04, rel=1e-5)
+    pen().backward()  # its gradient points back to the anchor: alpha (w - w0), beta (b - b0)
+    np.testing.assert_allclose(lin.weight.grad.numpy(), 0.5 * (lin.weight - w0).detach().numpy(), rtol=1e-5)
+    np.testing.assert_allclose(lin.bias.grad.numpy(), 2.0 * (lin.bias - b0).detach().numpy(), rtol=1e-5)
+
+    real = FT.apply_map(sim_seqs(3, REALP, rest=800.0), "log")
+    w_pre = torch.cat([p.detach().flatten() for p in base.net.parameters()])
+
+    def moved(**kw):
+        ft, info = FT.finetune(base, real[:2], real[2:], policy="none", lr=1e-2, max_epochs=4, patience=10,
+                               norm="checkpoint", **kw)
+        return float(torch.linalg.norm(torch.cat([p.detach().flatten() for p in ft.net.parameters()]) - w_pre)), info
+
+    d_plain, info_p = moved()
+    d_l2sp, info_l = moved(method="l2sp", l2sp_alpha=50.0)
+    assert info_p["method"] == "plain" and info_l["method"] == "l2sp" and info_l["l2sp_alpha"] == 50.0
+    assert info_p["best_epoch"] >= 0 and info_l["best_epoch"] >= 0
+    assert d_l2sp < 0.8 * d_plain
+    with pytest.raises(ValueError, match="method"):
+        FT.finetune(base, real[:1], real[1:], method="sgd")
+
+
+def test_lpft_probes_the_head_before_every_layer(ckpt):
+    """LP-FT (Kumar et al. 2022): stage 1 trains only the head (policy 'head'), stage 2 every layer from there;
+    the validation loss before stage 1 is the pre-trained net's, and stage 2 never ends above stage 1's best."""
+    base = load_checkpoint(ckpt)
+    real = FT.apply_map(sim_seqs(3, REALP, rest=800.0), "log")
+    ft, info = FT.finetune(base, real[:2], real[2:], policy="none", lr=1e-2, max_epochs=4, patience=10,
+                           norm="checkpoint", method="lpft")
+    _, plain = FT.finetune(base, real[:2], real[2:], policy="none", lr=1e-2, max_epochs=1, patience=1, norm="checkpoint")
+    lp = info["linear_probe"]
+    assert info["method"] == "lpft" and info["frozen"] == []
+    assert lp["n_trainable"] < info["n_trainable"]  # the probe: head + input affine only
+    assert info["valid_mse_z_before"] == pytest.approx(plain["valid_mse_z_before"])
+    assert info["best_loss"] <= lp["best_loss"] + 1e-9

@@ -3,6 +3,7 @@
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from learn.data import Sequence
 from learn.sim2real import _mean_metrics, two_point_calibration
@@ -89,3 +90,19 @@ def test_cli_refuses_a_rated_force_that_is_not_a_force(tmp_path):
                                        "--rated-force-n", bad])
         assert res.exit_code != 0 and "rated-force-n" in res.output, (bad, res.output)
         assert not (tmp_path / "o" / "state.json").exists()
+
+
+def test_paired_improvement_rule_and_pipeline_seed():
+    """The eighth round's rule: adopt when the mean paired difference over pipeline seeds is below minus its
+    standard error; the pipeline seed moves steps 2-3 only (0: the recorded runs) and keeps the fit's state key."""
+    from learn.sim2real import _fit_key, paired_improvement, pipeline_seed
+
+    r = paired_improvement([1.0, 2.0, 3.0], [0.8, 1.9, 2.7])  # d = -0.2, -0.1, -0.3: mean -0.2, se 0.0577
+    assert r["diff_mean"] == pytest.approx(-0.2) and r["diff_se"] == pytest.approx(0.1 / 3 ** 0.5) and r["improves"]
+    assert not paired_improvement([1.0, 2.0, 3.0], [1.2, 1.5, 3.1])["improves"]  # d = 0.2, -0.5, 0.1: mean -0.067, se 0.22
+    with pytest.raises(ValueError):
+        paired_improvement([1.0], [0.5])
+    assert pipeline_seed(7, {"pipeline_seed": 0}) == 7 and pipeline_seed(7, {}) == 7 and pipeline_seed(7, {"pipeline_seed": 2}) == 207
+    k0 = {"family": "velostat", "budget": {"n_boot": 16, "pipeline_seed": 0}, "seed": 0}
+    assert _fit_key(k0) == _fit_key({**k0, "budget": {"n_boot": 16, "pipeline_seed": 3}})
+    assert _fit_key(k0) != _fit_key({**k0, "budget": {"n_boot": 8, "pipeline_seed": 0}}) and _fit_key(None) is None

@@ -670,6 +670,48 @@ def sim2real_results() -> str:
                 + table(["split", "side", "threshold fitted", "linear creep", "exponent", "F_0 (N)", "F_c (N)",
                          "run-mean level trend (ln / ln N)", "steady d ln R / d ln F", "within-press rms (ln)",
                          "fine-tuned validation (N)", "test fine-tuned by budget (N)", "two-point (% FS)"], frow))
+    pno = sorted(RESULTS.glob("s2r-pipeline-noise-*.json"))
+    if pno:
+        nrow, drow = [], []
+        for f in pno:
+            d = json.loads(f.read_text())
+            split = f.stem.removeprefix("s2r-pipeline-noise-")
+            for meth, st in d.get("stats", {}).items():
+                if "valid_tail" not in st:
+                    continue
+                vp = st.get("vs_plain") or {}
+                nrow.append([split, meth, ", ".join(f"p{p}: {num(v, 3)}" for p, v in zip(st["pipeline_seeds"], st["valid_tail"])),
+                             f"{num(st['valid_tail_mean'], 3)} ± {num(st['valid_tail_se'], 2)}", num(st["train_seed_sd_mean"], 3),
+                             f"{num(vp['diff_mean'], 3)} ± {num(vp['diff_se'], 2)}" if vp else "–",
+                             ("yes" if vp["improves"] else "no") if vp else "–",
+                             "; ".join(f"{c}: {num(m_)} ± {num(s_, 2)}" for c, m_, s_ in
+                                       zip([c["n_runs"] for c in d["runs"][f"p{st['pipeline_seeds'][0]}/{meth}"]["curve"]],
+                                           st["test_by_budget_mean"], st["test_by_budget_sd"])),
+                             " / ".join(f"{v:.1f}" for v in st["test_pooled_pct_fs"]), " / ".join(f"{v:.1f}" for v in st["test_two_point_pct_fs"])])
+            for key, r in sorted(d.get("runs", {}).items()):
+                if key.endswith("/plain"):
+                    for c in r["curve"]:
+                        es = c["pretrained_valid_error_split_n"]
+                        fe = [s_["finetune_valid_error_split_n"] for s_ in c["seeds"]]
+                        drow.append([split, key.split("/")[0], c["n_runs"], num(c["pretrained_valid_rmse"]),
+                                     f"{num(es['level'])} / {num(es['shape'])}", num(c["finetuned_valid_rmse"]),
+                                     f"{num(sum(e['level'] for e in fe) / len(fe))} / {num(sum(e['shape'] for e in fe) / len(fe))}",
+                                     ", ".join(f"{s_['finetune_best_epoch']}" for s_ in c["seeds"])])
+        out += "" if not nrow else ("\n\nThe pipeline's spread and the fine-tuning methods (`bench/bench_s2r_pipeline_noise.py`, "
+                "`bench/results/s2r-pipeline-noise-*.json`; eighth round): pipeline seeds p redraw the generation and the "
+                "pre-training (fit, run order and the 3 fine-tuning seeds held). Fine-tuned RMSE on the training runs' "
+                "validation tails (N, mean over budgets and fine-tuning seeds) per p, its mean ± standard error over p, the "
+                "sd over the fine-tuning seeds inside one p, and the paired difference to plain fine-tuning (mean ± se over "
+                "p; the rule written before scoring: adopt if below minus its se in both Lupasic directions); test numbers "
+                "beside it, unused (fine-tuned by budget, N, mean ± sd over p; pooled and two-point % FS per p):\n\n"
+                + table(["split", "method", "validation tail per p (N)", "mean ± se", "sd over fine-tuning seeds",
+                         "paired difference to plain", "improves", "test fine-tuned by budget", "pooled % FS", "two-point % FS"], nrow))
+        if drow:
+            out += ("\n\nWhere the error on the validation tails sits (N; level: rms over presses of each plateau's mean "
+                    "error, shape: the rest within plateaus; `learn.sim2real.error_split`), the pre-trained net before and "
+                    "after plain fine-tuning (mean over seeds), and the fine-tuning seeds' best epochs:\n\n"
+                    + table(["split", "p", "real runs", "pre-trained (N)", "pre-trained level / shape", "fine-tuned (N)",
+                             "fine-tuned level / shape", "best epochs"], drow))
     abl = sorted(RESULTS.glob("s2r-ablation-*.json"))
     if abl:
         arows = []
