@@ -222,16 +222,7 @@ class VelostatSensor:
         cond, _ = run_film_device(p32, (E, T, N), self.fp, dev, out=scratch("velostat cond", size, wp.float32, dev))
         ro = run_readout_device(cond, (E, T, N), self.noise(seeds, T), self.rp, dev)
         s = to_host(sums, "velostat sums").reshape(E, T, 3)
-        cxy = s[..., 1:]
-        out = {
-            "force": s[..., 0].astype(np.float32),
-            "contact_xy": cxy.astype(np.float32),
-            "unit": self.unit_of(cxy),
-        }
-        out.update(ro)
-        out["adc"] = out["adc"].astype(np.int16 if self.rp.adc_bits <= 15 else np.int32)
-        out.pop("touch")
-        return out
+        return self._outputs(s[..., 0], s[..., 1:], ro)
 
     def conductance(self, pressure: np.ndarray) -> np.ndarray:
         """pressure [E,T,N] -> film conductance [E,T,N] (S) by the selected backend."""
@@ -257,6 +248,10 @@ class VelostatSensor:
 
             ro = run_readout_warp(cond, noise, self.rp, self.device)
         fz, cxy = force_centroid_numpy(pressure, self.xy, self.area)
+        return self._outputs(fz, cxy, ro)
+
+    def _outputs(self, fz: np.ndarray, cxy: np.ndarray, ro: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """force [E,T] (N), contact centroid [E,T,2] (m) and the readout's arrays -> OUTPUTS, each [E, T, ...]."""
         out = {
             "force": fz.astype(np.float32),
             "contact_xy": cxy.astype(np.float32),
