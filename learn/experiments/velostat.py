@@ -344,7 +344,7 @@ def unit_spread(units: np.ndarray, curves: np.ndarray, levels: np.ndarray, units
         dom = np.asarray(domain, int)[units]
         means = {d: lr[dom == d].mean(axis=0) for d in np.unique(dom)}
         between = np.mean([(means[d] - lr.mean(axis=0)) ** 2 for d in dom], axis=0).mean()
-        out["domains"] = int(len(means))
+        out["domains"] = len(means)
         out["between_domain_share"] = float(between / var) if var > 0 else float("nan")
     return out
 

@@ -207,7 +207,11 @@ class VelostatSensor:
         pairwise order (float32 rounding of the same float64 values)."""
         import warp as wp
 
-        from sensors.velostat.kernels import frame_sums_device, run_film_device, run_readout_device
+        from sensors.velostat.kernels import (
+            frame_sums_device,
+            run_film_device,
+            run_readout_device,
+        )
         from sensors.warp_setup import scratch, to_host
 
         E, T = frames
