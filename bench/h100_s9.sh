@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The device calls of session 9 (issue 16: velostat's sensor stage on the device, fabric's first batch streamed
 # while it steps), run from the worktree copy on the H100 machine with the packages unpacked in /root/site:
-# `bash bench/h100_s9.sh A|F|M`. Logs and result files go to $OUT as one tar (at most 8 files come back).
+# `bash bench/h100_s9.sh A|B|C|F|M|N|S|X`. Logs and result files go to $OUT as one tar (at most 8 files come back).
 export PYTHONPATH=/root/site:. PYTHONUNBUFFERED=1 OMP_NUM_THREADS=4
 set -o pipefail
 nvidia-smi --query-gpu=name,driver_version,clocks.sm,clocks.mem --format=csv,noheader
@@ -45,4 +45,15 @@ N)  # if time allows: ntype and cnt_pdms plain CLI
     cli ntype ${2:-4096} h100-s9-ntype noalone
     cli cnt_pdms ${3:-4096} h100-s9-cnt noalone
     pack N ;;
+S)  # the old single-frequency bench config (as -s5-single: compact 6 x 6 at 0.5 Hz, 196608 episodes) on this
+    # session's code, so the headline's end-to-end figure is one run of today's code, not a best-ever
+    timeout 400 python3 bench/bench_gpu_pipeline.py --parts e2e --workers 8 --shards-per-worker 2 --tag h100-s9-single \
+        2>&1 | tee $OUT/r/logs/gpu-pipeline-h100-s9-single.log | tail -3
+    cp bench/results/gpu-pipeline-h100-s9-single.json $OUT/r/
+    pack S ;;
+X)  # the compact 6 x 6 mixed-frequency run again (as M's first part): its spread between two runs of one code
+    timeout 400 python3 bench/bench_gpu_pipeline.py --parts e2e --workers 8 --shards-per-worker 2 \
+        --override "protocol.frequencies_hz=[0.1,0.5,1.0,2.0]" --tag h100-s9-mix-b 2>&1 | tee $OUT/r/logs/gpu-pipeline-h100-s9-mix-b.log | tail -3
+    cp bench/results/gpu-pipeline-h100-s9-mix-b.json $OUT/r/
+    pack X ;;
 esac
