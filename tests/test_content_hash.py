@@ -81,3 +81,34 @@ def test_manifest_still_reads_without_content_hash(runs, tmp_path):
     (d / "manifest.json").write_text(json.dumps(m))
     res = runner.invoke(app, ["inspect", str(d)])
     assert res.exit_code == 0 and "content_sha256 -" in res.output
+
+
+def test_digest_attributes_made_in_memory_equal_the_ones_read_back(tmp_path):
+    """The writer hashes an episode's attributes as a reader decodes them without reading them back
+    (`_decoded_attrs`): for every kind of value it stores, the same Python values (and types) as `_get_attrs`."""
+    import h5py
+    import numpy as np
+
+    from sensors.data.recording import _decoded_attrs, _encode_attrs, _get_attrs, _write_attrs
+
+    attrs = {"i": 7, "big": 2**63 + 5, "neg": -3, "f": 0.1, "f32": np.float32(0.1), "f16": np.float16(1.5),
+             "nan": float("nan"), "b": True, "nb": np.bool_(False), "s": "pad ü", "ns": np.str_("x"),
+             "c": np.complex128(1 + 2j), "arr": np.arange(4, dtype=np.int16), "farr": np.array([0.5, -1.0]),
+             "barr": np.array([True, False]), "zero_d": np.array(2.5), "lst": [1.0, 2.0], "ilst": (1, 2, 3),
+             "empty": [], "d": {"a": [1, "b"]}, "names": ["x", "y"], "i64": np.int64(-9), "u8": np.uint8(200)}
+    enc = _encode_attrs(attrs, "test")
+    with h5py.File(tmp_path / "a.h5", "w") as f:
+        g = f.create_group("ep")
+        _write_attrs(g, enc)
+        back = _get_attrs(g)
+    mem = _decoded_attrs(enc)
+    assert sorted(mem) == sorted(back)
+    for k in back:
+        assert type(mem[k]) is type(back[k]), k
+        if isinstance(back[k], np.ndarray):
+            assert mem[k].dtype == back[k].dtype and mem[k].shape == back[k].shape, k
+            np.testing.assert_array_equal(mem[k], back[k])
+        elif isinstance(back[k], float) and np.isnan(back[k]):
+            assert np.isnan(mem[k])
+        else:
+            assert mem[k] == back[k], k
