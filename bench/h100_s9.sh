@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The device calls of session 9 (issue 16: velostat's sensor stage on the device, fabric's first batch streamed
 # while it steps), run from the worktree copy on the H100 machine with the packages unpacked in /root/site:
-# `bash bench/h100_s9.sh A|B|C|F|M|N|S|X`. Logs and result files go to $OUT as one tar (at most 8 files come back).
+# `bash bench/h100_s9.sh A|B|C|F|M|N|S|W|X`. Logs and result files go to $OUT as one tar (at most 8 files come back).
 export PYTHONPATH=/root/site:. PYTHONUNBUFFERED=1 OMP_NUM_THREADS=4
 set -o pipefail
 nvidia-smi --query-gpu=name,driver_version,clocks.sm,clocks.mem --format=csv,noheader
@@ -56,4 +56,11 @@ X)  # the compact 6 x 6 mixed-frequency run again (as M's first part): its sprea
         --override "protocol.frequencies_hz=[0.1,0.5,1.0,2.0]" --tag h100-s9-mix-b 2>&1 | tee $OUT/r/logs/gpu-pipeline-h100-s9-mix-b.log | tail -3
     cp bench/results/gpu-pipeline-h100-s9-mix-b.json $OUT/r/
     pack X ;;
+W)  # after the writer's digest change (attributes decoded in memory): a small run compiles the kernels (a fresh
+    # machine), then the single-frequency bench config as S, tag -s9-single-w
+    timeout 300 python3 bench/bench_gpu_pipeline.py --parts e2e --workers 2 --shard-episodes 1024 --tag warm 2>&1 | tail -1
+    timeout 400 python3 bench/bench_gpu_pipeline.py --parts e2e --workers 8 --shards-per-worker 2 --tag h100-s9-single-w \
+        2>&1 | tee $OUT/r/logs/gpu-pipeline-h100-s9-single-w.log | tail -3
+    cp bench/results/gpu-pipeline-h100-s9-single-w.json $OUT/r/
+    pack W ;;
 esac
