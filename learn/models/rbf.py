@@ -330,7 +330,7 @@ class RBFNetwork:
                 raise ValueError("solver 'exact' (eq. 12) needs one centre per training sample")
             Phi = kernel_phi(self.kernel, self.spread, sq_dist(X, self.centres_))
             self.rls_ = RecursiveLeastSquares(self.delta, self.lam, self.block)
-            self.rls_.W = np.linalg.solve(Phi, np.asarray(Y, np.float64).reshape(len(X), -1))
+            self.rls_.W = exact_weights(Phi, Y)
             self.rls_.n_samples_seen_ = len(X)
             return self
         return self.partial_fit(X, Y)
