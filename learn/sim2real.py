@@ -257,7 +257,11 @@ S2R_BUDGET = {  # the default budget of `piezotwin sim2real` (2 CPU cores, <= 15
     "finetune_norm": "checkpoint", "rehearsal": 0.0, "n_train_seeds": 3, "time_budget_s": 900.0, "valid_tail": 0.25,
     "press_slope": False, "rated_force_n": None, "run_level": False, "fit_threshold": False,
     "creep_linear": False, "finetune_method": "plain", "l2sp_alpha": 0.1, "l2sp_beta": 0.01, "pipeline_seed": 0,
+    "fit_contact": False,
 }
+# fit_contact: the chain's contact-area term (the tip's contact share s = (F / (F + F_a))^(2/3), R_film / s;
+# sensors.chain_fit.contact_fraction) with F_a fitted; ninth round, adopted only by the rule written before scoring
+# (CHANGELOG). Off: F_a = 0, rounds 1-8 bit for bit
 # finetune_method: plain | l2sp | lpft (learn.finetune; L2-SP's alpha / beta: learn.finetune.L2SP_ALPHA, an estimate);
 # eighth round, adopted only by the rule written before scoring (CHANGELOG)
 # pipeline_seed: varies the generation draw and the pre-training (its simulated split, init and batch order) with the
@@ -497,7 +501,8 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
             # placement-level prior where presses land at varying places (the Lupasic board: no ADC full scale)
             fit = C.fit_chain(train_runs, p0, n_boot=int(B["n_boot"]), seed=seed,
                               progress=lambda k, n: bar.update(task, completed=k), level_prior=not any(r.attrs.get("adc_full_scale") for r in runs),
-                              fit_threshold=bool(B.get("fit_threshold")), creep_linear=bool(B.get("creep_linear")))
+                              fit_threshold=bool(B.get("fit_threshold")), creep_linear=bool(B.get("creep_linear")),
+                              fit_contact=bool(B.get("fit_contact")))
             held = C.evaluate(fit, [r for r in runs if r.key in test_keys])
             rand = C.randomization_from_fit(fit, train_runs, press_slope=bool(B["press_slope"]),
                                             rated_force_n=B.get("rated_force_n"), run_level=bool(B.get("run_level")))

@@ -204,6 +204,8 @@ def sim2real(
                              "the force a curved mount carries before the film is loaded) on a board without a readout floor.")] = False,
     creep_linear: Annotated[bool, typer.Option("--creep-linear", help="Linear creep: the fitted creep force "
                             "proportional to the load (the steady law stays a power law).")] = False,
+    fit_contact: Annotated[bool, typer.Option("--fit-contact", help="Fit the tip's contact-area term (the share of "
+                           "the tip in contact grows as F^(2/3) below the fitted force F_a: a steeper law at small force).")] = False,
     finetune_method: Annotated[str | None, typer.Option("--finetune-method", help="plain, l2sp (L2-SP, Li et al. 2018) "
                                "or lpft (LP-FT, Kumar et al. 2022); default: the budget's.")] = None,
     pipeline_seed: Annotated[int, typer.Option("--pipeline-seed", help="Redraw the generation and the pre-training "
@@ -232,6 +234,8 @@ def sim2real(
         b["fit_threshold"] = True
     if creep_linear:
         b["creep_linear"] = True
+    if fit_contact:
+        b["fit_contact"] = True
     if finetune_method is not None:
         from learn.finetune import FINETUNE_METHODS
 

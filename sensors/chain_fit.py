@@ -89,6 +89,11 @@ class ChainParams:
     adc_step: float = 0.0
     tip_area_m2: float = 1e-4
     threshold_force_n: float = 0.0  # force the cover / gap carries before the film is loaded (F_eff = F - F_0)
+    # contact area (module doc, "contact"): the share of the tip's face in contact, s = (F / (F + F_a))^beta;
+    # F_a = 0: full contact at any force (rounds 1-8, bit for bit)
+    contact_force_n: float = 0.0
+    contact_area_exponent: float = 2.0 / 3.0  # estimate: Hertz, a rounded tip's contact area grows as F^(2/3)
+    # (Johnson, Contact Mechanics 1985, eq. 4.22) before it spans the face; held, not fitted (one term: F_a)
 
     @property
     def times_s(self) -> list[float]:
@@ -122,14 +127,32 @@ def creep_force(force: np.ndarray, dt: float, p: ChainParams) -> np.ndarray:
     return c
 
 
+def contact_fraction(f: np.ndarray, p: ChainParams) -> np.ndarray | float:
+    """Share of the tip's face in contact with the film at the (effective) force f (N): s = (f / (f + F_a))^beta,
+    beta = contact_area_exponent; 1.0 when F_a = contact_force_n = 0 (off). Source: Johnson, Contact Mechanics
+    1985, sect. 4.2 (Hertz: a rounded or compliant tip's contact area grows as F^(2/3) until it spans the face;
+    Greenwood & Williamson 1966: the true contact of a rough film grows with the load); an FSR-type film conducts
+    through the true contact area (Interlink Electronics, FSR Integration Guide: the conductance follows the
+    contact area at low force), so R_film is divided by s. F >> F_a: s -> 1; F << F_a: s ~ (F / F_a)^beta, the
+    law steepens by beta F_a / (F + F_a) in d ln R / d ln F."""
+    if p.contact_force_n <= 0.0:
+        return 1.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return (f / (f + p.contact_force_n)) ** p.contact_area_exponent
+
+
 def film_resistance(force: np.ndarray, dt: float, p: ChainParams, level: np.ndarray | float = 0.0) -> np.ndarray:
     """R_film (ohm, inf unloaded) of the recorded force; level: ln multiplier per sample (press placement)."""
     f = np.maximum(np.asarray(force, np.float64) - p.threshold_force_n, 0.0)
     c = creep_force(f, dt, p)
-    with np.errstate(divide="ignore", over="ignore"):
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
         if p.creep_law == "aging":
-            return np.where(f > 0, p.r0_ohm * np.exp(level - c) * (f / F_REF_N) ** (-p.exponent), np.inf)
-        return np.where(f > 0, p.r0_ohm * np.exp(level) * ((f + c) / F_REF_N) ** (-p.exponent), np.inf)
+            r = np.where(f > 0, p.r0_ohm * np.exp(level - c) * (f / F_REF_N) ** (-p.exponent), np.inf)
+        else:
+            r = np.where(f > 0, p.r0_ohm * np.exp(level) * ((f + c) / F_REF_N) ** (-p.exponent), np.inf)
+        if p.contact_force_n > 0.0:
+            r = np.where(f > 0, r / contact_fraction(f, p), np.inf)
+        return r
 
 
 def total_resistance(r_film: np.ndarray, p: ChainParams) -> np.ndarray:
@@ -248,32 +271,38 @@ class ChainFit:
 
 
 NAMES = ("exponent", "ln_creep_amplitude", "ln_creep_force_n", "ln_tau_min_s", "ln_tau_max_s", "ln_r_series_ohm",
-         "threshold_force_n")
-LB = np.array([0.2, np.log(1e-3), np.log(1e-3), np.log(0.02), np.log(0.5), np.log(1e-3), 0.0])
-UB = np.array([4.0, np.log(50.0), np.log(1e4), np.log(5.0), np.log(1e3), np.log(1e7), 1e3])
+         "threshold_force_n", "ln_contact_force_n")
+LB = np.array([0.2, np.log(1e-3), np.log(1e-3), np.log(0.02), np.log(0.5), np.log(1e-3), 0.0, np.log(1e-3)])
+UB = np.array([4.0, np.log(50.0), np.log(1e4), np.log(5.0), np.log(1e3), np.log(1e7), 1e3, np.log(1e3)])
+CONTACT_START_N = 1.0  # estimate: starting F_a of the contact fit, inside the range where the Lupasic runs' law
+# steepens (below ~5 N, seventh round); from F_a -> 0 the term's gradient vanishes
 
 
-def _free(fit_series: bool, fit_threshold: bool = False, creep_linear: bool = False) -> list[int]:
+def _free(fit_series: bool, fit_threshold: bool = False, creep_linear: bool = False, fit_contact: bool = False) -> list[int]:
     """Indices of theta the fit moves: the shape always (F_c not with creep_linear: held at its upper bound);
     r_series and the threshold where the readout saturates (fit_series); the threshold alone with fit_threshold
-    (a mount that carries force before the film is loaded)."""
-    return sorted([0, 1, 3, 4] + ([] if creep_linear else [2]) + ([5, 6] if fit_series else [6] if fit_threshold else []))
+    (a mount that carries force before the film is loaded); the contact force F_a with fit_contact."""
+    return sorted([0, 1, 3, 4] + ([] if creep_linear else [2]) + ([5, 6] if fit_series else [6] if fit_threshold else [])
+                  + ([7] if fit_contact else []))
 
 
 def _with(p: ChainParams, th: np.ndarray, free: list[int]) -> ChainParams:
-    """p with the shape of theta (all seven entries); r_series and the threshold only where free (_free)."""
+    """p with the shape of theta (all eight entries); r_series, the threshold and F_a only where free (_free)."""
     q = replace(p, exponent=float(th[0]), creep_amplitude=float(np.exp(th[1])), creep_force_n=float(np.exp(th[2])),
                 tau_min_s=float(np.exp(th[3])), tau_max_s=float(np.exp(max(th[4], th[3]))))
     if 5 in free:
         q.r_series_ohm = float(np.exp(th[5]))
     if 6 in free:
         q.threshold_force_n = float(th[6])
+    if 7 in free:
+        q.contact_force_n = float(np.exp(th[7]))
     return q
 
 
 def _theta(p: ChainParams) -> np.ndarray:
     return np.array([p.exponent, np.log(p.creep_amplitude), np.log(p.creep_force_n), np.log(p.tau_min_s),
-                     np.log(p.tau_max_s), np.log(max(p.r_series_ohm, 1e-3)), p.threshold_force_n])
+                     np.log(p.tau_max_s), np.log(max(p.r_series_ohm, 1e-3)), p.threshold_force_n,
+                     np.log(max(p.contact_force_n, 1e-3))])
 
 
 class _Data:
@@ -450,7 +479,7 @@ N_RUN_BOOT = 200  # replicates of the run bootstrap of level_run_sd (no refit: c
 def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = None, n_boot: int = 16,
               min_force_frac: float = 0.1, min_force_n: float = 0.05, max_nfev: int = 60, seed: int = 0,
               progress=None, level_prior: bool = False, fit_threshold: bool = False,
-              creep_linear: bool = False) -> ChainFit:
+              creep_linear: bool = False, fit_contact: bool = False) -> ChainFit:
     """Fit the chain to real runs (see the module docstring); progress(k, n) is called after each fit.
 
     level_prior: the press levels are draws l_j ~ N(mu, sd^2) of a placement chosen before the press, so
@@ -467,15 +496,20 @@ def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = 
     creep_linear: linear creep (Boltzmann superposition, Findley, Lai & Onaran, Creep and Relaxation of Nonlinear
     Viscoelastic Materials 1976, ch. 2): the creep force proportional to the load, Phi = a F (F_c held at its
     upper bound, 1e4 N, where a F_c ln(1 + F / F_c) = a F within 0.2 % up to 40 N), so the steady law stays
-    the power law -n and the hold's relative drop is the same at every force."""
+    the power law -n and the hold's relative drop is the same at every force.
+
+    fit_contact: fit the contact force F_a of the tip's contact area (contact_fraction; its exponent held), started
+    at CONTACT_START_N where p0 has none; off, F_a stays p0's (0: no contact term)."""
     p0 = replace(p0, r_leak_ohm=leak_from_unloaded(runs, p0))
+    if fit_contact and p0.contact_force_n <= 0.0:
+        p0 = replace(p0, contact_force_n=CONTACT_START_N)
     data = _Data(runs, p0, min_force_frac, min_force_n)
     if len(data.presses) < 3:
         raise ValueError(f"found {len(data.presses)} press(es) with a response; a fit needs at least 3")
     if fit_series is None:
         fit_series = any("adc_full_scale" in r.attrs for r in runs)  # an ADC of known full scale: a floor shows
     idx = np.arange(len(data.presses))
-    free = _free(bool(fit_series), fit_threshold, creep_linear)
+    free = _free(bool(fit_series), fit_threshold, creep_linear, fit_contact)
     if creep_linear:
         p0 = replace(p0, creep_force_n=float(np.exp(UB[2])))
     q, res = _fit_shape(data, p0, idx, free, max_nfev)
@@ -569,7 +603,8 @@ def _summary(f: dict[str, Any]) -> dict[str, float]:
             "creep_force_n": p.creep_force_n, "tau_min_s": p.tau_min_s, "tau_max_s": p.tau_max_s,
             "level_log_sd": p.level_log_sd, "r_series_ohm": p.r_series_ohm,
             "level_within_run_sd": f["level_within_run_sd"], "level_between_run_sd": f["level_between_run_sd"],
-            "level_run_sd": f["level_run_sd"], "level_run_sd_anova": f["level_run_sd_anova"]}
+            "level_run_sd": f["level_run_sd"], "level_run_sd_anova": f["level_run_sd_anova"],
+            **({"contact_force_n": p.contact_force_n} if p.contact_force_n > 0 else {})}
 
 
 def within_press_error(p: ChainParams, data: _Data, idx: np.ndarray) -> dict[str, Any]:
@@ -772,7 +807,7 @@ def randomization_from_fit(fit: ChainFit, runs: Seq[RealRun], press_slope: bool 
     boot = []
     for b in fit.boot:
         d = {k: float(b[k]) for k in ("exponent", "creep_amplitude", "creep_force_n", "tau_min_s", "tau_max_s",
-                                      "r0_ohm", "r_series_ohm", "threshold_force_n") if k in b}
+                                      "r0_ohm", "r_series_ohm", "threshold_force_n", "contact_force_n") if k in b}
         if "level_within_run_sd" in b:
             d["level_log_sd"] = float(b["level_within_run_sd"])
         boot.append(d)
