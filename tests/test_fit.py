@@ -100,11 +100,11 @@ from scenes.randomize import Dist, Randomization, draw
 from sensors import chain_fit as CF
 
 
-def _synthetic_runs(p, n_runs=4, seed=1, fs=1000.0, rate=20.0):
+def _synthetic_runs(p, n_runs=4, seed=1, fs=1000.0, rate=20.0, low_n=2.0, high_n=30.0):
     """Runs made with known parameters: press sequences through simulate_reading, one level per press."""
     from simulate.generation.chain_gen import press_protocol
 
-    rand = Randomization(press={"peak_force_n": Dist(kind="loguniform", low=2.0, high=30.0),
+    rand = Randomization(press={"peak_force_n": Dist(kind="loguniform", low=low_n, high=high_n),
                                 "rise_s": Dist(kind="uniform", low=0.3, high=0.8), "hold_s": Dist(kind="uniform", low=1.0, high=1.5),
                                 "fall_s": Dist(kind="fixed", value=0.1), "gap_s": Dist(kind="uniform", low=1.0, high=2.0)})
     rng = np.random.default_rng(seed)
@@ -380,3 +380,46 @@ def test_chain_fit_threshold_and_linear_creep_recover_known_parameters():
     none = CF.fit_chain(_synthetic_runs(_replace(true, threshold_force_n=0.0), n_runs=3), p0, n_boot=0, level_prior=True,
                         fit_threshold=True, creep_linear=True)
     assert none.params.threshold_force_n < 0.1, none.params.threshold_force_n
+
+
+def test_contact_area_term_steepens_the_law_below_its_force_and_is_off_by_default():
+    """contact_fraction: R_film / s, s = (F / (F + F_a))^beta; without creep the local law is -(n + beta F_a / (F +
+    F_a)): -n - beta / 2 at F = F_a, -> -n far above it; F_a = 0 gives the rounds 1-8 chain bit for bit."""
+    p = CF.ChainParams(exponent=0.8, r0_ohm=1000.0, creep_amplitude=1e-3, creep_force_n=1.0, contact_force_n=3.0)
+    f = np.array([3.0 / 1.01, 3.0 * 1.01, 300.0 / 1.01, 300.0 * 1.01])
+    lr = np.log(CF.film_resistance(f, 0.05, p))
+    slope = np.diff(lr)[[0, 2]] / np.log(1.01 ** 2)
+    assert slope[0] == pytest.approx(-(0.8 + (2.0 / 3.0) / 2.0), abs=2e-3)
+    assert slope[1] == pytest.approx(-(0.8 + (2.0 / 3.0) * 3.0 / 303.0), abs=2e-3)
+    off = _replace(p, contact_force_n=0.0)
+    g = np.linspace(0.0, 40.0, 801)
+    r_off = CF.film_resistance(g, 0.05, off)
+    with np.errstate(divide="ignore"):
+        ref = np.where(g > 0, off.r0_ohm * ((g + CF.creep_force(g, 0.05, off)) / 1.0) ** (-off.exponent), np.inf)
+    assert np.array_equal(r_off, ref) and CF.contact_fraction(g, off) == 1.0
+    assert np.isinf(CF.film_resistance(g, 0.05, p)[0])
+
+
+def test_chain_fit_contact_force_recovers_known_parameters():
+    """fit_contact: a chain made with F_a = 3 N (runs pressed 0.5-40 N) is recovered (F_a, exponent, within-press
+    error, a bootstrap range around it); on a chain without the term the fitted F_a stays small; off (the default)
+    F_a is not fitted and stays 0."""
+    true = CF.ChainParams(exponent=0.8, r0_ohm=3000.0, creep_amplitude=1.0, creep_force_n=10.0, tau_min_s=0.1,
+                          tau_max_s=3.0, n_creep=4, level_log_sd=0.3, r_ref_ohm=1e4, full_scale=1000.0, noise_sd=0.0,
+                          contact_force_n=3.0)
+    p0 = CF.ChainParams(r_ref_ohm=1e4, full_scale=1000.0, n_creep=4)
+    runs = _synthetic_runs(true, n_runs=3, low_n=0.5, high_n=40.0)
+    fit = CF.fit_chain(runs, p0, n_boot=2, level_prior=True, fit_contact=True)
+    q = fit.params
+    assert abs(np.log(q.contact_force_n / 3.0)) < 0.25, q.contact_force_n
+    assert abs(q.exponent - 0.8) < 0.06, q.exponent
+    assert fit.error["rms_log_reading_within_press"] < 0.03
+    assert "ln_contact_force_n" in fit.result["names"] and "contact_force_n" in fit.ranges
+    assert all("contact_force_n" in b for b in CF.randomization_from_fit(fit, runs).boot)
+    # the default fit of the same runs has no term and a flatter law (the exponent takes part of it)
+    off = CF.fit_chain(runs, p0, n_boot=0, level_prior=True)
+    assert off.params.contact_force_n == 0.0 and "ln_contact_force_n" not in off.result["names"]
+    assert off.error["rms_log_reading_within_press"] > fit.error["rms_log_reading_within_press"]
+    none = CF.fit_chain(_synthetic_runs(_replace(true, contact_force_n=0.0), n_runs=3, low_n=0.5, high_n=40.0), p0,
+                        n_boot=0, level_prior=True, fit_contact=True)
+    assert none.params.contact_force_n < 0.3, none.params.contact_force_n
