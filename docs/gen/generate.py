@@ -712,6 +712,49 @@ def sim2real_results() -> str:
                     "after plain fine-tuning (mean over seeds), and the fine-tuning seeds' best epochs:\n\n"
                     + table(["split", "p", "real runs", "pre-trained (N)", "pre-trained level / shape", "fine-tuned (N)",
                              "fine-tuned level / shape", "best epochs"], drow))
+    ctc = sorted(RESULTS.glob("s2r-contact-*.json"))
+    if ctc:
+        crow = []
+        for f in ctc:
+            d = json.loads(f.read_text())
+            pr = d["paired"]
+            for side, key in (("reference", "valid_tail_reference_n"), ("contact", "valid_tail_contact_n")):
+                tf = d["training_fits"][side]["training_fit"]
+                rng_ = tf.get("contact_force_n_p5_p50_p95")
+                tst = d["test_beside_unused"][side]
+                crow.append([d["split"], side, num(tf["params"].get("contact_force_n", 0.0), 3)
+                             + (f" ({num(rng_[0], 3)}-{num(rng_[2], 3)})" if rng_ else ""), num(tf["params"]["exponent"], 3),
+                             num(tf["within_press_rms_log_reading"], 4), num(tf["run_mean_level_trend_per_ln_force"], 3),
+                             " / ".join(num(c["slope"], 2) for c in tf["chain_steady_dlnr_dlnf"]),
+                             ", ".join(f"p{p}: {num(v, 3)}" for p, v in zip(d["pipeline_seeds"], d[key])),
+                             "" if side == "reference" else f"{num(pr['diff_mean'], 3)} ± {num(pr['diff_se'], 2)}",
+                             "" if side == "reference" else ("yes" if pr["improves"] else "no"),
+                             " / ".join(f"{t['pooled_pct_fs']:.1f}" for t in tst),
+                             " / ".join(f"{t['two_point_pct_fs']:.1f}" for t in tst)])
+        out += ("\n\nThe tip's contact area (`sim2real --fit-contact`: the share of the tip in contact (F / (F + F_a))^(2/3), "
+                "F_a fitted with its bootstrap 5-95 % range; `bench/bench_s2r_contact.py`, `bench/results/s2r-contact-*.json`; "
+                "ninth round): the training fit (exponent, within-press rms ln reading, the run-mean level trend per ln "
+                "force, the steady d ln R / d ln F between 1, 2, 5, 10, 20 and 40 N), the fine-tuned RMSE on the training "
+                "runs' validation tails per pipeline seed (N) and the paired difference (mean ± se over p; adopt if below "
+                "minus its se in both Lupasic directions, rule written before scoring); test numbers per p beside, unused:\n\n"
+                + table(["split", "side", "F_a (N)", "exponent", "within-press rms (ln)", "run-mean level trend",
+                         "steady d ln R / d ln F", "validation tail per p (N)", "paired difference", "improves",
+                         "pooled % FS", "two-point % FS"], crow))
+    bnd = RESULTS / "s2r-band.json"
+    if bnd.is_file():
+        d = json.loads(bnd.read_text())
+        brow = [[k, v["n_presses"], f"{100 * v['inside_as_fitted']:.0f} %", num(v["band_half_width_log"]),
+                 f"{num(v['center_offset_log'])} ({num(v['center_offset_in_band_sd'])})", num(v["held_out_sd_over_band_sd"]),
+                 f"{100 * v['inside_band_on_held_out_mean']:.0f} %",
+                 f"{100 * v['inside_fitted_center_held_out_sd']:.0f} %" if v["inside_fitted_center_held_out_sd"] is not None else "–",
+                 num(v["fit"]["run_sd_anova_log"]), num(v["fit"]["run_sd_log"])] for k, v in d["splits"].items()]
+        out += ("\n\nWhere the held-out press levels leave the fitted 90 % band of a new run (`bench/bench_s2r_band.py`, "
+                "`bench/results/s2r-band.json`; target 80-95 % inside): the held-out levels' mean offset from the band's "
+                "center (ln, and in band sd), their sd over the band's sd, the share inside the band moved onto their own "
+                "mean (the spread alone) and inside a band of the fitted center with their own sd (the center alone), and "
+                "the fit's run-level sd (ANOVA; with the prior):\n\n"
+                + table(["split", "presses", "inside", "half width (ln)", "center offset (band sd)", "sd ratio",
+                         "inside, own center", "inside, own sd", "run sd ANOVA", "run sd used"], brow))
     abl = sorted(RESULTS.glob("s2r-ablation-*.json"))
     if abl:
         arows = []
