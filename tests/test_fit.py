@@ -423,3 +423,26 @@ def test_chain_fit_contact_force_recovers_known_parameters():
     none = CF.fit_chain(_synthetic_runs(_replace(true, contact_force_n=0.0), n_runs=3, low_n=0.5, high_n=40.0), p0,
                         n_boot=0, level_prior=True, fit_contact=True)
     assert none.params.contact_force_n < 0.3, none.params.contact_force_n
+
+
+def test_generation_draws_the_contact_force_with_its_replicate_and_scales_it_with_the_tip_area():
+    """chain_gen.episode: F_a comes with the bootstrap replicate (joint with the exponent) and scales with the tip's
+    area like F_c (Hertz: the force that makes the contact span the face ~ E* b^3 / R, ~ the area for a scaled tip);
+    the simulated reading is the chain's own at that F_a."""
+    from simulate.generation.chain_gen import episode
+
+    p0 = CF.ChainParams(exponent=0.8, r0_ohm=3000.0, creep_amplitude=1.0, creep_force_n=10.0, r_ref_ohm=1e4,
+                        full_scale=1000.0, contact_force_n=1.0)
+    rand = Randomization(press={"peak_force_n": Dist(kind="fixed", value=2.0)},
+                         episode={"tip_area_scale": Dist(kind="fixed", value=2.0)},
+                         boot=[{"exponent": 0.8, "contact_force_n": 5.0}])
+    ch, attrs = episode(p0, rand, 3, 10.0, 0.05)
+    q = CF.ChainParams.from_json(attrs["chain"])
+    assert q.contact_force_n == pytest.approx(10.0) and q.creep_force_n == pytest.approx(20.0)
+    assert attrs["randomized"]["contact_force_n"] == 5.0
+    lev = np.zeros(len(ch["force"]))  # level_log_sd 0: every press at level 0
+    assert np.allclose(ch["sensor"], np.maximum(CF.simulate_reading(ch["force"], 0.05, q, level=lev, fs=attrs["full_scale"]), 1e-6))
+    off = episode(CF.ChainParams(**{**p0.__dict__, "contact_force_n": 0.0}), Randomization(
+        press=rand.press, episode=rand.episode, boot=[{"exponent": 0.8}]), 3, 10.0, 0.05)[0]["sensor"]
+    assert np.all(off <= ch["sensor"])  # the partial contact raises R (high divider: the reading) at 2 N
+    assert np.any(off < ch["sensor"] - 1.0)
