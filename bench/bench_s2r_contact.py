@@ -39,6 +39,7 @@ def _test(m: dict) -> dict:
     r = m["results"]
     return {"pooled_pct_fs": r["finetuned"]["rmse_pct_full_scale"], "zero_shot_rmse_n": r["zero_shot"]["rmse"],
             "two_point_pct_fs": r["zero_shot"]["two_point_gain"]["rmse_pct_full_scale"],
+            "finetuned_by_budget_n": [c["finetuned_rmse"] for c in m["learning_curve"]],
             "curve": [{k: c[k] for k in ("n_runs", "finetuned_rmse", "scratch_rmse", "static_curve_rmse")} for c in m["learning_curve"]]}
 
 
@@ -56,8 +57,7 @@ def main(argv=None):
     ref = json.loads((RESULTS / f"s2r-pipeline-noise-{a.split}.json").read_text())
     cm = json.loads((a.candidate_run / "metrics.json").read_text())
     cp = json.loads(a.candidate_pipeline.read_text())
-    glob = cm["split"]["test"] if isinstance(cm["split"]["test"], str) else None
-    test_glob = json.loads((a.candidate_run / "state.json").read_text())["key"]["test"] if glob is None else glob
+    test_glob = json.loads((a.candidate_run / "state.json").read_text())["key"]["test"]
     seeds = [0, 1, 2]
     ref_t = [ref["runs"][f"p{p}/plain"]["finetuned_valid_rmse_mean"] for p in seeds]
     cand_t = [_tail_mean(cm["learning_curve"])] + [cp["runs"][f"p{p}/plain"]["finetuned_valid_rmse_mean"] for p in seeds[1:]]

@@ -712,7 +712,7 @@ def sim2real_results() -> str:
                     "after plain fine-tuning (mean over seeds), and the fine-tuning seeds' best epochs:\n\n"
                     + table(["split", "p", "real runs", "pre-trained (N)", "pre-trained level / shape", "fine-tuned (N)",
                              "fine-tuned level / shape", "best epochs"], drow))
-    ctc = sorted(RESULTS.glob("s2r-contact-*.json"))
+    ctc = sorted(f for f in RESULTS.glob("s2r-contact-*.json") if f.stem != "s2r-contact-fits")
     if ctc:
         crow = []
         for f in ctc:
@@ -740,6 +740,19 @@ def sim2real_results() -> str:
                 + table(["split", "side", "F_a (N)", "exponent", "within-press rms (ln)", "run-mean level trend",
                          "steady d ln R / d ln F", "validation tail per p (N)", "paired difference", "improves",
                          "pooled % FS", "two-point % FS"], crow))
+    cfit = RESULTS / "s2r-contact-fits.json"
+    if cfit.is_file():
+        d = json.loads(cfit.read_text())
+        frows = [[k, side, num(v["contact_force_n"], 3), num(v["exponent"], 3), num(v["within_press_rms_log_reading"], 4),
+                  ", ".join(v["at_bound"]) or "–", num(v["held_out_beside"]["rms_log_reading_within_press"], 3),
+                  f"{100 * v['held_out_beside']['level_in_band90']:.0f} %"]
+                 for k, sides in d["splits"].items() for side, v in sides.items()]
+        out += ("\n\nThe contact-area term on every split's training fit (point fits, no bootstrap; "
+                "`bench/bench_s2r_contact_fits.py`, `bench/results/s2r-contact-fits.json`): F_a (N), exponent, within-press "
+                "rms ln reading on the training presses, the fitted parameters at a bound, and beside them the held-out "
+                "within-press rms and levels inside the point fit's 90 % band:\n\n"
+                + table(["split", "side", "F_a (N)", "exponent", "within-press rms (ln)", "at a bound",
+                         "held-out within-press rms (ln)", "held-out levels in band"], frows))
     bnd = RESULTS / "s2r-band.json"
     if bnd.is_file():
         d = json.loads(bnd.read_text())
