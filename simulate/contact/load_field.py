@@ -324,6 +324,11 @@ def iter_load_batches(
     if cfg.protocol.kind in CONTACT_STAGES:
         import importlib
 
+        if cfg.protocol.kind == "press_stroke":  # one batch of physics, its fields slice by slice (on the device)
+            from simulate.contact.press_stroke import iter_press_stroke
+
+            yield from iter_press_stroke(cfg, protocols, threads, slice_episodes, device_fields)
+            return
         module, fn = CONTACT_STAGES[cfg.protocol.kind].split(":")
         yield slice(0, len(protocols)), getattr(importlib.import_module(module), fn)(cfg, protocols, threads)
         return

@@ -135,7 +135,9 @@ def step_worlds(cfg: SceneConfig, gids: list[int], threads: int = 1, submitted: 
     return protos, out, spent
 
 
-STREAM_FIRST_BATCH = True  # run the first batch's sensor chain in time chunks while it steps (where the sensor can)
+# run the first batch's sensor chain in time chunks while it steps (where the sensor can); PIEZOTWIN_FEED_STREAM=0
+# turns it off (the H100 A/B of session 10, bench/h100_s10.sh)
+STREAM_FIRST_BATCH = os.environ.get("PIEZOTWIN_FEED_STREAM", "1") != "0"
 STREAM_FRAMES = 1 << 22  # frames (episode-samples) per load-field + sensor pass of a stream (bounds its memory)
 
 
@@ -378,8 +380,9 @@ def feed_worlds(cfg: SceneConfig) -> int:
 
     p, s = cfg.protocol, cfg.sampling
     if p.kind in CONTACT_STAGES:
-        # the stage runs in the driver, its load field in numpy on the host with (episodes, samples, indenters,
-        # taxels) float64 temporaries (press_stroke on ntype's 24 x 24 grid: ~2 GB per 4096 episodes)
+        # the stage runs in the driver (press_stroke: its taxel fields by Warp kernels on the device, ~3 GB of
+        # float64 fields per 8192 ntype episodes; on the host, numpy's (episodes, samples, indenters, taxels)
+        # temporaries)
         return FEED_WORLDS // 4
     if p.kind != "sinusoid":
         return FEED_WORLDS
