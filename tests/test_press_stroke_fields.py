@@ -1,8 +1,12 @@
 """press_stroke's taxel fields and ntype's element loads on the device (the GPU path, session 10) against their
 numpy references: `press_stroke._load_batch` (numpy) vs `press_fields_warp`, `NtypeSensor.loads` (numpy einsums)
 vs `ntype_loads_warp`. The fields are the same float64 values but for each indenter's footprint sum (taxel order
-on the device, numpy's pairwise order on the host): ~1e-15 relative; the per-frame totals are bit for bit; the
-recorded float32 sensor outputs equal within 2 ulp (float32 rounding of float64 values ~1e-15 apart)."""
+on the device, numpy's pairwise order on the host): ~1e-15 relative; the per-frame totals are bit for bit. The
+electrode forces, rounded to float32 for the element chain, can then differ by 1 ulp, and the chain's float32
+sums with cancellation (compliance x force) carry that as ~1 float32 epsilon of the channel's scale: the
+recorded outputs agree within 2 ulp of the value or 8 float32 epsilons (~1e-6) of the channel's largest value
+(the H100: displacement 3.6e-12 m apart at a scale of ~1e-5 m, where 2 ulp alone failed), and the measured
+resistance, quantised to resolution_ohm, within one quantum where a reading sits on a rounding boundary."""
 
 import numpy as np
 import pytest
@@ -45,13 +49,18 @@ def _check_sensor(cfg, host, dev, seeds, device: str) -> None:
 
     a = make_sensor(cfg, "warp", "cpu").run_load(host, seeds)
     b = make_sensor(cfg, "warp", device).run_load(dev, seeds)
+    eps32 = float(np.finfo(np.float32).eps)
     for k in a:
         assert a[k].dtype == b[k].dtype == np.float32, k
         ref = a[k].astype(np.float64)
-        ulp = np.spacing(np.abs(a[k])).astype(np.float64)
-        # 2 ulp of the value, or of the channel's scale where a value is ~0 by cancellation (force sums)
-        tol = 2 * np.maximum(ulp, 1e-9 * np.abs(ref).max())
-        assert (np.abs(b[k].astype(np.float64) - ref) <= tol).all(), (k, np.abs(b[k] - a[k]).max())
+        assert np.abs(ref).max() > 0, k
+        diff = np.abs(b[k].astype(np.float64) - ref)
+        tol = np.maximum(2 * np.spacing(np.abs(a[k])).astype(np.float64), 8 * eps32 * np.abs(ref).max())
+        if k == "resistance_measured":  # quantised: a reading on a rounding boundary may go one quantum either way
+            q = cfg.sensor.readout.resolution_ohm
+            assert (diff <= tol + q).all() and (diff > tol).mean() < 1e-3, (k, diff.max(), (diff > tol).mean())
+            continue
+        assert (diff <= tol).all(), (k, diff.max(), np.abs(ref).max())
 
 
 def test_press_fields_kernel_matches_numpy_reference():

@@ -129,14 +129,12 @@ def physics_engine(cfg: SceneConfig) -> tuple[str, str]:
 
 
 def simulate_sensors(
-    cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1, alloc=None, progress=None,
+    cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1, alloc=None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Run the episodes; returns sensordata (E, T, nsensordata) at the sample times and target (E, T).
     Stepping: C MuJoCo's rollout on `threads` threads, or MuJoCo Warp worlds (`physics_engine`).
     alloc(shape) -> float64 array: where the sensordata goes (default np.zeros; the GPU feed's physics
-    process passes a view of a shared-memory block, so the worlds' output needs no second copy).
-    progress(k): called as samples 0 .. k - 1 of every episode are in the sensordata (MuJoCo Warp: chunk by
-    chunk as the worlds step; C MuJoCo: once, at the end)."""
+    process passes a view of a shared-memory block, so the worlds' output needs no second copy)."""
     engine, device = physics_engine(cfg)
     n = episode_length(protocols)
     sub = cfg.sampling.substeps
@@ -151,7 +149,7 @@ def simulate_sensors(
         states0, sens0 = _initial_states(m, cfg, protocols, episode_controls(cfg, protocols, nstep, slice(0, 1))[0][:, 0])
         qpos0 = states0[:, 1 : 1 + m.nq]  # full-physics state = (time, qpos, qvel, ...)
         out = worlds_for(m, mjcf, E, device, box_primitive=box_primitive_for(cfg.protocol.control)).run(qpos0, lambda sl, eps: episode_controls(cfg, protocols[eps], nstep, sl)[0], sens0, sub, n,
-                                                 out=None if alloc is None else alloc((E, n, m.nsensordata)), progress=progress)
+                                                 out=None if alloc is None else alloc((E, n, m.nsensordata)))
     else:
         ctrl, _ = episode_controls(cfg, protocols, nstep)
         states0, sens0 = _initial_states(m, cfg, protocols, ctrl[:, 0])
@@ -165,8 +163,6 @@ def simulate_sensors(
             b = min(E, a + chunk)
             _, sd = mujoco.rollout.rollout(m, data_arg, states0[a:b], ctrl[a:b], nstep=nstep)
             out[a:b, 1:] = sd[:, rows]
-        if progress is not None:  # the rollout runs blocks of whole episodes: all samples at once
-            progress(n)
     return out, sample_targets(cfg, protocols, n)
 
 
