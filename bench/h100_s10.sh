@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The device calls of session 10 (issue 16: ntype's taxel fields and element loads on the device; fabric's
 # streamed first batch A/B), run from the worktree copy on the H100 machine with the packages unpacked in
-# /root/site: `bash bench/h100_s10.sh I|A|F|G`. Logs and result files go to $OUT as one tar (at most 8 files come back).
+# /root/site: `bash bench/h100_s10.sh I|A|F|G|M`. Logs and result files go to $OUT as one tar (at most 8 files come back).
 export PYTHONPATH=/root/site:. PYTHONUNBUFFERED=1 OMP_NUM_THREADS=4
 set -o pipefail
 nvidia-smi --query-gpu=name,driver_version,clocks.sm,clocks.mem --format=csv,noheader
@@ -32,4 +32,14 @@ F)  # the plain CLI of fabric_1, first batch streamed (the default), with MuJoCo
 G)  # the same with the stream off (PIEZOTWIN_FEED_STREAM=0): the keep / drop A/B
     export PIEZOTWIN_FEED_STREAM=0; cli fabric_1 ${2:-8192} h100-s10-fabric-nostream noalone
     pack G ;;
+M)  # compact 6 x 6 mixed 0.1-2 Hz end to end (the command of -s9-mix-w) on today's code, then the same with a
+    # smaller first batch (--ramp-batches 3: worlds / 8, worlds / 4, worlds / 2 before the full ones), so the
+    # driver and the writers start sooner while the later batches step
+    for r in 2 3; do
+        timeout 280 python3 bench/bench_gpu_pipeline.py --parts e2e --workers 8 --shards-per-worker 2 --ramp-batches $r \
+            --override "protocol.frequencies_hz=[0.1,0.5,1.0,2.0]" --tag h100-s10-mix-ramp$r 2>&1 | grep -v "^Module" \
+            | tee $OUT/r/logs/gpu-pipeline-h100-s10-mix-ramp$r.log | tail -3
+        cp bench/results/gpu-pipeline-h100-s10-mix-ramp$r.json $OUT/r/
+    done
+    pack M ;;
 esac
