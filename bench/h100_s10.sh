@@ -29,14 +29,16 @@ A)  # the plain CLI with today's code: ntype (its taxel fields and element loads
 F)  # the plain CLI of fabric_1, first batch streamed (the default), with MuJoCo Warp alone
     cli fabric_1 ${2:-8192} h100-s10-fabric
     pack F ;;
-G)  # the same with the stream off (PIEZOTWIN_FEED_STREAM=0): the keep / drop A/B
+G)  # the same with the stream off (PIEZOTWIN_FEED_STREAM=0, commit 8c879ca; the stream is gone since): the A/B
     export PIEZOTWIN_FEED_STREAM=0; cli fabric_1 ${2:-8192} h100-s10-fabric-nostream noalone
     pack G ;;
 M)  # compact 6 x 6 mixed 0.1-2 Hz end to end (the command of -s9-mix-w) on today's code, then the same with a
     # smaller first batch (--ramp-batches 3: worlds / 8, worlds / 4, worlds / 2 before the full ones), so the
     # driver and the writers start sooner while the later batches step
+    timeout 200 python3 bench/bench_gpu_pipeline.py --parts e2e --workers 2 --shard-episodes 1024 \
+        --override "protocol.frequencies_hz=[0.1,0.5,1.0,2.0]" --tag warm 2>&1 | tail -1  # kernels compiled, not timed
     for r in 2 3; do
-        timeout 280 python3 bench/bench_gpu_pipeline.py --parts e2e --workers 8 --shards-per-worker 2 --ramp-batches $r \
+        timeout 270 python3 bench/bench_gpu_pipeline.py --parts e2e --workers 8 --shards-per-worker 2 --ramp-batches $r \
             --override "protocol.frequencies_hz=[0.1,0.5,1.0,2.0]" --tag h100-s10-mix-ramp$r 2>&1 | grep -v "^Module" \
             | tee $OUT/r/logs/gpu-pipeline-h100-s10-mix-ramp$r.log | tail -3
         cp bench/results/gpu-pipeline-h100-s10-mix-ramp$r.json $OUT/r/
