@@ -58,7 +58,7 @@ def _check_sensor(cfg, host, dev, seeds, device: str) -> None:
         tol = np.maximum(2 * np.spacing(np.abs(a[k])).astype(np.float64), 8 * eps32 * np.abs(ref).max())
         if k == "resistance_measured":  # quantised: a reading on a rounding boundary may go one quantum either way
             q = cfg.sensor.readout.resolution_ohm
-            assert (diff <= tol + q).all() and (diff > tol).mean() < 1e-3, (k, diff.max(), (diff > tol).mean())
+            assert (diff <= tol + q).all() and (diff > tol).mean() < 1e-2, (k, diff.max(), (diff > tol).mean())
             continue
         assert (diff <= tol).all(), (k, diff.max(), np.abs(ref).max())
 
