@@ -298,6 +298,9 @@ CONTACT_STAGES: dict[str, str] = {
     "press_stroke": "simulate.contact.press_stroke:run_press_stroke",
     "element_loads": "simulate.contact.element_loads:run_element_loads",
 }
+# those with a sliced form: "module:function(cfg, protocols, threads, slice_episodes, device_fields)" yielding
+# (slice of protocols, LoadBatch) as `iter_load_batches` does
+SLICED_CONTACT_STAGES: dict[str, str] = {"press_stroke": "simulate.contact.press_stroke:iter_press_stroke"}
 
 
 def run_episodes(cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1) -> LoadBatch:
@@ -320,10 +323,9 @@ def iter_load_batches(
     if cfg.protocol.kind in CONTACT_STAGES:
         import importlib
 
-        if cfg.protocol.kind == "press_stroke":  # one batch of physics, its fields slice by slice (on the device)
-            from simulate.contact.press_stroke import iter_press_stroke
-
-            yield from iter_press_stroke(cfg, protocols, threads, slice_episodes, device_fields)
+        if cfg.protocol.kind in SLICED_CONTACT_STAGES:  # one batch of physics, its fields slice by slice (on the device)
+            module, fn = SLICED_CONTACT_STAGES[cfg.protocol.kind].split(":")
+            yield from getattr(importlib.import_module(module), fn)(cfg, protocols, threads, slice_episodes, device_fields)
             return
         module, fn = CONTACT_STAGES[cfg.protocol.kind].split(":")
         yield slice(0, len(protocols)), getattr(importlib.import_module(module), fn)(cfg, protocols, threads)
