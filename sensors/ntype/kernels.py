@@ -207,3 +207,62 @@ def scan_feedback_warp(R: np.ndarray, upper: np.ndarray, lower: np.ndarray, U: i
             return o.numpy().reshape(F, M, 3)  # one chunk: no copy on the CPU device
         out[a:b] = o.numpy()
     return out.reshape(F, M, 3)
+
+
+# ------------------------------------------------------------------------------------------ element loads
+# `NtypeSensor.loads` on fields left on the device (the GPU path): per frame and element, the label (the sum of the
+# taxel forces the element's cell holds) and the electrode force (the cover influence, Boussinesq through the cover
+# layer: sensors/ntype/model.py `cover_influence`) over the taxels in order. float64 like the numpy einsums, which
+# sum in another order (BLAS): equal to ~1e-15 relative (tests/test_ntype.py).
+
+
+@wp.kernel(enable_backward=False)
+def ntype_loads_kernel(
+    shear: wp.array3d(dtype=wp.float64),  # [F, N, 2] Pa
+    pressure: wp.array2d(dtype=wp.float64),  # [F, N] Pa
+    area: wp.float64,
+    owner: wp.array(dtype=wp.int32),  # [N] element of each taxel
+    influence: wp.array3d(dtype=wp.float64),  # [3, M, N]
+    labels: wp.array3d(dtype=wp.float64),  # [F, M, 3] out
+    elec: wp.array3d(dtype=wp.float64),  # [F, M, 3] out, world frame z up (a press pushes the electrode down)
+):
+    f, m = wp.tid()
+    zero = wp.float64(0.0)
+    lx = zero
+    ly = zero
+    lz = zero
+    ex = zero
+    ey = zero
+    ez = zero
+    for n in range(pressure.shape[1]):
+        fx = shear[f, n, 0] * area
+        fy = shear[f, n, 1] * area
+        fz = pressure[f, n] * area
+        if owner[n] == m:
+            lx += fx
+            ly += fy
+            lz += fz
+        ex += influence[0, m, n] * fx
+        ey += influence[1, m, n] * fy
+        ez += influence[2, m, n] * fz
+    labels[f, m, 0] = lx
+    labels[f, m, 1] = ly
+    labels[f, m, 2] = lz
+    elec[f, m, 0] = ex
+    elec[f, m, 1] = ey
+    elec[f, m, 2] = -ez
+
+
+def ntype_loads_warp(shear, pressure, area_m2: float, owner: np.ndarray, influence: np.ndarray, frames: tuple[int, int]):
+    """(labels, electrode forces) [E, T, M, 3] float64 numpy of taxel fields left on the device: shear (E T, N, 2)
+    and pressure (E T, N) float64 Warp arrays; owner [N], influence [3, M, N] as in `NtypeSensor`."""
+    E, T = frames
+    F, M = E * T, influence.shape[1]
+    device = pressure.device
+    with wp.ScopedDevice(device):
+        lab, el = wp.empty((F, M, 3), dtype=wp.float64), wp.empty((F, M, 3), dtype=wp.float64)
+        wp.launch(ntype_loads_kernel, dim=(F, M), inputs=[
+            shear.reshape((F, -1, 2)), pressure.reshape((F, -1)), wp.float64(area_m2),
+            wp.array(np.asarray(owner, np.int32), dtype=wp.int32), wp.array(np.ascontiguousarray(influence, np.float64), dtype=wp.float64),
+            lab, el])
+        return lab.numpy().reshape(E, T, M, 3), el.numpy().reshape(E, T, M, 3)

@@ -131,6 +131,7 @@ class NtypeSensor:
 
     family = "ntype"
     outputs = OUTPUTS
+    device_load = True  # run_load takes taxel fields left on the device (LoadBatch, GPU path; warp backend)
 
     def __init__(self, cfg: SceneConfig, backend: str = "warp", device: str = "cpu"):
         device = resolve_backend(backend, device)
@@ -162,7 +163,13 @@ class NtypeSensor:
         return labels, elec
 
     def run_load(self, load: LoadBatch, seeds: list[int]) -> dict[str, np.ndarray]:
-        labels, elec = self.loads(load)
+        if load.fields_on_device and self.backend == "warp":  # the element loads made there (`ntype_loads_warp`)
+            from sensors.ntype.kernels import ntype_loads_warp
+
+            labels, elec = ntype_loads_warp(load.shear_pa, load.pressure_pa, load.taxel_area_m2, self.owner,
+                                            self.influence, load.target.shape)
+            return self.run(labels, elec, seeds)
+        labels, elec = self.loads(load.on_host())
         return self.run(labels, elec, seeds)
 
     def run(self, labels: np.ndarray, electrode_force: np.ndarray, seeds: list[int]) -> dict[str, np.ndarray]:

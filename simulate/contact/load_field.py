@@ -129,14 +129,12 @@ def physics_engine(cfg: SceneConfig) -> tuple[str, str]:
 
 
 def simulate_sensors(
-    cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1, alloc=None, progress=None,
+    cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1, alloc=None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Run the episodes; returns sensordata (E, T, nsensordata) at the sample times and target (E, T).
     Stepping: C MuJoCo's rollout on `threads` threads, or MuJoCo Warp worlds (`physics_engine`).
     alloc(shape) -> float64 array: where the sensordata goes (default np.zeros; the GPU feed's physics
-    process passes a view of a shared-memory block, so the worlds' output needs no second copy).
-    progress(k): called as samples 0 .. k - 1 of every episode are in the sensordata (MuJoCo Warp: chunk by
-    chunk as the worlds step; C MuJoCo: once, at the end)."""
+    process passes a view of a shared-memory block, so the worlds' output needs no second copy)."""
     engine, device = physics_engine(cfg)
     n = episode_length(protocols)
     sub = cfg.sampling.substeps
@@ -151,7 +149,7 @@ def simulate_sensors(
         states0, sens0 = _initial_states(m, cfg, protocols, episode_controls(cfg, protocols, nstep, slice(0, 1))[0][:, 0])
         qpos0 = states0[:, 1 : 1 + m.nq]  # full-physics state = (time, qpos, qvel, ...)
         out = worlds_for(m, mjcf, E, device, box_primitive=box_primitive_for(cfg.protocol.control)).run(qpos0, lambda sl, eps: episode_controls(cfg, protocols[eps], nstep, sl)[0], sens0, sub, n,
-                                                 out=None if alloc is None else alloc((E, n, m.nsensordata)), progress=progress)
+                                                 out=None if alloc is None else alloc((E, n, m.nsensordata)))
     else:
         ctrl, _ = episode_controls(cfg, protocols, nstep)
         states0, sens0 = _initial_states(m, cfg, protocols, ctrl[:, 0])
@@ -165,8 +163,6 @@ def simulate_sensors(
             b = min(E, a + chunk)
             _, sd = mujoco.rollout.rollout(m, data_arg, states0[a:b], ctrl[a:b], nstep=nstep)
             out[a:b, 1:] = sd[:, rows]
-        if progress is not None:  # the rollout runs blocks of whole episodes: all samples at once
-            progress(n)
     return out, sample_targets(cfg, protocols, n)
 
 
@@ -302,6 +298,9 @@ CONTACT_STAGES: dict[str, str] = {
     "press_stroke": "simulate.contact.press_stroke:run_press_stroke",
     "element_loads": "simulate.contact.element_loads:run_element_loads",
 }
+# those with a sliced form: "module:function(cfg, protocols, threads, slice_episodes, device_fields)" yielding
+# (slice of protocols, LoadBatch) as `iter_load_batches` does
+SLICED_CONTACT_STAGES: dict[str, str] = {"press_stroke": "simulate.contact.press_stroke:iter_press_stroke"}
 
 
 def run_episodes(cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1) -> LoadBatch:
@@ -324,6 +323,10 @@ def iter_load_batches(
     if cfg.protocol.kind in CONTACT_STAGES:
         import importlib
 
+        if cfg.protocol.kind in SLICED_CONTACT_STAGES:  # one batch of physics, its fields slice by slice (on the device)
+            module, fn = SLICED_CONTACT_STAGES[cfg.protocol.kind].split(":")
+            yield from getattr(importlib.import_module(module), fn)(cfg, protocols, threads, slice_episodes, device_fields)
+            return
         module, fn = CONTACT_STAGES[cfg.protocol.kind].split(":")
         yield slice(0, len(protocols)), getattr(importlib.import_module(module), fn)(cfg, protocols, threads)
         return

@@ -170,3 +170,100 @@ def fields_f32_to_host(fields: dict[str, wp.array], shapes: dict[str, tuple[int,
         wp.launch(_to_f32, dim=flat.shape[0], inputs=[flat, dst], device=arr.device)
         out[name] = to_host(dst, f"field {name}").reshape(shapes[name])
     return out
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# press_stroke (ntype): several flat indenters, each force spread uniformly over its footprint (simulate/contact/
+# press_stroke.py `_load_batch`, the numpy reference; Johnson, Contact Mechanics, 1985, flat punch on a Winkler
+# layer). Frames F = E x T, indenters C; float64 like the reference.
+
+
+@wp.func
+def _box_cover(x: wp.float64, y: wp.float64, hx: wp.float64, hy: wp.float64, ix: int, iy: int,
+               x_lo: wp.array(dtype=wp.float64), x_hi: wp.array(dtype=wp.float64), y_lo: wp.array(dtype=wp.float64),
+               y_hi: wp.array(dtype=wp.float64), px: wp.float64, py: wp.float64) -> wp.float64:
+    """Cell (ix, iy)'s covered fraction: interval_coverage in y times in x (the reference's cy * cx)."""
+    zero = wp.float64(0.0)
+    cx = wp.max(wp.min(x + hx, x_hi[ix]) - wp.max(x - hx, x_lo[ix]), zero) / px
+    cy = wp.max(wp.min(y + hy, y_hi[iy]) - wp.max(y - hy, y_lo[iy]), zero) / py
+    return cy * cx
+
+
+@wp.kernel
+def _press_weights(pos: wp.array3d(dtype=wp.float64), hx: wp.float64, hy: wp.float64,
+                   x_lo: wp.array(dtype=wp.float64), x_hi: wp.array(dtype=wp.float64), y_lo: wp.array(dtype=wp.float64),
+                   y_hi: wp.array(dtype=wp.float64), px: wp.float64, py: wp.float64, w: wp.array2d(dtype=wp.float64)):
+    """w[f, c] = indenter c's footprint in cells (sum of its cover over the grid, taxel order)."""
+    f, c = wp.tid()
+    nx = x_lo.shape[0]
+    acc = wp.float64(0.0)
+    for iy in range(y_lo.shape[0]):
+        for ix in range(nx):
+            acc += _box_cover(pos[f, c, 0], pos[f, c, 1], hx, hy, ix, iy, x_lo, x_hi, y_lo, y_hi, px, py)
+    w[f, c] = acc
+
+
+@wp.kernel
+def _press_fields(pos: wp.array3d(dtype=wp.float64), fn: wp.array2d(dtype=wp.float64), ft: wp.array3d(dtype=wp.float64),
+                  w: wp.array2d(dtype=wp.float64), area: wp.float64, hx: wp.float64, hy: wp.float64,
+                  x_lo: wp.array(dtype=wp.float64), x_hi: wp.array(dtype=wp.float64), y_lo: wp.array(dtype=wp.float64),
+                  y_hi: wp.array(dtype=wp.float64), px: wp.float64, py: wp.float64,
+                  deform: wp.array2d(dtype=wp.float64), pressure: wp.array2d(dtype=wp.float64),
+                  shear: wp.array3d(dtype=wp.float64)):
+    """deformation = sum_c penetration x cover; pressure, shear = sum_c cover / (area w_c) x force_c (indenters in
+    order, as the reference's sums over its indenter axis)."""
+    f, n = wp.tid()
+    nx = x_lo.shape[0]
+    ix = n % nx
+    iy = n // nx
+    zero = wp.float64(0.0)
+    d = zero
+    p = zero
+    sx = zero
+    sy = zero
+    for c in range(pos.shape[1]):
+        cover = _box_cover(pos[f, c, 0], pos[f, c, 1], hx, hy, ix, iy, x_lo, x_hi, y_lo, y_hi, px, py)
+        d += wp.max(-pos[f, c, 2], zero) * cover
+        share = zero
+        if w[f, c] > zero:
+            share = cover / (area * w[f, c])
+        p += share * fn[f, c]
+        sx += share * ft[f, c, 0]
+        sy += share * ft[f, c, 1]
+    deform[f, n] = d
+    pressure[f, n] = p
+    shear[f, n, 0] = sx
+    shear[f, n, 1] = sy
+
+
+def press_fields_warp(cfg: SceneConfig, pos_m: np.ndarray, normal_n: np.ndarray, shear_n: np.ndarray, device: str):
+    """press_stroke's taxel fields for box indenters on `device`: pos_m (E, T, C, 3) indenter positions (z < 0:
+    into the pad), normal_n (E, T, C), shear_n (E, T, C, 2). Returns (deformation (E T, N), pressure (E T, N),
+    shear (E T, N, 2)) as float64 Warp arrays on the device and w (E, T, C) numpy, each indenter's footprint in
+    cells (> 0: it found the pad). Against the numpy reference (`press_stroke._load_batch`): the same values
+    but for the footprint sum, summed here in taxel order and there pairwise, so the fields agree to ~1e-15
+    relative (tests/test_press_stroke_fields.py)."""
+    pad, ind = cfg.pad, cfg.indenter
+    if ind.shape != "box":
+        raise ValueError("press_fields_warp: box indenters only (the sphere's field stays in numpy)")
+    E, T, C, _ = pos_m.shape
+    F, nx, ny = E * T, pad.taxels_x, pad.taxels_y
+    N = nx * ny
+    f64 = wp.float64
+    px, py = pad.size_x_m / nx, pad.size_y_m / ny
+    cx, cy = taxel_centres_1d(pad.size_x_m, nx), taxel_centres_1d(pad.size_y_m, ny)
+
+    def arr(x, shape=None):
+        return wp.array(np.ascontiguousarray(x, np.float64).reshape(shape or np.shape(x)), dtype=f64, device=device)
+
+    with wp.ScopedDevice(device):
+        edges = [arr(cx - 0.5 * px), arr(cx + 0.5 * px), arr(cy - 0.5 * py), arr(cy + 0.5 * py)]
+        geo = [f64(ind.size_x_m / 2), f64(ind.size_y_m / 2)]
+        pos = arr(pos_m, (F, C, 3))
+        w = wp.empty((F, C), dtype=f64)
+        wp.launch(_press_weights, dim=(F, C), inputs=[pos, *geo, *edges, f64(px), f64(py), w])
+        deform, pressure, shear = wp.empty((F, N), dtype=f64), wp.empty((F, N), dtype=f64), wp.empty((F, N, 2), dtype=f64)
+        wp.launch(_press_fields, dim=(F, N), inputs=[pos, arr(normal_n, (F, C)), arr(shear_n, (F, C, 2)), w,
+                                                     f64(taxel_area_m2(cfg)), *geo, *edges, f64(px), f64(py),
+                                                     deform, pressure, shear])
+        return deform, pressure, shear, w.numpy().reshape(E, T, C)

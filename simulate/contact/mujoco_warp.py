@@ -113,15 +113,14 @@ class WarpWorlds:
         """Store the subclass's n_extra values of this sample after the sensordata in `out` (nothing here)."""
 
     def run(self, qpos0: np.ndarray, ctrl, sens0: np.ndarray, substeps: int, n_samples: int,
-            out: np.ndarray | None = None, progress=None) -> np.ndarray:
+            out: np.ndarray | None = None) -> np.ndarray:
         """Reset the worlds to qpos0 (E, nq) at rest and replay the controls; sensors at samples 1..n-1 after
         each substeps-th step (sample 0 = sens0, computed by the caller with mj_forward).
 
         ctrl: (E, nstep, nu) array, or a function (steps, episodes) of two slices returning those rows; the
         next chunk's controls are made on CONTROL_THREADS host threads (blocks of episodes; numpy releases the
         GIL) while the device runs the current one. out: a (E, n_samples, nsensordata + n_extra) float64 array to
-        fill (default a new one); sens0 has as many columns. progress(k): called each time samples 0 .. k - 1 of
-        every world are in `out` (the GPU feed hands them on while the later samples step).
+        fill (default a new one); sens0 has as many columns.
         """
         import mujoco_warp as mjw
         from concurrent.futures import ThreadPoolExecutor
@@ -189,8 +188,6 @@ class WarpWorlds:
                     wp.copy(rec_host, rec)
                     wp.synchronize_device(self.device)
                 out[:, a : a + k] = rec_host.numpy()[:, :k]
-                if progress is not None:
-                    progress(a + k)
         return out
 
 

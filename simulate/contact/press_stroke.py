@@ -98,6 +98,15 @@ def run_press_stroke(cfg: SceneConfig, protocols: list[EpisodeProtocol], threads
     indenters (x, y: stick-slip shear on the pad; z: MuJoCo normal force); contact_points counts the
     indenters in contact.
     """
+    return next(iter_press_stroke(cfg, protocols, threads))[1]
+
+
+def iter_press_stroke(cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1,
+                      slice_episodes: int | None = None, device_fields: str | None = None):
+    """`run_press_stroke` as (slice of protocols, LoadBatch) pieces of at most slice_episodes episodes (default
+    all) after one batch of physics. device_fields: on the MuJoCo Warp path with box indenters, the taxel fields
+    are made by Warp kernels on that device and stay there (flat Warp arrays, see LoadBatch), for a sensor chain
+    that runs there (`press_fields_warp`; the numpy `_load_batch` is its reference)."""
     n = protocols[0].n_samples
     if any(p.n_samples != n for p in protocols) or n < 2:
         raise ValueError("run_press_stroke: all protocols need the same n_samples >= 2")
@@ -133,8 +142,13 @@ def run_press_stroke(cfg: SceneConfig, protocols: list[EpisodeProtocol], threads
             states[:, 1 : 1 + m.nq], lambda sl, eps: controls_batch(cfg, protocols[eps], (np.arange(sl.start, sl.stop) + 1.0) * dt),
             np.concatenate([sens0, np.zeros((E, 2 * C))], axis=1), sub, n)
         sd = rec[..., : m.nsensordata].reshape(E, n, C, per)
-        return _load_batch(cfg, protocols, sd[..., 0:3], np.clip(-sd[..., 6], 0.0, None),
-                           rec[..., m.nsensordata :].reshape(E, n, C, 2), sd[..., 3])
+        shear = rec[..., m.nsensordata :].reshape(E, n, C, 2)
+        step = E if slice_episodes is None else max(1, slice_episodes)
+        for a in range(0, E, step):
+            sl = slice(a, min(E, a + step))
+            yield sl, _load_batch(cfg, protocols[sl], sd[sl, ..., 0:3], np.clip(-sd[sl, ..., 6], 0.0, None), shear[sl],
+                                  sd[sl, ..., 3], device_fields if device_fields == device else None)
+        return
     ctrl = _controls(cfg, protocols, (np.arange(nstep) + 1.0) * dt)
     rows = np.arange(1, n) * sub - 1
     pos = np.zeros((E, n, C, 3))
@@ -152,7 +166,7 @@ def run_press_stroke(cfg: SceneConfig, protocols: list[EpisodeProtocol], threads
         r = np.concatenate([[0], rows + 1])
         sdr = sd[:, r]
         pos[a:b], fn[a:b], ft[a:b], found[a:b] = sdr[..., 0:3], normal[:, r], shear[:, r], sdr[..., 3]
-    return _load_batch(cfg, protocols, pos, fn, ft, found)
+    yield slice(0, E), _load_batch(cfg, protocols, pos, fn, ft, found)
 
 
 def _mjcf(cfg: SceneConfig) -> str:
@@ -161,11 +175,19 @@ def _mjcf(cfg: SceneConfig) -> str:
     return build_mjcf(cfg)
 
 
-def _load_batch(cfg, protocols, pos, fn, ft, found) -> LoadBatch:
+def _load_batch(cfg, protocols, pos, fn, ft, found, device_fields: str | None = None) -> LoadBatch:
+    """The LoadBatch of indenter positions pos (E, T, C, 3), normal forces fn (E, T, C), shear ft (E, T, C, 2) and
+    contact flags found (E, T, C). device_fields: the taxel fields by `press_fields_warp` on that device, left
+    there (box indenters; else the numpy field below, its reference)."""
     pad, ind = cfg.pad, cfg.indenter
     E, T, C, _ = pos.shape
     nx, ny = pad.taxels_x, pad.taxels_y
     area = taxel_area_m2(cfg)
+    if device_fields is not None and ind.shape == "box":
+        from simulate.contact.load_field_kernels import press_fields_warp
+
+        deform, pressure, shear, w = press_fields_warp(cfg, pos, fn, ft, device_fields)
+        return _with_totals(cfg, protocols, pos, fn, ft, found, w, deform, pressure, shear)
     pen = np.clip(-pos[..., 2], 0.0, None)  # (E, T, C)
     if ind.shape == "box":
         cx = interval_coverage(pos[..., 0], ind.size_x_m / 2, pad.size_x_m, nx)  # (E, T, C, nx)
@@ -181,6 +203,13 @@ def _load_batch(cfg, protocols, pos, fn, ft, found) -> LoadBatch:
     share = np.where(w[..., None] > 0, cover / (area * np.where(w > 0, w, 1.0))[..., None], 0.0)  # (E,T,C,N) 1/m2
     pressure = (share * fn[..., None]).sum(2)
     shear = (share[..., None] * ft[..., None, :]).sum(2)
+    return _with_totals(cfg, protocols, pos, fn, ft, found, w, deform, pressure, shear)
+
+
+def _with_totals(cfg, protocols, pos, fn, ft, found, w, deform, pressure, shear) -> LoadBatch:
+    """The LoadBatch of the fields and the per-frame totals (w: (E, T, C) each indenter's footprint in cells)."""
+    pad = cfg.pad
+    T = pos.shape[1]
     # loads that found no cell (footprint off the pad) are dropped from the field and the totals alike
     on = (w > 0).astype(float)
     force = np.concatenate([(ft * on[..., None]).sum(2), (fn * on).sum(2)[..., None]], axis=-1)
@@ -197,6 +226,6 @@ def _load_batch(cfg, protocols, pos, fn, ft, found) -> LoadBatch:
         pressure_pa=pressure,
         shear_pa=shear,
         taxel_xy_m=taxel_xy_m(cfg),
-        taxel_area_m2=area,
+        taxel_area_m2=taxel_area_m2(cfg),
         control=cfg.protocol.control,
     )

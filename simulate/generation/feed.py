@@ -69,16 +69,12 @@ def _views(buf, where: list[tuple[int, str, tuple[int, ...]]]) -> list[np.ndarra
     return [np.ndarray(shape, np.dtype(dt), buffer=buf, offset=off) for off, dt, shape in where]
 
 
-def step_worlds(cfg: SceneConfig, gids: list[int], threads: int = 1, submitted: float | None = None,
-                mailbox=None) -> tuple[list, dict, dict]:
+def step_worlds(cfg: SceneConfig, gids: list[int], threads: int = 1, submitted: float | None = None) -> tuple[list, dict, dict]:
     """Physics task (in the feed's physics process): the protocols of episodes `gids` and, per length group,
     their (sensordata, target) from `simulate_sensors`, written straight into a shared-memory block the
     receiver unlinks: ({n_samples: (block name, layout)} or the arrays themselves where /dev/shm has no room);
     and where the task's time went ("waiting to start" since `submitted`, a time.time(), "imports", "protocols",
-    "worlds": initial states, controls, MuJoCo Warp). mailbox: a queue (a multiprocessing manager's) told, for
-    each length group stepped alone into a block, ("block", n_samples, block name, sensordata shape, positions
-    in gids) before it steps and ("rows", n_samples, k) each time samples 0 .. k - 1 of all its worlds are in
-    the block: the driver runs their load field and sensor chain meanwhile (`Stream`)."""
+    "worlds": initial states, controls, MuJoCo Warp)."""
     import time
 
     t0 = time.time()
@@ -108,17 +104,10 @@ def step_worlds(cfg: SceneConfig, gids: list[int], threads: int = 1, submitted: 
             if not _shm_room(nbytes):
                 return np.zeros(shape)
             made.append(shared_memory.SharedMemory(create=True, size=nbytes))
-            if mailbox is not None and done is None:
-                mailbox.put(("block", n, made[0].name, tuple(shape), list(idx)))
             return np.ndarray(shape, np.float64, buffer=made[0].buf)
 
-        def progress(k: int, n: int = n) -> None:
-            if made:
-                mailbox.put(("rows", n, int(k)))
-
         if done is None:
-            sens, target = simulate_sensors(cfg, [protos[i] for i in idx], threads, alloc,
-                                            None if mailbox is None else progress)
+            sens, target = simulate_sensors(cfg, [protos[i] for i in idx], threads, alloc)
         else:
             into, target = alloc(done[0].shape), done[1]  # into shared memory like the rest
             into[...] = done[0]
@@ -133,76 +122,6 @@ def step_worlds(cfg: SceneConfig, gids: list[int], threads: int = 1, submitted: 
         shm.close()
     spent["worlds"] = time.time() - t2
     return protos, out, spent
-
-
-STREAM_FIRST_BATCH = True  # run the first batch's sensor chain in time chunks while it steps (where the sensor can)
-STREAM_FRAMES = 1 << 22  # frames (episode-samples) per load-field + sensor pass of a stream (bounds its memory)
-
-
-def streams_sensor(cfg: SceneConfig, sensor) -> bool:
-    """Whether the feed runs this sensor's chain in time chunks while the first batch's worlds step: a sensor
-    with `stream` (fabric), the same sensor for every episode (no scene draws), physics in the physics processes.
-    (MuJoCo Warp hands the samples on chunk by chunk; C MuJoCo's rollout all at once, at its end.)"""
-    from simulate.contact.load_field import CONTACT_STAGES
-
-    r = cfg.randomize
-    return hasattr(sensor, "stream") and cfg.protocol.kind not in CONTACT_STAGES and (r is None or r.empty())
-
-
-class Stream:
-    """The load field and sensor chain of one length group of a batch, run in time chunks in the driver while its
-    worlds still step in the physics process (`step_worlds` with a mailbox: the sensordata block and how many
-    samples are in it). `advance(k)` runs the samples up to k, carrying the chain's state (`sensor.stream`);
-    `finish` the rest, giving a `Streamed` that `simulate_slices` slices as it would the group's own run: the
-    same channels bit for bit (every step is per sample or carries its state; tests/test_feed_stream.py)."""
-
-    def __init__(self, cfg: SceneConfig, sensor, block: str, shape: tuple[int, int, int], positions: list[int],
-                 seeds: list[int]):
-        from simulate.generation.run import _records_fields
-
-        self.cfg, self.positions = cfg, positions
-        self.shm = _attach(block)
-        self.sens = np.ndarray(shape, np.float64, buffer=self.shm.buf)
-        E, self.n = shape[0], shape[1]
-        self.st = sensor.stream(seeds, self.n)
-        self.fed = 0
-        N = cfg.pad.n_taxels
-        self.fields = (np.empty((E, self.n, N), np.float32), np.empty((E, self.n, N), np.float32),
-                       np.empty((E, self.n, N, 2), np.float32)) if _records_fields(cfg) else None
-
-    def advance(self, k: int) -> None:
-        from simulate.contact.load_field import load_batch
-
-        E = self.sens.shape[0]
-        step = max(1, STREAM_FRAMES // max(1, E))
-        while self.fed < min(k, self.n):
-            a, b = self.fed, min(k, self.n, self.fed + step)
-            batch = load_batch(self.cfg, self.sens[:, a:b], np.zeros((E, b - a)))
-            self.st.feed(batch, a)
-            if self.fields is not None:
-                for dst, src in zip(self.fields, (batch.deformation_m, batch.pressure_pa, batch.shear_pa)):
-                    dst[:, a:b] = src
-            self.fed = b
-
-    def finish(self, sens: np.ndarray, target: np.ndarray):
-        """The group's `Streamed` (sens, target: its whole (sensordata, target) from the physics task)."""
-        from simulate.contact.load_field import load_batch
-        from simulate.generation.run import Streamed
-
-        self.advance(self.n)
-        E = sens.shape[0]
-        empty = (np.empty((E, self.n, 0), np.float32),) * 2 + (np.empty((E, self.n, 0, 2), np.float32),)
-        batch = load_batch(self.cfg, sens, target, fields=self.fields or empty)
-        out = self.st.finish()
-        self.close()
-        return Streamed(batch, out)
-
-    def close(self) -> None:
-        self.sens = None
-        try:
-            self.shm.close()
-        except BufferError:  # a view still alive (an error unwinding): the memory goes with the process
-            pass
 
 
 PACK_THREADS = 4  # threads copying a piece into its shared block (numpy copies release the GIL)
@@ -378,8 +297,9 @@ def feed_worlds(cfg: SceneConfig) -> int:
 
     p, s = cfg.protocol, cfg.sampling
     if p.kind in CONTACT_STAGES:
-        # the stage runs in the driver, its load field in numpy on the host with (episodes, samples, indenters,
-        # taxels) float64 temporaries (press_stroke on ntype's 24 x 24 grid: ~2 GB per 4096 episodes)
+        # the stage runs in the driver (press_stroke: its taxel fields by Warp kernels on the device, ~3 GB of
+        # float64 fields per 8192 ntype episodes; on the host, numpy's (episodes, samples, indenters, taxels)
+        # temporaries)
         return FEED_WORLDS // 4
     if p.kind != "sinusoid":
         return FEED_WORLDS
@@ -408,10 +328,9 @@ def _groups(cfg: SceneConfig, todo: list[int], worlds: int) -> list[list[int]]:
 
 
 def produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, seconds: dict | None = None,
-            stepped: tuple[list, dict] | None = None, pool: BlockPool | None = None,
-            streams: dict | None = None) -> list[PackedShard]:
+            stepped: tuple[list, dict] | None = None, pool: BlockPool | None = None) -> list[PackedShard]:
     """`iter_produce`'s shards in the order of `shards`."""
-    packs = {p.shard: p for p in iter_produce(cfg, shards, sensor, threads, seconds, stepped, pool, streams)}
+    packs = {p.shard: p for p in iter_produce(cfg, shards, sensor, threads, seconds, stepped, pool)}
     return [packs[s] for s in shards]
 
 
@@ -420,15 +339,13 @@ SLICES_PER_LENGTH = 4  # slices (at most SENSOR_SLICE episodes each) per length 
 
 
 def iter_produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, seconds: dict | None = None,
-                 stepped: tuple[list, dict] | None = None, pool: BlockPool | None = None,
-                 streams: dict | None = None) -> Iterator[PackedShard]:
+                 stepped: tuple[list, dict] | None = None, pool: BlockPool | None = None) -> Iterator[PackedShard]:
     """Simulate the episodes of `shards` as one batch and pack each shard's recorded channels, yielding each
     shard as soon as all its episodes are packed (seconds: adds the time spent simulating and packing).
     stepped: `step_worlds` of these episodes, run in the physics process; this process then runs only the load
     field and the sensor chain. pool: pack into its shared blocks. Each slice's outputs come back from the GPU
     into reused page-locked buffers (`host_staging`) and are packed before the next slice runs; each length
-    group goes in SLICES_PER_LENGTH slices or more. streams: {n_samples: `Stream`} of length groups whose load
-    field and sensor chain ran in time chunks while they stepped; only their last chunk runs here."""
+    group goes in SLICES_PER_LENGTH slices or more."""
     import time
 
     from sensors.data.manifest import episode_seed
@@ -455,10 +372,6 @@ def iter_produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, 
                 handed = tuple(_views(blocks[-1].buf, handed[1]))
             physics[n] = handed
     try:
-        for n, st in (streams or {}).items():
-            t0 = time.perf_counter()
-            physics[n] = st.finish(*physics[n])
-            seconds["simulate"] = seconds.get("simulate", 0.0) + time.perf_counter() - t0
         with host_staging():
             t0 = time.perf_counter()
             for pos, protos_s, arrays in simulate_slices(cfg, seeds, sensor, threads, gids, protos, physics, SLICES_PER_LENGTH):
@@ -487,8 +400,6 @@ def iter_produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, 
                 t0 = time.perf_counter()
     finally:
         physics = None
-        for st in (streams or {}).values():
-            st.close()
         for shm in blocks:
             try:
                 shm.close()
@@ -509,7 +420,7 @@ def generate_feed(
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
 
-    from sensors.registry import make_sensor, sensor_class
+    from sensors.registry import make_sensor
     from sensors.warp_setup import init_warp
     from simulate.contact.load_field import CONTACT_STAGES
     from simulate.contact.mjcf import build_mjcf
@@ -532,53 +443,8 @@ def generate_feed(
     # the worlds step in their own processes, batches ahead of the load field + sensor chain here (kinds with
     # their own contact stage run it here); they start first, so their start-up overlaps the driver's
     physics = None if cfg.protocol.kind in CONTACT_STAGES else ProcessPoolExecutor(PHYSICS_PROCESSES, mp_context=ctx)
-    # the first batch's sensor chain runs in time chunks while its worlds step (a modest run is one batch, and
-    # nothing else would overlap its stepping); the physics task says through `mailbox` how far it is
-    manager = ctx.Manager() if physics and STREAM_FIRST_BATCH and streams_sensor(cfg, sensor_class(cfg.sensor.family)) else None
-    mailbox = manager.Queue() if manager else None
-
     def step(b: int):
-        return physics.submit(step_worlds, cfg, [k for s in groups[b] for k in episode_ids_of_shard(cfg, s)], threads, time.time(),
-                              mailbox if b == 0 else None)
-
-    def await_streaming(future, gids: list[int]) -> tuple[tuple, dict]:
-        """Wait for the first batch's physics task, running its length groups' load field and sensor chain as
-        their samples come in; returns (its result, {n_samples: Stream})."""
-        import queue
-
-        from sensors.data.manifest import episode_seed
-
-        streams: dict[int, Stream] = {}
-        try:
-            while True:
-                done = future.done()
-                try:
-                    msgs = [mailbox.get(timeout=0.001 if done else 0.05)]
-                except queue.Empty:
-                    if done:
-                        return future.result(), streams
-                    continue
-                while True:  # everything queued: advance each group once, to its latest row
-                    try:
-                        msgs.append(mailbox.get_nowait())
-                    except queue.Empty:
-                        break
-                t0 = time.perf_counter()
-                rows: dict[int, int] = {}
-                for m in msgs:
-                    if m[0] == "block":
-                        streams[m[1]] = Stream(cfg, sensor, m[2], m[3], m[4],
-                                               [episode_seed(cfg.generation.root_seed, gids[i]) for i in m[4]])
-                    else:
-                        rows[m[1]] = max(rows.get(m[1], 0), m[2])
-                for n, k in rows.items():
-                    if n in streams:
-                        streams[n].advance(k)
-                add("simulate (first batch, while it steps)", t0)
-        except BaseException:
-            for st in streams.values():
-                st.close()
-            raise
+        return physics.submit(step_worlds, cfg, [k for s in groups[b] for k in episode_ids_of_shard(cfg, s)], threads, time.time())
 
     ahead = [step(b) for b in range(min(PHYSICS_PROCESSES, len(groups)))] if physics else []
     try:
@@ -590,8 +456,6 @@ def generate_feed(
     except BaseException:
         if physics:
             physics.shutdown(wait=False, cancel_futures=True)
-        if manager:
-            manager.shutdown()
         raise
     pool = ProcessPoolExecutor(writers, mp_context=ctx)
     pending: dict = {}  # future -> packed shard (kept until its file is checked, for a resubmit)
@@ -672,12 +536,7 @@ def generate_feed(
             if physics:
                 t0 = time.perf_counter()
                 try:
-                    if b == 0 and mailbox is not None:
-                        t_in = seconds.get("simulate (first batch, while it steps)", 0.0)
-                        stepped, streams = await_streaming(ahead.pop(0), [k for s in group for k in episode_ids_of_shard(cfg, s)])
-                        t0 += seconds.get("simulate (first batch, while it steps)", 0.0) - t_in  # not waiting
-                    else:
-                        stepped, streams = ahead.pop(0).result(), None
+                    stepped = ahead.pop(0).result()
                 except BrokenProcessPool:
                     raise RuntimeError(f"the physics process died stepping shards {group} (complete shards are kept: "
                                        "rerun to resume)") from None
@@ -689,9 +548,7 @@ def generate_feed(
                     ahead.append(step(b + PHYSICS_PROCESSES))
                 elif not ahead:  # the last batch is here: the physics processes exit (free the GPU) meanwhile
                     physics.shutdown(wait=False)
-            else:
-                streams = None
-            for p in iter_produce(cfg, group, sensor, threads, seconds, stepped, shared, streams):
+            for p in iter_produce(cfg, group, sensor, threads, seconds, stepped, shared):
                 submit(p)  # as soon as its episodes are packed: the writers start while the batch's last slices run
                 collect(0, block=False)
         shared.drain()
@@ -703,8 +560,6 @@ def generate_feed(
         pool.shutdown(wait=True, cancel_futures=True)
         if physics:
             physics.shutdown(wait=True, cancel_futures=True)
-        if manager:
-            manager.shutdown()
         shared.close()
         add("shut down", t0)
     return entries

@@ -102,13 +102,6 @@ def simulate_slices(
         for n, idx in run:
             done = physics[n] if physics is not None else None if padded is None else padded.pop(n)
             per = min(SENSOR_SLICE, max(1, -(-len(idx) // max(1, pieces))))
-            if isinstance(done, Streamed):  # load field and sensor chain run already, in time chunks
-                for a in range(0, len(idx), per):
-                    sl = slice(a, min(len(idx), a + per))
-                    part = idx[sl]
-                    yield part, [protos[i] for i in part], channel_arrays(
-                        _episodes(done.batch, sl), {k: v[sl] for k, v in done.outputs.items()}, cfg, sensor)
-                continue
             for sl, batch in iter_load_batches(cfg, [protos[i] for i in idx], threads, per if gpu else None, on_device, done):
                 part = idx[sl]
                 out = run_sensor(cfg, sensor, batch if on_device else batch.on_host(), [seeds[i] for i in part],
@@ -138,15 +131,6 @@ def episode_protocols(cfg: SceneConfig, seeds: list[int], indices: list[int] | N
             p = replace(p, offset_xy_m=off, params={**p.params, "randomized": vals})
         out.append(p)
     return out
-
-
-@dataclass
-class Streamed:
-    """A length group's load batch (fields on the host) and sensor outputs, made in time chunks while its worlds
-    stepped (the GPU feed, `simulate.generation.feed.Stream`); `simulate_slices` only slices them."""
-
-    batch: LoadBatch
-    outputs: dict[str, np.ndarray]
 
 
 def _episode_slice(batch: LoadBatch, j: int) -> LoadBatch:
