@@ -504,3 +504,23 @@ def test_ae_runs_hold_every_staircase_to_15n():
             assert t[top[1]] <= cfg.protocol.duration_s + 1e-9, (mode, k, p["speed_m_per_s"])
             speeds.add(round(p["speed_m_per_s"] * 6e4, 3))
         assert min(speeds) == pytest.approx(min(cfg.protocol.loading_speeds_m_per_s) * 6e4)
+
+
+@pytest.mark.slow  # two spawned processes import torch: ~20 s on 2 loaded cores
+def test_search_hidden_workers_same_nets():
+    """The hidden-node search in worker processes trains the same nets as one after another (same seeds, CPU,
+    one thread): equal validation scores, the same chosen size, equal predictions."""
+    from learn.models.velostat import search_hidden
+
+    rng = np.random.default_rng(3)
+    u = rng.integers(0, 4, 300).astype(float)
+    f = rng.uniform(1, 15, 300)
+    r = 2e4 * (1 + 0.3 * u) / f
+    xs, ys = [np.column_stack([u, r])], [f[:, None]]
+    valid = ([xs[0][:60]], [ys[0][:60]])
+    hp = {"max_epochs": 4, "patience": 4, "r_input": "log", "encoding": "onehot"}
+    a, sa = search_hidden(xs, ys, valid, hidden=[3, 5], seed=1, **hp)
+    b, sb = search_hidden(xs, ys, valid, hidden=[3, 5], seed=1, workers=2, **hp)
+    assert sa == sb and a.hparams["hidden"] == b.hparams["hidden"]
+    np.testing.assert_array_equal(a.predict(xs[0]), b.predict(xs[0]))
+    assert sa[3] != sa[5]  # two different nets, not one scored twice

@@ -21,6 +21,7 @@ and our TCN, on the same held-out recordings; the paper's numbers beside ours.
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -542,8 +543,14 @@ def ae_errors(seqs: list[Sequence], preds: list[np.ndarray], rate: float) -> dic
 @single_thread
 def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None = None,
         overrides: list[str] | None = None, models: list[str] | None = None, seed: int = 0,
-        progress: bool = True, log: Callable[[str], None] = print) -> dict[str, Any]:
+        progress: bool = True, log: Callable[[str], None] = print, workers: int = 1,
+        tcn_device: str | None = None) -> dict[str, Any]:
+    """workers > 1: each BP hidden-node search trains its nets in that many CPU processes (same nets);
+    tcn_device: where ours trains (default: the current training device, as the BP nets); both are recorded
+    in metrics["run"]. The numbers depend on neither but tcn_device (CUDA vs CPU float rounding)."""
     import torch
+
+    from learn.train import current_device, resolve_device, training_device
 
     from learn.checkpoint import save_checkpoint
     from learn.models import make_model
@@ -559,6 +566,8 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
     if unknown:
         raise ValueError(f"unknown model(s) {unknown}; known: {sorted(md_models(md))}")
     want = lambda k: models is None or k in models or k == "mean"
+    bp_device = current_device() if workers <= 1 else "cpu"
+    tcn_dev = resolve_device(tcn_device) if tcn_device is not None else current_device()
     cfgs = scenes_of(md, list(overrides or []), seed)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -662,7 +671,7 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
               **({"n_ids": cl["k"] if by == "cluster" else n_units} if onehot else {})}
         xs, ys = _bp_xy(p_tr, ids)
         vx, vy = _bp_xy(p_va, ids) if len(p_va) else (xs, ys)
-        bp, scores = search_hidden(xs, ys, (vx, vy), hidden=md.hidden, seed=seed, **hp)
+        bp, scores = search_hidden(xs, ys, (vx, vy), hidden=md.hidden, seed=seed, workers=workers, **hp)
         # the paper's "testing set" RMSE (sect. 4.2: train < 1 N, test < 2 N) is over BP samples, one (unit, R) -> F
         # per held hold: the same points (R over each hold's last second) of the held-out recordings
         tx, ty = _bp_xy(hold_points(te, tracker if comp else None, cfg, rate), ids)
@@ -755,6 +764,7 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
                       "test_ae": [s.key for s in te_ae]},
             "creep": creep, "clustering": clustering, "bp_search": bp_search, "models": results, "paper": PAPER,
             "findings": findings(results, creep, clustering, bp_search),
+            "run": {"workers": int(workers), "bp_device": bp_device, "tcn_device": tcn_dev},
         }
         if partial:
             metrics["partial"] = partial
@@ -767,36 +777,38 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
     write_metrics("the paper's chains only: ours (TCN) still training or not run")
 
     comps: dict[str, Any] = {}
-    if want("tcn"):
-        cand = {}
-        for variant in md.tcn_inputs:
-            chs = None
-            if variant in ("calibrated", "aged"):
-                raw_k, comp_k = CALIBRATED_FROM[0], next((k for k in CALIBRATED_FROM[1] if k in chains), None)
-                if raw_k not in chains or comp_k is None:
-                    continue
-                chs = {raw_k: chains[raw_k], comp_k: chains[comp_k]}
-            trk = tracker if variant in ("compensated", "calibrated", "aged") else None
-            feats = (lambda t, c, a: (lambda s: tcn_features(s, t, c, a)))(trk, chs, rate if variant == "aged" else None)
-            names = TCN_INPUTS[variant]
-            tcn = make_model("ensemble", member="tcn", n_members=md.tcn_members, member_hparams=md.tcn)
-            t0 = time.perf_counter()
-            tcn.fit([feats(s) for s in tr], [s.y for s in tr], valid=([feats(s) for s in va], [s.y for s in va]),
-                    seed=seed, progress=progress, inputs=names, targets=TARGETS,
-                    units={**{n: ("mS" if n.startswith("conductance") else "mm" if n.endswith("_mm") else "N" if n.endswith("_n") else "1")
-                              for n in names}, "force": "N"})
-            fit_s = time.perf_counter() - t0
-            with torch.inference_mode():
-                vr = M.rmse(np.concatenate([s.y[:, 0] for s in va]), np.concatenate([tcn.predict(feats(s))[:, 0] for s in va]))
-            cand[variant] = (tcn, fit_s, feats, float(vr))
-            log(f"TCN ensemble, {variant} inputs ({md.tcn_members} members): {fit_s:.0f} s, valid RMSE {vr:.3f} N")
-            write_metrics(f"the paper's chains; ours trained on the inputs {sorted(cand)} so far (valid RMSE "
-                          + ", ".join(f"{k} {v[3]:.3f}" for k, v in cand.items()) + " N), not yet tested")
-        pick = min(cand, key=lambda k: cand[k][3])
-        tcn, fit_s, feats, _ = cand[pick]
-        save_checkpoint(tcn, ckd / "tcn", dataset=fps["mix"], extra={"experiment": KEY, "mode": mode, "inputs": pick})
-        comps["tcn"] = (tcn, fit_s, feats, pick, {k: v[3] for k, v in cand.items()})
-        log(f"ours: {pick} inputs (validation RMSE " + ", ".join(f"{k} {v[3]:.3f}" for k, v in cand.items()) + " N)")
+    tcn_ctx = training_device(tcn_dev) if tcn_device is not None else contextlib.nullcontext()
+    with tcn_ctx:
+        if want("tcn"):
+            cand = {}
+            for variant in md.tcn_inputs:
+                chs = None
+                if variant in ("calibrated", "aged"):
+                    raw_k, comp_k = CALIBRATED_FROM[0], next((k for k in CALIBRATED_FROM[1] if k in chains), None)
+                    if raw_k not in chains or comp_k is None:
+                        continue
+                    chs = {raw_k: chains[raw_k], comp_k: chains[comp_k]}
+                trk = tracker if variant in ("compensated", "calibrated", "aged") else None
+                feats = (lambda t, c, a: (lambda s: tcn_features(s, t, c, a)))(trk, chs, rate if variant == "aged" else None)
+                names = TCN_INPUTS[variant]
+                tcn = make_model("ensemble", member="tcn", n_members=md.tcn_members, member_hparams=md.tcn)
+                t0 = time.perf_counter()
+                tcn.fit([feats(s) for s in tr], [s.y for s in tr], valid=([feats(s) for s in va], [s.y for s in va]),
+                        seed=seed, progress=progress, inputs=names, targets=TARGETS,
+                        units={**{n: ("mS" if n.startswith("conductance") else "mm" if n.endswith("_mm") else "N" if n.endswith("_n") else "1")
+                                  for n in names}, "force": "N"})
+                fit_s = time.perf_counter() - t0
+                with torch.inference_mode():
+                    vr = M.rmse(np.concatenate([s.y[:, 0] for s in va]), np.concatenate([tcn.predict(feats(s))[:, 0] for s in va]))
+                cand[variant] = (tcn, fit_s, feats, float(vr))
+                log(f"TCN ensemble, {variant} inputs ({md.tcn_members} members): {fit_s:.0f} s, valid RMSE {vr:.3f} N")
+                write_metrics(f"the paper's chains; ours trained on the inputs {sorted(cand)} so far (valid RMSE "
+                              + ", ".join(f"{k} {v[3]:.3f}" for k, v in cand.items()) + " N), not yet tested")
+            pick = min(cand, key=lambda k: cand[k][3])
+            tcn, fit_s, feats, _ = cand[pick]
+            save_checkpoint(tcn, ckd / "tcn", dataset=fps["mix"], extra={"experiment": KEY, "mode": mode, "inputs": pick})
+            comps["tcn"] = (tcn, fit_s, feats, pick, {k: v[3] for k, v in cand.items()})
+            log(f"ours: {pick} inputs (validation RMSE " + ", ".join(f"{k} {v[3]:.3f}" for k, v in cand.items()) + " N)")
     if "tcn" in comps:
         evaluate("tcn")
     metrics = write_metrics()
