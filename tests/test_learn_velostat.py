@@ -524,3 +524,19 @@ def test_search_hidden_workers_same_nets():
     assert sa == sb and a.hparams["hidden"] == b.hparams["hidden"]
     np.testing.assert_array_equal(a.predict(xs[0]), b.predict(xs[0]))
     assert sa[3] != sa[5]  # two different nets, not one scored twice
+
+
+@pytest.mark.slow  # two tiny runs (~25 s each on 2 cores) and three spawned processes
+def test_experiment_velostat_tcn_workers_same_numbers(tmp_path):
+    """Ours' input sets trained side by side in processes (tcn_workers, the device script's setting) give the same
+    nets on the CPU as one after another: every model's test RMSE and ours' validation RMSEs equal."""
+    from learn.experiments.velostat import run
+
+    kw = dict(mode="tiny", models=["raw_bp", "paper_unit", "tcn"], progress=False, log=lambda s: None,
+              data_dir=tmp_path / "data")
+    a = run(tmp_path / "a", **kw)
+    b = run(tmp_path / "b", tcn_workers=3, **kw)
+    assert b["run"]["tcn_workers"] == 3 and a["run"]["tcn_workers"] == 1
+    assert a["models"]["tcn"]["valid_rmse_by_inputs"] == b["models"]["tcn"]["valid_rmse_by_inputs"]
+    for k in a["models"]:
+        assert a["models"][k]["test"]["rmse"] == b["models"][k]["test"]["rmse"], k

@@ -540,12 +540,36 @@ def ae_errors(seqs: list[Sequence], preds: list[np.ndarray], rate: float) -> dic
             "points": [list(r) for r in rows]}
 
 
+def _fit_tcn(xs, ys, vx, vy, names, device: str | None, *, seed: int, n_members: int, member_hparams: dict,
+             progress: bool = False):
+    """Ours on one input set: the TCN seed ensemble fitted on features already made -> (ensemble, seconds).
+    device None: the current training device (in this process); else that device (a worker process, torch on
+    one thread)."""
+    import contextlib as _cl
+
+    import torch
+
+    from learn.models import make_model
+    from learn.train import training_device
+
+    if device is not None:
+        torch.set_num_threads(1)
+    tcn = make_model("ensemble", member="tcn", n_members=n_members, member_hparams=member_hparams)
+    t0 = time.perf_counter()
+    with (training_device(device) if device is not None else _cl.nullcontext()):
+        tcn.fit(xs, ys, valid=(vx, vy), seed=seed, progress=progress, inputs=names, targets=TARGETS,
+                units={**{n: ("mS" if n.startswith("conductance") else "mm" if n.endswith("_mm") else "N" if n.endswith("_n") else "1")
+                          for n in names}, "force": "N"})
+    return tcn, time.perf_counter() - t0
+
+
 @single_thread
 def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None = None,
         overrides: list[str] | None = None, models: list[str] | None = None, seed: int = 0,
         progress: bool = True, log: Callable[[str], None] = print, workers: int = 1,
-        tcn_device: str | None = None) -> dict[str, Any]:
+        tcn_device: str | None = None, tcn_workers: int = 1) -> dict[str, Any]:
     """workers > 1: each BP hidden-node search trains its nets in that many CPU processes (same nets);
+    tcn_workers > 1: ours' input sets train side by side in that many processes (same nets on the CPU);
     tcn_device: where ours trains (default: the current training device, as the BP nets); both are recorded
     in metrics["run"]. The numbers depend on neither but tcn_device (CUDA vs CPU float rounding)."""
     import torch
@@ -553,7 +577,6 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
     from learn.train import current_device, resolve_device, training_device
 
     from learn.checkpoint import save_checkpoint
-    from learn.models import make_model
     from learn.models.velostat import CreepTracker, search_hidden
     from sensors.warp_setup import init_warp
     from simulate.generation.run import generate
@@ -764,7 +787,8 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
                       "test_ae": [s.key for s in te_ae]},
             "creep": creep, "clustering": clustering, "bp_search": bp_search, "models": results, "paper": PAPER,
             "findings": findings(results, creep, clustering, bp_search),
-            "run": {"workers": int(workers), "bp_device": bp_device, "tcn_device": tcn_dev},
+            "run": {"workers": int(workers), "tcn_workers": int(tcn_workers), "bp_device": bp_device,
+                    "tcn_device": tcn_dev},
         }
         if partial:
             metrics["partial"] = partial
@@ -781,6 +805,7 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
     with tcn_ctx:
         if want("tcn"):
             cand = {}
+            jobs = {}
             for variant in md.tcn_inputs:
                 chs = None
                 if variant in ("calibrated", "aged"):
@@ -789,21 +814,31 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
                         continue
                     chs = {raw_k: chains[raw_k], comp_k: chains[comp_k]}
                 trk = tracker if variant in ("compensated", "calibrated", "aged") else None
-                feats = (lambda t, c, a: (lambda s: tcn_features(s, t, c, a)))(trk, chs, rate if variant == "aged" else None)
-                names = TCN_INPUTS[variant]
-                tcn = make_model("ensemble", member="tcn", n_members=md.tcn_members, member_hparams=md.tcn)
-                t0 = time.perf_counter()
-                tcn.fit([feats(s) for s in tr], [s.y for s in tr], valid=([feats(s) for s in va], [s.y for s in va]),
-                        seed=seed, progress=progress, inputs=names, targets=TARGETS,
-                        units={**{n: ("mS" if n.startswith("conductance") else "mm" if n.endswith("_mm") else "N" if n.endswith("_n") else "1")
-                                  for n in names}, "force": "N"})
-                fit_s = time.perf_counter() - t0
+                jobs[variant] = (lambda t, c, a: (lambda s: tcn_features(s, t, c, a)))(trk, chs, rate if variant == "aged" else None)
+            fit_kw = {"seed": seed, "n_members": md.tcn_members, "member_hparams": md.tcn, "progress": progress}
+            pool = None
+            if tcn_workers > 1 and len(jobs) > 1:  # the input sets side by side, each in its own process
+                import multiprocessing as mp
+                from concurrent.futures import ProcessPoolExecutor
+
+                pool = ProcessPoolExecutor(min(tcn_workers, len(jobs)), mp_context=mp.get_context("spawn"))
+                futs = {v: pool.submit(_fit_tcn, [f(s) for s in tr], [s.y for s in tr], [f(s) for s in va],
+                                       [s.y for s in va], TCN_INPUTS[v], current_device(), **fit_kw)
+                        for v, f in jobs.items()}
+            for variant, feats in jobs.items():
+                if pool is not None:
+                    tcn, fit_s = futs[variant].result()
+                else:
+                    tcn, fit_s = _fit_tcn([feats(s) for s in tr], [s.y for s in tr], [feats(s) for s in va],
+                                          [s.y for s in va], TCN_INPUTS[variant], None, **fit_kw)
                 with torch.inference_mode():
                     vr = M.rmse(np.concatenate([s.y[:, 0] for s in va]), np.concatenate([tcn.predict(feats(s))[:, 0] for s in va]))
                 cand[variant] = (tcn, fit_s, feats, float(vr))
                 log(f"TCN ensemble, {variant} inputs ({md.tcn_members} members): {fit_s:.0f} s, valid RMSE {vr:.3f} N")
                 write_metrics(f"the paper's chains; ours trained on the inputs {sorted(cand)} so far (valid RMSE "
                               + ", ".join(f"{k} {v[3]:.3f}" for k, v in cand.items()) + " N), not yet tested")
+            if pool is not None:
+                pool.shutdown()
             pick = min(cand, key=lambda k: cand[k][3])
             tcn, fit_s, feats, _ = cand[pick]
             save_checkpoint(tcn, ckd / "tcn", dataset=fps["mix"], extra={"experiment": KEY, "mode": mode, "inputs": pick})
