@@ -484,6 +484,14 @@ def test_targets_table_marks_each_target_from_the_findings():
     assert row["creep compensation removes >= 50 % of the hold drift (R, Figs. 9-10)"] == ["49.6 % (**not met**)", "52.0 % (met) |"]
     assert "(**not met**)" in row["K-means band (eq. 3 as printed) within 2x of 0.00612 / 0.02374"][0]
     assert row["ours beats every paper chain on every metric"] == ["met", "not tested (partial run) |"]
+    fr = run(0.83, 5, 0.52)
+    fr["clustering"]["first_round"] = {"k_elbow": 3}
+    fr["machine"]["train_device_tcn"] = "cuda"
+    t = targets_table({"full seed 1": fr}).splitlines()
+    assert t[0] == "| target | full seed 1 |"
+    row = {r.split(" | ")[0].strip("| "): r.split(" | ")[1:] for r in t[2:]}
+    assert row["Ward elbow 4-6 groups"] == ["5 (met); one calibration per unit 3 |"]
+    assert row["wall time (quick: < 10 min on 2 shared cores); CPU time"] == ["5.0 min (device machine, ours on cuda) |"]
 
 
 def test_ae_runs_hold_every_staircase_to_15n():

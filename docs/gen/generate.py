@@ -811,9 +811,15 @@ def experiment(family: str) -> str:
 
         if str(ROOT) not in sys.path:
             sys.path.insert(0, str(ROOT))
-        runs = {(m or {}).get("mode", p.stem): m for p in files if (m := load(p)) and "findings" in m}
-        runs = dict(sorted(runs.items(), key=lambda kv: ("tiny", "quick", "full").index(kv[0])
-                           if kv[0] in ("tiny", "quick", "full") else 3))
+        # one column per recorded run: the mode, and the training seed where it is not 0 (seeds 1-2 are other
+        # data and another film part: scenes_of pins the part to the seed)
+        order = ("tiny", "quick", "full")
+        runs = {}
+        for p in files:
+            if (m := load(p)) and "findings" in m:
+                md, sd = m.get("mode", p.stem), int(m.get("seed", 0) or 0)
+                runs[(order.index(md) if md in order else 3, sd, md)] = m
+        runs = {(md if sd == 0 else f"{md} seed {sd}"): m for (_, sd, md), m in sorted(runs.items())}
         if runs:
             out.append("### Issue 14 targets by run\n\n"
                        + importlib.import_module("learn.experiments.velostat").targets_table(runs) + "\n")
