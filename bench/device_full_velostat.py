@@ -67,7 +67,7 @@ def cmd_collect(a: argparse.Namespace) -> None:
     dest.mkdir(parents=True, exist_ok=True)
     gpu = _gpu()
     wrote = []
-    for sd in sorted(run.glob("seed*")):
+    for sd in sorted(p for p in run.glob("seed*") if p.is_dir()):
         mp = sd / "metrics.json"
         if not mp.is_file():
             print(f"{sd}: no metrics.json (still generating or training the paper's chains)")
@@ -93,6 +93,12 @@ def cmd_collect(a: argparse.Namespace) -> None:
                         "train_device_bp": "cpu", "note": note}
         s = int(m.get("seed", 0))
         name = f"velostat-{m.get('mode', a.mode)}" + ("" if s == 0 else f"-seed{s}") + ".json"
+        if (dest / name).is_file():  # the record this one replaces: same data (fingerprints)?
+            try:
+                old = json.loads((dest / name).read_text()).get("datasets")
+                m["machine"]["datasets_equal_to_replaced_record"] = old == m.get("datasets")
+            except (OSError, ValueError):
+                pass
         (dest / name).write_text(json.dumps(m, indent=2, allow_nan=True))
         wrote.append(str(dest / name))
         f = m.get("findings", {})
