@@ -15,9 +15,12 @@
 # per seed, in seed order; ~8 of the 16 cores: ntype's full run shares the machine), VF_THREADS=2 (generation
 # threads per seed), VF_RUN=runs/velostat-full, VF_DEST=bench/results/experiments, VF_TCN=auto, VF_TCN_WORKERS=3
 # (ours' three input sets side by side, one process each), VF_POLL_S=540.
-# Estimate (from this session's and session 9's local runs, scaled): data ~1.5-2 min per seed (2 threads),
-# BP searches ~4 min (seed 0, 4 workers) / ~7 min (2 workers), ours 9 members of <= 200 epochs x ~470 batches on
-# the GPU ~10-15 min: seed 0 complete in ~20 min; seeds 1-2 may end partial (their chains first).
+# Estimate (scaled from local runs on 2 shared cores: session 9's full data 266 s wall and BP searches ~1160 CPU-s
+# in all; this session's quick run with 2 BP workers), for ~8 cores and one H100: data ~2 min per seed (2
+# generation threads), the paper's chains ~5 min (seed 0, 4 BP workers) / ~8 min (seeds 1-2, 2 workers), ours
+# (9 TCN members of <= 200 epochs x ~470 batches; its 3 input sets side by side, ~1-2 s an epoch on the GPU)
+# ~5-8 min: seed 0 complete in ~15 min, seeds 1-2 in ~18-20 min. A seed still training when the machine goes
+# back leaves a metrics.json marked partial (the paper's chains are tested before ours trains); collect takes it.
 set -u
 cd "$(dirname "$0")/.."
 export PYTHONPATH=${PYTHONPATH:-/root/site:.} PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
