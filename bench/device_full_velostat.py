@@ -80,8 +80,11 @@ def cmd_collect(a: argparse.Namespace) -> None:
             wall = round(mp.stat().st_mtime - dt.datetime.fromisoformat(started).timestamp(), 1)
         part = m.get("partial")
         budget = "FULL budget (Mode full unchanged)" if m.get("mode") == "full" else f"mode {m.get('mode')}"
-        note = (f"{budget}, seed {m.get('seed')}, run on the device machine by "
-                f"bench/device_full_velostat.sh (seeds side by side, other jobs on the same machine): BP hidden "
+        where = ("run on the device machine by bench/device_full_velostat.sh (seeds side by side, other jobs on the "
+                 "same machine)" if a.where == "device" else
+                 f"run locally by bench/device_full_velostat.py run (nice 10, {os.cpu_count()} cores shared with other "
+                 "helpers' jobs)")
+        note = (f"{budget}, seed {m.get('seed')}, {where}: BP hidden "
                 f"searches in {info.get('workers', '?')} CPU processes each (torch on one thread: the same nets as "
                 f"one after another), ours (TCN ensemble) trained on {info.get('tcn_device', '?')} (GPU: {gpu}; its "
                 f"{info.get('tcn_workers', 1)} input sets side by side in processes); "
@@ -122,6 +125,7 @@ def main(argv: list[str] | None = None) -> None:
     c.add_argument("--dest", default="bench/results/experiments")
     c.add_argument("--mode", default="full")
     c.add_argument("--commit", default=os.environ.get("VF_COMMIT", "unknown"))
+    c.add_argument("--where", choices=("device", "local"), default="device", help="what machine.note says")
     a = ap.parse_args(argv)
     {"run": cmd_run, "collect": cmd_collect}[a.cmd](a)
 
