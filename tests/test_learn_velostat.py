@@ -548,3 +548,22 @@ def test_experiment_velostat_tcn_workers_same_numbers(tmp_path):
     assert a["models"]["tcn"]["valid_rmse_by_inputs"] == b["models"]["tcn"]["valid_rmse_by_inputs"]
     for k in a["models"]:
         assert a["models"][k]["test"]["rmse"] == b["models"][k]["test"]["rmse"], k
+
+
+def test_ae_errors_top_steps_by_loading_speed():
+    """ae_errors: the worst A-E point and the top steps' (13-15 N) signed error per staircase speed, from
+    hand-made staircases: a slow one reading 1.5 N low at the top, a fast one 0.5 N high."""
+    from learn.data import Sequence
+    from learn.experiments.velostat import ae_errors
+
+    rate = 10.0
+    tg = np.repeat(np.arange(1.0, 16.0), 30)  # 15 levels, 3 s each
+    seqs, preds = [], []
+    for site, v, off in (("A", 1.0, -1.5), ("E", 6.0, 0.5)):
+        seqs.append(Sequence(x=np.zeros((len(tg), 3)), y=tg[:, None], inputs=[], targets=["force"], units={},
+                             meta={"site": site, "speed_mm_per_min": v}, extra={"target": tg}))
+        preds.append(tg + np.where(tg >= 13, off, 0.1))
+    a = ae_errors(seqs, preds, rate)
+    assert a["n"] == 30 and a["max_abs_n"] == pytest.approx(1.5)
+    assert a["top_signed_by_speed_n"] == {"1": pytest.approx(-1.5), "6": pytest.approx(0.5)}
+    assert a["worst_point"][0] == "A" and a["worst_point"][1] >= 13 and a["worst_point"][3] == 1.0
