@@ -48,6 +48,16 @@ def _run(cfg, knots, xys, field: str):
     return ramp, hold
 
 
+def _loglog(x: np.ndarray, xp: np.ndarray, fp: np.ndarray) -> np.ndarray:
+    """Piecewise-linear interpolation, extended beyond both ends along the end segments (a reading above the
+    calibration's top level is not clipped to it)."""
+    y = np.interp(x, xp, fp)
+    lo, hi = x < xp[0], x > xp[-1]
+    y[lo] = fp[0] + (x[lo] - xp[0]) * (fp[1] - fp[0]) / (xp[1] - xp[0])
+    y[hi] = fp[-1] + (x[hi] - xp[-1]) * (fp[-1] - fp[-2]) / (xp[-1] - xp[-2])
+    return y
+
+
 def kneedle_scores(heights: np.ndarray, kmax: int = 15) -> dict[str, float]:
     h = np.sort(np.asarray(heights))[::-1][:kmax]
     x = np.arange(kmax) / (kmax - 1)
@@ -85,8 +95,7 @@ def slow() -> dict:
             knots = [knots_staircase(cfg, LEVELS, HOLD_S, v * CV.MM_PER_MIN) for v in speeds]
             ramp, hold = _run(cfg, knots, [site_xy_m(cfg, site)] * len(speeds), "resistance")
             cal = np.exp(np.log(hold).mean(0))
-            lr, lf = np.log(cal[::-1]), np.log(LEVELS[::-1])
-            err = np.exp(np.interp(np.log(hold), lr, lf)) - LEVELS
+            err = np.exp(_loglog(np.log(hold), np.log(cal[::-1]), np.log(LEVELS[::-1]))) - LEVELS
             res[site] = {
                 "r_ramp_end_1_over_6_pct": (100 * (ramp[0] / ramp[-1] - 1)).tolist(),
                 "r_hold_end_1_over_6_pct": (100 * (hold[0] / hold[-1] - 1)).tolist(),
