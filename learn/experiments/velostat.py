@@ -1361,9 +1361,10 @@ DIFFERENCES = """
   structure is left an estimate (not reshaped to land on 5); the elbow is reported per run and seed.
 - **Slow A-E presses read low at 13-15 N** (same bench, `slow`). On single ramps R at full load is the same at 1
   and 6 mm/min (Fig. 5; `piezotwin calibrate velostat`), but on a staircase the hold creep grows with the speed of
-  the ramp before each hold (Fig. 5), so after fourteen 5 s holds a 1 mm/min staircase has crept less than a 6
-  mm/min one and reads a higher R at 15 N; the creep during the ramps themselves is negligible (R at the end of
-  the ramp and at the end of the hold differ between speeds by the same share). A calibration over mixed speeds
+  the ramp before each hold (Fig. 5): at the end of the first ramp (1 N) R is the same at both speeds, after its
+  5 s hold the 1 mm/min staircase reads a higher R, and the gap made in the low-force holds (where the relative
+  creep is largest, Fig. 3a) is carried up the staircase to 15 N, the last holds adding little to it. A
+  calibration over mixed speeds
   (the sweep draws 1-6 mm/min per unit) then reads slow staircases low and fast ones high, most at the top steps
   where dF/F = dR/R is largest in newtons; with the creep off the error vanishes. This is the paper's own Fig. 5
   effect carried through a staircase; the paper gives no loading speed for its calibration or its A-E presses
