@@ -12,14 +12,15 @@
 #                                                 shape docs/gen reads; partial runs say so) and packs them with the
 #                                                 logs and reports into $OUT/velostat-full.tgz (one file)
 # Environment (defaults for the device): VF_MODE=full, VF_SEEDS="0 1 2", VF_WORKERS="4 2 2" (BP worker processes
-# per seed, in seed order; ~8 of the 16 cores: ntype's full run shares the machine), VF_THREADS=2 (generation
-# threads per seed), VF_RUN=runs/velostat-full, VF_DEST=bench/results/experiments, VF_TCN=auto, VF_TCN_WORKERS=3
+# per seed, in seed order; ~8 of the 16 cores: ntype's full run shares the machine), VF_THREADS=1 (generation
+# threads per seed: the same arrays at any count, but the count is in the recorded config, so 1 keeps the data
+# fingerprints equal to session 9's full record and its chains comparable number for number), VF_RUN=runs/velostat-full, VF_DEST=bench/results/experiments, VF_TCN=auto, VF_TCN_WORKERS=3
 # (ours' three input sets side by side, one process each), VF_POLL_S=540.
 # Estimate (scaled from local runs on 2 shared cores: session 9's full data 266 s wall and BP searches ~1160 CPU-s
-# in all; this session's quick run with 2 BP workers), for ~8 cores and one H100: data ~2 min per seed (2
-# generation threads), the paper's chains ~5 min (seed 0, 4 BP workers) / ~8 min (seeds 1-2, 2 workers), ours
+# in all; this session's quick run with 2 BP workers), for ~8 cores and one H100: data ~3 min per seed (one
+# generation thread), the paper's chains ~5 min (seed 0, 4 BP workers) / ~8 min (seeds 1-2, 2 workers), ours
 # (9 TCN members of <= 200 epochs x ~470 batches; its 3 input sets side by side, ~1-2 s an epoch on the GPU)
-# ~5-8 min: seed 0 complete in ~15 min, seeds 1-2 in ~18-20 min. A seed still training when the machine goes
+# ~5-8 min: seed 0 complete in ~16 min, seeds 1-2 in ~19-21 min. A seed still training when the machine goes
 # back leaves a metrics.json marked partial (the paper's chains are tested before ours trains); collect takes it.
 set -u
 cd "$(dirname "$0")/.."
@@ -28,7 +29,7 @@ PY=${PY:-python3}
 MODE=${VF_MODE:-full}
 SEEDS=(${VF_SEEDS:-0 1 2})
 WORKERS=(${VF_WORKERS:-4 2 2})
-THREADS=${VF_THREADS:-2}
+THREADS=${VF_THREADS:-1}
 RUN=${VF_RUN:-runs/velostat-$MODE}
 DEST=${VF_DEST:-bench/results/experiments}
 TCN=${VF_TCN:-auto}
