@@ -96,11 +96,13 @@ def cmd_collect(a: argparse.Namespace) -> None:
                         "train_device_bp": "cpu", "note": note}
         s = int(m.get("seed", 0))
         name = f"velostat-{m.get('mode', a.mode)}" + ("" if s == 0 else f"-seed{s}") + ".json"
-        if (dest / name).is_file():  # the record this one replaces: same data (fingerprints)?
+        if (dest / name).is_file():  # the record this one replaces: the same data (content hashes per folder)?
             try:
-                old = json.loads((dest / name).read_text()).get("datasets")
-                m["machine"]["datasets_equal_to_replaced_record"] = old == m.get("datasets")
-            except (OSError, ValueError):
+                old = json.loads((dest / name).read_text()).get("datasets") or {}
+                new = m.get("datasets") or {}
+                m["machine"]["datasets_equal_to_replaced_record"] = bool(old) and all(
+                    old.get(k, {}).get("content_sha256") == v.get("content_sha256") for k, v in new.items())
+            except (OSError, ValueError, AttributeError):
                 pass
         (dest / name).write_text(json.dumps(m, indent=2, allow_nan=True))
         wrote.append(str(dest / name))
