@@ -102,6 +102,10 @@ def cmd_collect(a: argparse.Namespace) -> None:
                 new = m.get("datasets") or {}
                 m["machine"]["datasets_equal_to_replaced_record"] = bool(old) and all(
                     old.get(k, {}).get("content_sha256") == v.get("content_sha256") for k, v in new.items())
+                om = json.loads((dest / name).read_text()).get("models") or {}
+                both = [k for k in m.get("models", {}) if k in om and k != "tcn"]
+                m["machine"]["chains_equal_to_replaced_record"] = {  # the paper's chains: CPU, same seeds
+                    k: om[k]["test"]["rmse"] == m["models"][k]["test"]["rmse"] for k in both}
             except (OSError, ValueError, AttributeError):
                 pass
         (dest / name).write_text(json.dumps(m, indent=2, allow_nan=True))
