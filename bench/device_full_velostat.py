@@ -29,6 +29,17 @@ def _cpu_s() -> float:
     return a.ru_utime + a.ru_stime + b.ru_utime + b.ru_stime
 
 
+def _commit() -> str:
+    """The checkout's commit when the run starts (the device copy may have no .git: VF_COMMIT, else unknown)."""
+    try:
+        r = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, timeout=20)
+        if r.returncode == 0 and r.stdout.strip():
+            return r.stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        pass
+    return os.environ.get("VF_COMMIT", "unknown")
+
+
 def cmd_run(a: argparse.Namespace) -> None:
     from learn.experiments import velostat as V
     from learn.train import resolve_device, training_device
@@ -39,7 +50,8 @@ def cmd_run(a: argparse.Namespace) -> None:
     tcn_dev = resolve_device(a.tcn_device)
     info = {"seed": a.seed, "mode": a.mode, "workers": a.workers, "tcn_workers": a.tcn_workers,
             "tcn_device": tcn_dev, "bp_device": "cpu",
-            "overrides": a.set, "started_utc": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")}
+            "overrides": a.set, "started_utc": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+            "commit": _commit()}
     (out / "run.json").write_text(json.dumps(info, indent=1))
 
     def log(s: str) -> None:
@@ -86,12 +98,13 @@ def cmd_collect(a: argparse.Namespace) -> None:
                  "helpers' jobs)")
         note = (f"{budget}, seed {m.get('seed')}, {where}: BP hidden "
                 f"searches in {info.get('workers', '?')} CPU processes each (torch on one thread: the same nets as "
-                f"one after another), ours (TCN ensemble) trained on {info.get('tcn_device', '?')} (GPU: {gpu}; its "
-                f"{info.get('tcn_workers', 1)} input sets side by side in processes); "
-                f"wall_s / cpu_s = this seed's process from its start, data generation included"
+                f"one after another), ours (TCN ensemble) trained on {info.get('tcn_device', '?')} (GPU: {gpu}; "
+                + (f"its input sets side by side in {info['tcn_workers']} processes); " if info.get("tcn_workers", 1) > 1
+                   else "its input sets one after another); ") +
+                "wall_s / cpu_s = this seed's process from its start, data generation included"
                 + (f". PARTIAL: {part}" if part else ""))
         m["machine"] = {"host_platform": platform.platform(), "cpus": os.cpu_count(), "processor": platform.processor(),
-                        "gpu": gpu, "git_commit": a.commit, "date_utc": dt.datetime.now(dt.timezone.utc).date().isoformat(),
+                        "gpu": gpu, "git_commit": info.get("commit", a.commit), "date_utc": dt.datetime.now(dt.timezone.utc).date().isoformat(),
                         "wall_s": wall, "cpu_s": info.get("cpu_s"), "train_device_tcn": info.get("tcn_device"),
                         "train_device_bp": "cpu", "note": note}
         s = int(m.get("seed", 0))
