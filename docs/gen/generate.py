@@ -917,12 +917,13 @@ def _exp_headline(family: str) -> list[list[str]]:
                 R = m["models"]
                 paper = [k for k in ("raw_bp", "paper_unit", "paper_cluster", "literal_unit", "literal_cluster") if k in R]
                 b = min(paper, key=lambda k: R[k]["test"]["rmse"])
+                run = mode if not m.get("seed") else f"{mode}, seed {m['seed']}: film part {m['seed']}"
                 if "tcn" not in R and m.get("partial"):  # a run stopped before ours was tested: the chains alone
-                    rows.append([f"velostat paper chains ({mode}, partial: ours not tested): test RMSE / worst A-E point, "
+                    rows.append([f"velostat paper chains ({run}, partial: ours not tested): test RMSE / worst A-E point, "
                                  f"best paper chain ({b})", f"{num(R[b]['test']['rmse'])} / {num(R[b]['ae'].get('max_abs_n'))} N", src])
                     continue
                 r = R["tcn"]
-                rows.append([f"velostat compensation ({mode}): test RMSE / worst A-E point, ours vs best paper chain ({b})",
+                rows.append([f"velostat compensation ({run}): test RMSE / worst A-E point, ours vs best paper chain ({b})",
                              f"{num(r['test']['rmse'])} / {num(r['ae'].get('max_abs_n'))} N vs "
                              f"{num(R[b]['test']['rmse'])} / {num(R[b]['ae'].get('max_abs_n'))} N", src])
         except (KeyError, TypeError, ValueError):
