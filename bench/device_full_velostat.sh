@@ -48,8 +48,11 @@ start)
     for i in "${!SEEDS[@]}"; do
         s=${SEEDS[$i]}; w=${WORKERS[$i]:-2}
         if alive "$s"; then echo "seed $s already running (pid $(cat $RUN/seed$s.pid))"; continue; fi
-        setsid nohup $PY bench/device_full_velostat.py run --seed "$s" --mode "$MODE" --out "$RUN/seed$s" \
-            --workers "$w" --tcn-device "$TCN" --tcn-workers "${VF_TCN_WORKERS:-3}" --set "generation.threads=$THREADS" \
+        # seeds after the first start ${VF_STAGGER_S:-20} s apart (in the background: start returns at once), so
+        # that Warp's kernel cache is filled by one process first
+        setsid nohup bash -c "sleep $(( i * ${VF_STAGGER_S:-20} )); exec $PY bench/device_full_velostat.py run \
+            --seed $s --mode $MODE --out $RUN/seed$s --workers $w --tcn-device $TCN \
+            --tcn-workers ${VF_TCN_WORKERS:-3} --set generation.threads=$THREADS" \
             > "$RUN/seed$s.log" 2>&1 < /dev/null &
         echo $! > "$RUN/seed$s.pid"
         echo "seed $s: pid $!, $w BP workers, log $RUN/seed$s.log"
