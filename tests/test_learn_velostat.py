@@ -484,6 +484,14 @@ def test_targets_table_marks_each_target_from_the_findings():
     assert row["creep compensation removes >= 50 % of the hold drift (R, Figs. 9-10)"] == ["49.6 % (**not met**)", "52.0 % (met) |"]
     assert "(**not met**)" in row["K-means band (eq. 3 as printed) within 2x of 0.00612 / 0.02374"][0]
     assert row["ours beats every paper chain on every metric"] == ["met", "not tested (partial run) |"]
+    fr = run(0.83, 5, 0.52)
+    fr["clustering"]["first_round"] = {"k_elbow": 3}
+    fr["machine"]["train_device_tcn"] = "cuda"
+    t = targets_table({"full seed 1": fr}).splitlines()
+    assert t[0] == "| target | full seed 1 |"
+    row = {r.split(" | ")[0].strip("| "): r.split(" | ")[1:] for r in t[2:]}
+    assert row["Ward elbow 4-6 groups"] == ["5 (met); one calibration per unit 3 |"]
+    assert row["wall time (quick: < 10 min on 2 shared cores); CPU time"] == ["5.0 min (device machine, ours on cuda) |"]
 
 
 def test_ae_runs_hold_every_staircase_to_15n():
@@ -504,3 +512,58 @@ def test_ae_runs_hold_every_staircase_to_15n():
             assert t[top[1]] <= cfg.protocol.duration_s + 1e-9, (mode, k, p["speed_m_per_s"])
             speeds.add(round(p["speed_m_per_s"] * 6e4, 3))
         assert min(speeds) == pytest.approx(min(cfg.protocol.loading_speeds_m_per_s) * 6e4)
+
+
+@pytest.mark.slow  # two spawned processes import torch: ~20 s on 2 loaded cores
+def test_search_hidden_workers_same_nets():
+    """The hidden-node search in worker processes trains the same nets as one after another (same seeds, CPU,
+    one thread): equal validation scores, the same chosen size, equal predictions."""
+    from learn.models.velostat import search_hidden
+
+    rng = np.random.default_rng(3)
+    u = rng.integers(0, 4, 300).astype(float)
+    f = rng.uniform(1, 15, 300)
+    r = 2e4 * (1 + 0.3 * u) / f
+    xs, ys = [np.column_stack([u, r])], [f[:, None]]
+    valid = ([xs[0][:60]], [ys[0][:60]])
+    hp = {"max_epochs": 4, "patience": 4, "r_input": "log", "encoding": "onehot"}
+    a, sa = search_hidden(xs, ys, valid, hidden=[3, 5], seed=1, **hp)
+    b, sb = search_hidden(xs, ys, valid, hidden=[3, 5], seed=1, workers=2, **hp)
+    assert sa == sb and a.hparams["hidden"] == b.hparams["hidden"]
+    np.testing.assert_array_equal(a.predict(xs[0]), b.predict(xs[0]))
+    assert sa[3] != sa[5]  # two different nets, not one scored twice
+
+
+@pytest.mark.slow  # two tiny runs (~25 s each on 2 cores) and three spawned processes
+def test_experiment_velostat_tcn_workers_same_numbers(tmp_path):
+    """Ours' input sets trained side by side in processes (tcn_workers, the device script's setting) give the same
+    nets on the CPU as one after another: every model's test RMSE and ours' validation RMSEs equal."""
+    from learn.experiments.velostat import run
+
+    kw = dict(mode="tiny", models=["raw_bp", "paper_unit", "tcn"], progress=False, log=lambda s: None,
+              data_dir=tmp_path / "data")
+    a = run(tmp_path / "a", **kw)
+    b = run(tmp_path / "b", tcn_workers=3, **kw)
+    assert b["run"]["tcn_workers"] == 3 and a["run"]["tcn_workers"] == 1
+    assert a["models"]["tcn"]["valid_rmse_by_inputs"] == b["models"]["tcn"]["valid_rmse_by_inputs"]
+    for k in a["models"]:
+        assert a["models"][k]["test"]["rmse"] == b["models"][k]["test"]["rmse"], k
+
+
+def test_ae_errors_top_steps_by_loading_speed():
+    """ae_errors: the worst A-E point and the top steps' (13-15 N) signed error per staircase speed, from
+    hand-made staircases: a slow one reading 1.5 N low at the top, a fast one 0.5 N high."""
+    from learn.data import Sequence
+    from learn.experiments.velostat import ae_errors
+
+    rate = 10.0
+    tg = np.repeat(np.arange(1.0, 16.0), 30)  # 15 levels, 3 s each
+    seqs, preds = [], []
+    for site, v, off in (("A", 1.0, -1.5), ("E", 6.0, 0.5)):
+        seqs.append(Sequence(x=np.zeros((len(tg), 3)), y=tg[:, None], inputs=[], targets=["force"], units={},
+                             meta={"site": site, "speed_mm_per_min": v}, extra={"target": tg}))
+        preds.append(tg + np.where(tg >= 13, off, 0.1))
+    a = ae_errors(seqs, preds, rate)
+    assert a["n"] == 30 and a["max_abs_n"] == pytest.approx(1.5)
+    assert a["top_signed_by_speed_n"] == {"1": pytest.approx(-1.5), "6": pytest.approx(0.5)}
+    assert a["worst_point"][0] == "A" and a["worst_point"][1] >= 13 and a["worst_point"][3] == 1.0

@@ -858,6 +858,31 @@ def _generic_report(m: dict) -> str:
     return "\n".join(lines)
 
 
+def velostat_units_slow() -> str:
+    """bench/results/velostat-units-slow.json (bench/bench_velostat_units_slow.py): the Ward elbow on eq. 10's data
+    over film parts with parts of the unit spread switched off, and the slow A-E presses' error at 13-15 N."""
+    d = load("velostat-units-slow.json")
+    if not d:
+        return ""
+    rows = [[name, ", ".join(str(k) for k in v["k_by_part"]), num(v["median"]), f"{100 * v['share_4_6']:.0f} %"]
+            for name, v in d["units"].items()]
+    L = ["### Ward elbow over film parts, and the slow presses (`bench/results/velostat-units-slow.json`)\n",
+         f"Eq. 10's data (one 1-15 N calibration per unit, {num(d['hold_s'])} s holds, one random speed of 1-6 mm/min "
+         "per unit) on the ideal load field, Ward and the kneedle elbow, film parts "
+         f"{d['parts'][0]}-{d['parts'][-1]}:\n", table(["film", "elbow per part", "median", "parts in 4-6"], rows), ""]
+    rows = []
+    for name, sites in d["slow"].items():
+        for site, v in sites.items():
+            rows.append([name, site, f"{v['r_ramp_end_1_over_6_pct'][-1]:+.1f} %", f"{v['r_hold_end_1_over_6_pct'][-1]:+.1f} %",
+                         " / ".join(f"{e:+.2f}" for e in v["force_error_13_15n_1mm_min_n"]),
+                         " / ".join(f"{e:+.2f}" for e in v["force_error_13_15n_6mm_min_n"])])
+    L += ["1-15 N staircases, 5 s per step, at 1-6 mm/min, read through a calibration made of the same staircases "
+          "at all six speeds (log-log, extended beyond its ends; true film + ITO resistance, no readout noise):\n",
+          table(["film", "site", "R at the 15 N ramp's end, 1 vs 6 mm/min", "R at the 15 N hold's end, 1 vs 6 mm/min",
+                 "force error at 13 / 14 / 15 N, 1 mm/min (N)", "same, 6 mm/min (N)"], rows), ""]
+    return "\n".join(L) + "\n"
+
+
 def experiment(family: str) -> str:
     files = experiment_files(family)
     if not files:
@@ -870,12 +895,19 @@ def experiment(family: str) -> str:
 
         if str(ROOT) not in sys.path:
             sys.path.insert(0, str(ROOT))
-        runs = {(m or {}).get("mode", p.stem): m for p in files if (m := load(p)) and "findings" in m}
-        runs = dict(sorted(runs.items(), key=lambda kv: ("tiny", "quick", "full").index(kv[0])
-                           if kv[0] in ("tiny", "quick", "full") else 3))
+        # one column per recorded run: the mode, and the training seed where it is not 0 (seeds 1-2 are other
+        # data and another film part: scenes_of pins the part to the seed)
+        order = ("tiny", "quick", "full")
+        runs = {}
+        for p in files:
+            if (m := load(p)) and "findings" in m:
+                md, sd = m.get("mode", p.stem), int(m.get("seed", 0) or 0)
+                runs[(order.index(md) if md in order else 3, sd, md)] = m
+        runs = {(md if sd == 0 else f"{md} seed {sd}"): m for (_, sd, md), m in sorted(runs.items())}
         if runs:
             out.append("### Issue 14 targets by run\n\n"
                        + importlib.import_module("learn.experiments.velostat").targets_table(runs) + "\n")
+        out.append(velostat_units_slow())
     for p in files:
         m = load(p)
         if m is None:
@@ -944,12 +976,13 @@ def _exp_headline(family: str) -> list[list[str]]:
                 R = m["models"]
                 paper = [k for k in ("raw_bp", "paper_unit", "paper_cluster", "literal_unit", "literal_cluster") if k in R]
                 b = min(paper, key=lambda k: R[k]["test"]["rmse"])
+                run = mode if not m.get("seed") else f"{mode}, seed {m['seed']}: film part {m['seed']}"
                 if "tcn" not in R and m.get("partial"):  # a run stopped before ours was tested: the chains alone
-                    rows.append([f"velostat paper chains ({mode}, partial: ours not tested): test RMSE / worst A-E point, "
+                    rows.append([f"velostat paper chains ({run}, partial: ours not tested): test RMSE / worst A-E point, "
                                  f"best paper chain ({b})", f"{num(R[b]['test']['rmse'])} / {num(R[b]['ae'].get('max_abs_n'))} N", src])
                     continue
                 r = R["tcn"]
-                rows.append([f"velostat compensation ({mode}): test RMSE / worst A-E point, ours vs best paper chain ({b})",
+                rows.append([f"velostat compensation ({run}): test RMSE / worst A-E point, ours vs best paper chain ({b})",
                              f"{num(r['test']['rmse'])} / {num(r['ae'].get('max_abs_n'))} N vs "
                              f"{num(R[b]['test']['rmse'])} / {num(R[b]['ae'].get('max_abs_n'))} N", src])
         except (KeyError, TypeError, ValueError):

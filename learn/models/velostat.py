@@ -550,12 +550,34 @@ class BPCompensator(TorchCompensator):
         super().load_state_tensors(t)
 
 
-def search_hidden(xs, ys, valid, hidden: Seq[int] = range(3, 13), seed: int = 0, **hp) -> tuple[BPCompensator, dict[int, float]]:
-    """Train one BP net per hidden-node count (eq. 16: 3..12) and keep the lowest validation RMSE (N)."""
+def _fit_bp(h: int, xs, ys, valid, seed: int, hp: dict[str, Any]) -> BPCompensator:
+    """One net of the hidden-node search (a worker process of search_hidden: torch on one thread, CPU)."""
+    from learn.train import training_device
+
+    torch.set_num_threads(1)
+    with training_device("cpu"):
+        return BPCompensator(hidden=int(h), **hp).fit(xs, ys, valid=valid, seed=seed)
+
+
+def search_hidden(xs, ys, valid, hidden: Seq[int] = range(3, 13), seed: int = 0, workers: int = 1,
+                  **hp) -> tuple[BPCompensator, dict[int, float]]:
+    """Train one BP net per hidden-node count (eq. 16: 3..12) and keep the lowest validation RMSE (N).
+
+    workers > 1: the nets train side by side in that many spawned processes, each on the CPU with torch on one
+    thread (the nets are independent and seeded alike: the same weights as one after another on one thread,
+    tested); workers = 1 trains them here, on the current training device."""
+    if workers > 1 and len(hidden) > 1:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(min(int(workers), len(hidden)), mp_context=mp.get_context("spawn")) as ex:
+            futs = [ex.submit(_fit_bp, int(h), xs, ys, valid, seed, hp) for h in hidden]
+            comps = [f.result() for f in futs]
+    else:
+        comps = (BPCompensator(hidden=int(h), **hp).fit(xs, ys, valid=valid, seed=seed) for h in hidden)
     scores: dict[int, float] = {}
     best: tuple[float, BPCompensator | None] = (np.inf, None)
-    for h in hidden:
-        comp = BPCompensator(hidden=int(h), **hp).fit(xs, ys, valid=valid, seed=seed)
+    for h, comp in zip(hidden, comps):
         e = np.concatenate([comp.predict(x)[:, 0] - np.asarray(y).reshape(len(y), -1)[:, 0] for x, y in zip(*valid)])
         scores[int(h)] = float(np.sqrt(np.mean(e**2)))
         if scores[int(h)] < best[0]:
