@@ -487,6 +487,63 @@ def _run(md: Mode, mode: str, out: Path, data: Path, seqs: list, fp: dict, folds
     return metrics
 
 
+def merge_runs(parts: list[dict[str, Any]]) -> dict[str, Any]:
+    """One task's metrics from runs of disjoint model groups on the same data, folds and seed (the device's full
+    run: bench/device_full_ntype.sh, one process per model group or window): the models' results side by side,
+    windows merged, timings summed, the findings recomputed on the union (as `_run` would have written them
+    had one process run every group). ValueError unless every part has the same dataset, task, seed, mode and
+    folds. The first part's protocol is kept, with the union of the windows and, per part, where it ran
+    (``parts``)."""
+    if not parts:
+        raise ValueError("merge_runs: no parts")
+    base = parts[0]
+    same = ("experiment", "mode", "seed", "task")
+    for m in parts[1:]:
+        for k in same:
+            if m.get(k) != base.get(k):
+                raise ValueError(f"merge_runs: parts differ in {k} ({base.get(k)!r} vs {m.get(k)!r})")
+        if m["dataset"]["dataset_sha256"] != base["dataset"]["dataset_sha256"]:
+            raise ValueError("merge_runs: parts ran on different datasets")
+        if m["protocol"]["fold_episodes"] != base["protocol"]["fold_episodes"]:
+            raise ValueError("merge_runs: parts ran on different folds")
+    models: dict[str, Any] = {"mean": base["models"]["mean"]}
+    timing: dict[str, float] = {}
+    gaps: dict[str, float] = {}
+    extra: dict[str, Any] = {}
+    for m in parts:
+        for k, v in m["models"].items():
+            if k == "rbf_win":
+                models.setdefault("rbf_win", {}).update(v)
+            elif k != "mean":
+                if k in models:
+                    raise ValueError(f"merge_runs: model {k} in more than one part")
+                models[k] = v
+        for k, v in m.get("timing_s", {}).items():
+            timing[k] = timing.get(k, 0.0) + float(v)
+        gaps.update(m["findings"].get("nearest_centre_median", {}))
+        if "table1_exact_phi_condition_fold1" in m["findings"]:
+            extra["table1_exact_phi_condition_fold1"] = m["findings"]["table1_exact_phi_condition_fold1"]
+    if "rbf_win" in models:
+        models["rbf_win"] = {w: models["rbf_win"][w] for w in sorted(models["rbf_win"], key=int)}
+    spreads = base["protocol"]["spreads"]
+    windows = [int(w) for w in models.get("rbf_win", {})]
+    out = {k: v for k, v in base.items() if k not in ("models", "timing_s", "findings", "tasks", "machine", "run")}
+    out["protocol"] = {**base["protocol"], "windows": windows,
+                       "parts": [{"models": sorted(k for k in m["models"] if k != "mean"),
+                                  "windows": m["protocol"]["windows"] if "rbf_win" in m["models"] else [],
+                                  **({"run": m["run"]} if "run" in m else {})} for m in parts]}
+    out["models"] = models
+    out["timing_s"] = timing
+    F = findings(models, spreads, windows, paper_task=base.get("task") == "paper")
+    F["nearest_centre_median"] = gaps
+    if extra:
+        F.update(extra)
+    F.update(exact_findings(models, spreads))
+    out["findings"] = F
+    out["tasks"] = {}
+    return out
+
+
 def phi_condition(kernel: str, spread: float, X: np.ndarray) -> float:
     """2-norm condition number of eq. 12's Phi = [phi(||X_i - X_j||)] over the training inputs X (symmetric,
     positive definite in exact arithmetic for both kernels): lambda_max / lambda_min, inf where round-off has made

@@ -176,7 +176,20 @@ class ElementMLP:
                 Ws[2 * li].append(torch.empty(fo, fi).uniform_(-wb, wb, generator=g).T)
                 b = 1.0 / math.sqrt(fi)
                 Ws[2 * li + 1].append(torch.empty(fo).uniform_(-b, b, generator=g)[None, :])
-        params = [torch.stack(w).to(dev).contiguous().requires_grad_(True) for w in Ws]
+        # every member's weights in one flat buffer [S, T] (views per layer): one AdamW update of a few
+        # elementwise kernels a step instead of one set per tensor (same arithmetic, element by element)
+        stacked = [torch.stack(w) for w in Ws]
+        shapes = [t.shape[1:] for t in stacked]
+        flat = torch.cat([t.reshape(S, -1) for t in stacked], 1).to(dev).requires_grad_(True)
+
+        def unpack(buf: torch.Tensor) -> list[torch.Tensor]:
+            out, o = [], 0
+            for shp in shapes:
+                sz = math.prod(shp)
+                out.append(buf[:, o : o + sz].view(buf.shape[0], *shp))
+                o += sz
+            return out
+
         n = [len(m[0]) for m in members]
 
         def pad(rows: list[np.ndarray], width: int) -> torch.Tensor:
@@ -198,12 +211,12 @@ class ElementMLP:
         # AdamW as torch.optim.AdamW(lr, weight_decay; betas 0.9, 0.999, eps 1e-8), per member: a member takes a
         # step only when its batch holds rows and it has not stopped early
         beta1, beta2, eps, wd = 0.9, 0.999, 1e-8, float(h["weight_decay"])
-        mom = [torch.zeros_like(p) for p in params]
-        sq = [torch.zeros_like(p) for p in params]
+        m1 = torch.zeros_like(flat)
+        m2 = torch.zeros_like(flat)
         steps = torch.zeros(S, dtype=torch.float64)
         epochs = int(h["max_epochs"])
         best = [float("inf")] * S
-        state: list[list[torch.Tensor] | None] = [None] * S
+        state: list[torch.Tensor | None] = [None] * S
         bad, done, last_ep = [0] * S, [False] * S, [0] * S
         ar = torch.arange(S, device=dev)[:, None]
         for ep in range(epochs):
@@ -229,20 +242,18 @@ class ElementMLP:
                     continue
                 j, msk = P[:, i * bs : (i + 1) * bs], M[:, i * bs : (i + 1) * bs]
                 x, y = a[ar, j], b[ar, j]
-                loss = member_loss(forward(x, params), y, msk.float()[..., None], cnt_d[i]).sum()
-                grads = torch.autograd.grad(loss, params)
+                loss = member_loss(forward(x, unpack(flat)), y, msk.float()[..., None], cnt_d[i]).sum()
+                (g,) = torch.autograd.grad(loss, flat)
                 with torch.no_grad():
-                    for p, g, m1, m2 in zip(params, grads, mom, sq):
-                        shp = (S,) + (1,) * (p.dim() - 1)
-                        am = act_d[i].view(shp)
-                        nm1 = torch.where(am, m1.lerp(g, 1 - beta1), m1)
-                        nm2 = torch.where(am, m2 * beta2 + (1 - beta2) * g * g, m2)
-                        m1.copy_(nm1)
-                        m2.copy_(nm2)
-                        upd = p * (1 - lr * wd) - (lr / bc1[i].view(shp)) * nm1 / (nm2.sqrt() / bc2s[i].view(shp) + eps)
-                        p.copy_(torch.where(am, upd, p))
+                    am = act_d[i].view(S, 1)
+                    nm1 = torch.where(am, m1.lerp(g, 1 - beta1), m1)
+                    nm2 = torch.where(am, m2 * beta2 + (1 - beta2) * g * g, m2)
+                    m1.copy_(nm1)
+                    m2.copy_(nm2)
+                    upd = flat * (1 - lr * wd) - (lr / bc1[i].view(S, 1)) * nm1 / (nm2.sqrt() / bc2s[i].view(S, 1) + eps)
+                    flat.copy_(torch.where(am, upd, flat))
             with torch.no_grad():
-                vl = (member_loss(forward(av, params), bv, vmask, nv.to(av.dtype))).double().cpu().numpy()
+                vl = (member_loss(forward(av, unpack(flat)), bv, vmask, nv.to(av.dtype))).double().cpu().numpy()
             for s in range(S):
                 if done[s]:
                     continue
@@ -250,14 +261,14 @@ class ElementMLP:
                 v = float(vl[s])
                 if v < best[s]:
                     best[s], bad[s] = v, 0
-                    state[s] = [p[s].detach().clone() for p in params]
+                    state[s] = flat[s].detach().clone()
                 else:
                     bad[s] += 1
                     if bad[s] > int(h["patience"]):
                         done[s] = True
             if all(done):
                 break
-        self.params_ = [torch.stack([state[s][li] for s in range(S)]).cpu() for li in range(len(params))]
+        self.params_ = [t.contiguous() for t in unpack(torch.stack(state).cpu())]
         self.history_ = [{"epochs": last_ep[s] + 1, "best_valid_loss": best[s], "n_rows": n[s], "device": str(dev)}
                          for s in range(S)]
         return self
