@@ -365,3 +365,105 @@ def test_experiment_ntype_quick(quick_run):
 def test_experiment_ntype_quick_open_targets(quick_run):
     F = quick_run["findings"]
     assert F["table1_interior_optimum"]
+
+
+def test_element_mlp_batched_members_match_one_after_another():
+    """`ElementMLP.fit` trains the ensemble as one batched network (flat weights, per-member AdamW and early
+    stopping) and `fit_sequential` one nn.Sequential after another with the same draws: the same members up to
+    float summation order, also when the members hold different numbers of rows and stop at different epochs."""
+    from learn.models.element_mlp import ElementMLP
+
+    rng = np.random.default_rng(0)
+    rest = np.array([40e3, 40e3, 20e3])
+    R = [rest * np.exp(rng.normal(0, 0.05, (8, 36, 3))) for _ in range(10)]
+    F = [np.abs(rng.normal(0, 1, (8, 36, 3))) * (rng.random((8, 36, 3)) < 0.4) for _ in range(10)]
+    kw = {"n_seeds": 3, "hidden": 8, "max_epochs": 7, "patience": 1, "batch_size": 300}
+    a = ElementMLP(rest, 2.0, **kw).fit(R, F, seed=5)
+    b = ElementMLP(rest, 2.0, **kw).fit_sequential(R, F, seed=5)
+    rows = [h["n_rows"] for h in a.history_]
+    assert rows == [h["n_rows"] for h in b.history_] and len(set(rows)) > 1  # members of unequal size
+    assert [h["epochs"] for h in a.history_] == [h["epochs"] for h in b.history_]
+    for ha, hb in zip(a.history_, b.history_):
+        assert ha["best_valid_loss"] == pytest.approx(hb["best_valid_loss"], rel=1e-5)
+    pa, pb = a.predict(R[0]), b.predict(R[0])
+    np.testing.assert_allclose(pa, pb, rtol=0, atol=1e-5 * np.abs(pb).max())
+
+
+def _part(models, windows, sha="d0", seed=0):
+    """A metrics.json of one process of the device run (the keys merge_runs reads)."""
+    return {"experiment": "ntype", "mode": "full", "seed": seed, "task": "press_stroke",
+            "dataset": {"dataset_sha256": sha}, "protocol": {"fold_episodes": [["e0"], ["e1"]], "spreads": [1.0, 7.0, 10.0],
+                                                            "windows": windows},
+            "models": {"mean": _e(9, 9, 9), **models}, "timing_s": {k: 1.0 for k in models},
+            "findings": {"nearest_centre_median": {f"rbf_w{w}": 5.0 + w for w in windows}}}
+
+
+def _e(x, y, z):
+    return {"E_Fx": float(x), "E_Fy": float(y), "E_Fz": float(z), **{f"MAE{k}_F{c}": 0.1 for k in ("", "_loaded") for c in "xyz"}}
+
+
+def test_merge_runs_recomputes_findings_across_parts():
+    """The device's parts (one model group or window a process) merge into the metrics one process would have
+    written: windows side by side, findings that span parts (window 5 vs Table 1, ours vs the best RBF) recomputed;
+    parts of different data or seeds are refused."""
+    from learn.experiments.ntype import merge_runs
+
+    t1 = {"1.0": _e(9, 9, 9), "7.0": _e(4, 4, 3), "10.0": _e(5, 5, 4)}  # Table 1: best spread 7 (interior)
+    w5 = {"1.0": _e(8, 8, 8), "7.0": _e(3, 3, 3.5), "10.0": _e(3.5, 3.5, 3.6)}  # beats Table 1 on Fx, Fy only
+    w3 = {"1.0": _e(8, 8, 8), "7.0": _e(3.0, 3.0, 2.9), "10.0": _e(6, 6, 6)}
+    parts = [_part({"elem_mlp": _e(2, 2, 3.2)}, []), _part({"rbf_win": {"5": w5}}, [5]),
+             _part({"rbf_col": t1}, []), _part({"rbf_win": {"3": w3}}, [3])]
+    m = merge_runs(parts)
+    assert list(m["models"]["rbf_win"]) == ["3", "5"] and m["protocol"]["windows"] == [3, 5]
+    F = m["findings"]
+    assert F["table1_best_spread"] == 7.0 and F["table1_interior_optimum"]
+    assert F["window5_beats_no_window"] == {"Fx": True, "Fy": True, "Fz": False}
+    assert F["best_paper_model"] == "rbf_w3" and F["best_paper_errors"] == {"Fx": 3.0, "Fy": 3.0, "Fz": 2.9}
+    assert F["elem_mlp_beats_best_paper_model"] == {"Fx": True, "Fy": True, "Fz": False}
+    assert F["nearest_centre_median"] == {"rbf_w3": 8.0, "rbf_w5": 10.0}
+    assert m["timing_s"] == {"elem_mlp": 1.0, "rbf_win": 2.0, "rbf_col": 1.0} and m["tasks"] == {}
+    with pytest.raises(ValueError, match="different datasets"):
+        merge_runs([parts[0], _part({"rbf_col": t1}, [], sha="other")])
+    with pytest.raises(ValueError, match="seed"):
+        merge_runs([parts[0], _part({"rbf_col": t1}, [], seed=1)])
+    with pytest.raises(ValueError, match="more than one part"):
+        merge_runs([parts[2], parts[2]])
+
+
+@pytest.mark.slow
+def test_device_full_script_round_trip(tmp_path):
+    """bench/device_full_ntype.sh start / poll / collect at the tiny scale: the parts (Table 1, window 3, one
+    process each) merge into the results file with the same models and findings as one process running both."""
+    import dataclasses
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from learn.experiments import ntype as NT
+
+    repo = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "NTYPE_MODE": "tiny", "NTYPE_SEEDS": "0", "NTYPE_PARTS": "w3 t1", "PY": sys.executable,
+           "NTYPE_ROOT": str(tmp_path / "dev"), "NTYPE_RESULTS": str(tmp_path / "res"), "OUT": str(tmp_path / "out"),
+           "NTYPE_GPU": "cpu", "PYTHONPATH": str(repo)}
+    for cmd in ("start", "poll", "collect"):
+        r = subprocess.run(["bash", "bench/device_full_ntype.sh", cmd, *(["240"] if cmd == "poll" else [])], cwd=repo,
+                           env=env, capture_output=True, text=True, timeout=400)
+        assert r.returncode == 0, (cmd, r.stdout, r.stderr)
+    assert "all parts ended" in r.stdout or "done" in r.stdout
+    m = json.loads((tmp_path / "res" / "ntype-full.json").read_text())
+    assert (tmp_path / "out" / "ntype-full-device.tgz").stat().st_size > 1000
+    md = dataclasses.replace(NT.MODES["tiny"], tasks=("paper",), alt_kernels=("eq9+exact",), windows=(3,))
+    old = NT.MODES["tiny"]
+    NT.MODES["tiny"] = md
+    try:
+        one = NT.run(tmp_path / "one", mode="tiny", data_dir=tmp_path / "dev" / "data" / "s0", models=["rbf_col", "rbf_win"],
+                     seed=0, progress=False, log=lambda s: None)
+    finally:
+        NT.MODES["tiny"] = old
+    assert m["dataset"]["dataset_sha256"] == one["dataset"]["dataset_sha256"]
+    assert m["models"] == json.loads(json.dumps(one["models"]))
+    for k in ("table1_best_spread", "window_best_spread", "best_paper_model", "best_paper_errors",
+              "nearest_centre_median", "table1_best_spread_exact"):
+        assert m["findings"][k] == json.loads(json.dumps(one["findings"][k])), k
+    assert m["machine"]["missing"] == [] and [p["status"] for p in m["machine"]["parts"]] == ["done", "done"]
