@@ -4,7 +4,7 @@ seed, bench/results/experiments/<prefix>.json (seed 0), <prefix>-seed1.json, <pr
 
 A model group whose process did not finish is taken from the recorded paper-methods file of that seed
 (--recorded, e.g. ntype-full-paper.json: Table 1 and window 5 of session 9) only when that file ran on the same
-dataset (sha256) and folds; otherwise it is left out and listed under machine.missing.
+data (content_sha256) and folds; otherwise it is left out and listed under machine.missing.
 
   python3 bench/ntype_full_merge.py --root runs/ntype-full-dev --seeds 0,1,2
 """
@@ -26,7 +26,7 @@ def _git() -> str:
 
 
 def merge_seed(root: Path, seed: int, recorded: Path | None, expected: list[str]) -> tuple[dict, dict]:
-    from learn.experiments.ntype import merge_runs
+    from learn.experiments.ntype import _content, merge_runs
 
     parts, infos, missing = [], [], []
     for name in expected:
@@ -45,7 +45,7 @@ def merge_seed(root: Path, seed: int, recorded: Path | None, expected: list[str]
     used_recorded = []
     if missing and recorded is not None and recorded.exists():
         r = json.loads(recorded.read_text())
-        if (r["dataset"]["dataset_sha256"] == parts[0]["dataset"]["dataset_sha256"]
+        if (_content(r) == _content(parts[0])
                 and r["protocol"]["fold_episodes"] == parts[0]["protocol"]["fold_episodes"]):
             have = {k for m in parts for k in m["models"] if k != "mean"}
             have_w = {w for m in parts for w in m["models"].get("rbf_win", {})}

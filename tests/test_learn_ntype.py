@@ -392,7 +392,7 @@ def test_element_mlp_batched_members_match_one_after_another():
 def _part(models, windows, sha="d0", seed=0):
     """A metrics.json of one process of the device run (the keys merge_runs reads)."""
     return {"experiment": "ntype", "mode": "full", "seed": seed, "task": "press_stroke",
-            "dataset": {"dataset_sha256": sha}, "protocol": {"fold_episodes": [["e0"], ["e1"]], "spreads": [1.0, 7.0, 10.0],
+            "dataset": {"dataset_sha256": "t" + sha, "content_sha256": sha}, "protocol": {"fold_episodes": [["e0"], ["e1"]], "spreads": [1.0, 7.0, 10.0],
                                                             "windows": windows},
             "models": {"mean": _e(9, 9, 9), **models}, "timing_s": {k: 1.0 for k in models},
             "findings": {"nearest_centre_median": {f"rbf_w{w}": 5.0 + w for w in windows}}}
@@ -461,7 +461,7 @@ def test_device_full_script_round_trip(tmp_path):
                      seed=0, progress=False, log=lambda s: None)
     finally:
         NT.MODES["tiny"] = old
-    assert m["dataset"]["dataset_sha256"] == one["dataset"]["dataset_sha256"]
+    assert m["dataset"]["content_sha256"] == one["dataset"]["content_sha256"]
     assert m["models"] == json.loads(json.dumps(one["models"]))
     for k in ("table1_best_spread", "window_best_spread", "best_paper_model", "best_paper_errors",
               "nearest_centre_median", "table1_best_spread_exact"):

@@ -487,12 +487,17 @@ def _run(md: Mode, mode: str, out: Path, data: Path, seqs: list, fp: dict, folds
     return metrics
 
 
+def _content(m: dict[str, Any]) -> str | None:
+    """A run's data by content (dataset_sha256 also covers the shards' timestamps)."""
+    return m["dataset"].get("content_sha256") or m["dataset"].get("dataset_sha256")
+
+
 def merge_runs(parts: list[dict[str, Any]]) -> dict[str, Any]:
     """One task's metrics from runs of disjoint model groups on the same data, folds and seed (the device's full
     run: bench/device_full_ntype.sh, one process per model group or window): the models' results side by side,
     windows merged, timings summed, the findings recomputed on the union (as `_run` would have written them
-    had one process run every group). ValueError unless every part has the same dataset, task, seed, mode and
-    folds. The first part's protocol is kept, with the union of the windows and, per part, where it ran
+    had one process run every group). ValueError unless every part has the same dataset (content_sha256), task,
+    seed, mode and folds. The first part's protocol is kept, with the union of the windows and, per part, where it ran
     (``parts``)."""
     if not parts:
         raise ValueError("merge_runs: no parts")
@@ -502,7 +507,7 @@ def merge_runs(parts: list[dict[str, Any]]) -> dict[str, Any]:
         for k in same:
             if m.get(k) != base.get(k):
                 raise ValueError(f"merge_runs: parts differ in {k} ({base.get(k)!r} vs {m.get(k)!r})")
-        if m["dataset"]["dataset_sha256"] != base["dataset"]["dataset_sha256"]:
+        if _content(m) != _content(base):
             raise ValueError("merge_runs: parts ran on different datasets")
         if m["protocol"]["fold_episodes"] != base["protocol"]["fold_episodes"]:
             raise ValueError("merge_runs: parts ran on different folds")
