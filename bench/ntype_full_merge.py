@@ -31,7 +31,7 @@ def merge_seed(root: Path, seed: int, recorded: Path | None, expected: list[str]
     parts, infos, missing = [], [], []
     for name in expected:
         d = root / "parts" / f"s{seed}-{name}" / "out"
-        info = json.loads((d / "run_info.json").read_text()) if (d / "run_info.json").exists() else {"status": "not started"}
+        info = json.loads((d / "run_info.json").read_text()) if (d / "run_info.json").exists() else {"status": "not finished"}
         info["part"] = name
         infos.append(info)
         if info.get("status") == "done" and (d / "metrics.json").exists():
@@ -90,8 +90,11 @@ def main() -> None:
             "date_utc": __import__("datetime").datetime.now(__import__("datetime").timezone.utc).strftime("%Y-%m-%d"),
             "cpu_s": round(sum(float(i.get("cpu_s", 0.0)) for i in infos), 1),
             "wall_s": a.wall_s, "train_device": devs, "gpu": gpus,
-            "parts": [{k: i.get(k) for k in ("part", "status", "models", "windows", "alt_kernels", "train_device",
-                                             "threads", "cpu_s", "wall_s")} for i in infos],
+            "parts": "; ".join(
+                f"{i['part']} {i.get('status')}" + (f" {float(i['cpu_s']):.0f} CPU-s / {float(i['wall_s']):.0f} s wall"
+                                                    if i.get("cpu_s") is not None else "")
+                + (f" ({i.get('train_device')})" if set(i.get("models", [])) & {"elem_mlp", "map_cnn"} else "")
+                for i in infos),
             "missing": run["missing"], "from_recorded": run["from_recorded"],
             "note": ("device full run (bench/device_full_ntype.sh): the paper's task at the full budget (MODES['full'], "
                      "3000 samples, 10 folds), one process per model group / window, merged by "

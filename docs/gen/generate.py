@@ -817,6 +817,18 @@ def experiment(family: str) -> str:
         if runs:
             out.append("### Issue 14 targets by run\n\n"
                        + importlib.import_module("learn.experiments.velostat").targets_table(runs) + "\n")
+    if family == "ntype":  # issue 14's targets on the paper's task, one column per recorded run and seed
+        import importlib
+
+        if str(ROOT) not in sys.path:
+            sys.path.insert(0, str(ROOT))
+        order = ("quick", "full-paper", "full")  # the quick runs, session 9's paper methods at full, the device's full runs
+        runs = {p.stem.removeprefix("ntype-"): m for p in files if (m := load(p)) and "findings" in m}
+        runs = dict(sorted(runs.items(), key=lambda kv: (next((i for i, o in enumerate(order)
+                                                                if re.fullmatch(rf"{o}(-seed\d+)?", kv[0])), 9), kv[0])))
+        if runs:
+            out.append("### Issue 14 targets by run (the paper's task)\n\n"
+                       + importlib.import_module("learn.experiments.ntype").targets_table(runs) + "\n")
     for p in files:
         m = load(p)
         if m is None:

@@ -925,6 +925,70 @@ def report(m: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def targets_table(runs: dict[str, dict[str, Any]]) -> str:
+    """Issue 14's ntype targets on the paper's task, one column per recorded run (label -> metrics.json), each cell
+    the measured value and met / not met: Table 1's best spread inside the 1-10 sweep, window 5 better than no
+    window on all three components, window 5's errors within 3x of Table 3's, ours (element MLP) better than the
+    best RBF on all three; and the run's cost (quick: <= 10 min)."""
+    yes = lambda ok: "met" if ok else "**not met**"  # noqa: E731
+    comp = COMPONENTS
+
+    def e3(d: dict[str, Any]) -> str:
+        return " / ".join(fmt(d[f"E_{c}"], 2) for c in comp)
+
+    def cell(m: dict[str, Any], key: str) -> str:
+        R, F = m.get("models", {}), m.get("findings", {})
+        try:
+            if key == "samples":
+                return f"{m['protocol']['samples']} (seed {m.get('seed', 0)})"
+            if key == "t1":
+                if "rbf_col" not in R:
+                    return "not run"
+                b = F["table1_best_spread"]
+                return f"{b:g} ({yes(F['table1_interior_optimum'])})"
+            if key == "w5":
+                if "rbf_col" not in R or "5" not in R.get("rbf_win", {}):
+                    return "not run"
+                v = F["window5_beats_no_window"]
+                return ", ".join("yes" if v[c] else "no" for c in comp) + f" ({yes(all(v.values()))})"
+            if key == "w5_3x":
+                if "5" not in R.get("rbf_win", {}):
+                    return "not run"
+                d = R["rbf_win"]["5"][_best_spread(R["rbf_win"]["5"])]
+                ok = all(d[f"E_{c}"] <= 3.0 * p for c, p in zip(comp, PAPER_TABLE3[5]))
+                return f"{e3(d)} % ({yes(ok)})"
+            if key == "best":
+                return f"{F['best_paper_model']}: " + " / ".join(fmt(F["best_paper_errors"][c], 2) for c in comp) + " %"
+            if key == "ours":
+                if "elem_mlp" not in R:
+                    return "not run"
+                v = F["elem_mlp_beats_best_paper_model"]
+                return f"{e3(R['elem_mlp'])} % ({yes(all(v.values()))})"
+            if key == "time":
+                mc = m.get("machine", {})
+                w, c = mc.get("wall_s"), mc.get("cpu_s")
+                out = []
+                if w:
+                    out.append(f"{w / 60:.1f} min wall" + (f" ({yes(w <= 600)})" if m.get("mode") == "quick" else ""))
+                if c:
+                    out.append(f"{c:.0f} CPU-s" + (f" ({yes(c <= 600)} on CPU time)" if m.get("mode") == "quick" else ""))
+                if mc.get("train_device"):
+                    out.append("ours on " + ", ".join(mc["train_device"]))
+                return "; ".join(out) or "–"
+        except (KeyError, TypeError, ValueError):
+            return "–"
+        return "–"
+
+    rows = [("samples (seed)", "samples"),
+            ("Table 1 best spread inside the 1-10 sweep (paper 7)", "t1"),
+            ("window 5 better than no window (F_x, F_y, F_z)", "w5"),
+            ("window 5 within 3x of Table 3 (<= 6.39 / 8.13 / 4.08 %)", "w5_3x"),
+            ("best paper model (E_Fx / E_Fy / E_Fz)", "best"),
+            ("ours (element MLP) better than the best RBF on all three", "ours"),
+            ("cost", "time")]
+    return md_table(["target"] + list(runs), [[lab] + [cell(m, k) for m in runs.values()] for lab, k in rows])
+
+
 def _maes(R: dict[str, Any]) -> dict[str, dict]:
     out = {"mean": R["mean"]}
     if "rbf_col" in R:
