@@ -10,24 +10,25 @@
 #                                            # ntype-full.json, -seed1, -seed2 and tars them + logs into $OUT
 #   bash bench/device_full_ntype.sh stop     # ends the parts still running (by the pids start wrote)
 #
-# One process per (seed, part): gpu = elem_mlp + map_cnn with --train-device $NTYPE_GPU (cuda when nvidia-smi
-# answers), w3 / w7 / w5 / w1 = one window of rbf_win each, t1 = Table 1 (rbf_col, eq9 + eq9+exact). One thread
-# each (OMP / MKL / OpenBLAS / torch). Oversubscribed on purpose (18 processes for ~8 cores): nice levels finish
-# what the targets need first (ours and windows 3 / 7 at nice 0, Table 1 and window 5 at 2 - both recorded by
-# session 9 on these seeds - window 1, our extra row, at 4). collect merges whatever finished; a Table 1 / window 5
+# One process per (seed, part): emlp = the element MLP (ours) and cnn = the map CNN (ours, first attempt), each
+# with --train-device $NTYPE_GPU (cuda when nvidia-smi answers); w3 / w7 / w5 / w1 = one window of rbf_win
+# each; t1 = Table 1 (rbf_col, eq9 + eq9+exact, the readings session 9 ran at full). One thread each (OMP / MKL /
+# OpenBLAS / torch). Oversubscribed on purpose (21 processes for ~8 cores): nice levels finish what the targets
+# need first (ours and windows 3 / 7 at nice 0, Table 1 and window 5 at 2 - both recorded by session 9 on these
+# seeds - the map CNN at 3, window 1, our extra row, at 4). collect merges whatever finished; a Table 1 / window 5
 # part that did not is taken from ntype-full-paper[-seedN].json only if that ran on the same dataset and folds.
 # Expected: ~6000 CPU-s in all (local measurements scaled by samples, centres and windows, CHANGELOG "ntype,
 # session 10"), 12-15 min wall on 8 free cores; the GPU parts ~5-10 min each.
 #
 # Knobs (environment): NTYPE_MODE=full|tiny (tiny: a seconds-long test of the script), NTYPE_SEEDS="0 1 2",
-# NTYPE_PARTS="gpu w3 w7 w5 t1 w1", NTYPE_GPU=cuda|cpu|auto, NTYPE_ROOT=runs/ntype-full-dev, PY=python3.
+# NTYPE_PARTS="emlp cnn w3 w7 w5 t1 w1", NTYPE_GPU=cuda|cpu|auto, NTYPE_ROOT=runs/ntype-full-dev, PY=python3.
 set -u
 export PYTHONPATH=/root/site:.${PYTHONPATH:+:$PYTHONPATH} PYTHONUNBUFFERED=1
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 NUMEXPR_NUM_THREADS=1
 PY=${PY:-python3}
 MODE=${NTYPE_MODE:-full}
 SEEDS=${NTYPE_SEEDS:-0 1 2}
-PARTS=${NTYPE_PARTS:-gpu w3 w7 w5 t1 w1}
+PARTS=${NTYPE_PARTS:-emlp cnn w3 w7 w5 t1 w1}
 ROOT=${NTYPE_ROOT:-runs/ntype-full-dev}
 OUTDIR=${OUT:-$ROOT/out}
 if [ -z "${NTYPE_GPU:-}" ]; then
@@ -36,7 +37,8 @@ fi
 
 part_args() {  # part -> the arguments of bench/ntype_full_part.py and its nice level
     case "$1" in
-        gpu) echo "0 --models elem_mlp,map_cnn --train-device $NTYPE_GPU" ;;
+        emlp) echo "0 --models elem_mlp --train-device $NTYPE_GPU" ;;
+        cnn) echo "3 --models map_cnn --train-device $NTYPE_GPU" ;;
         w1|w3|w5|w7) n=${1#w}; lvl=0; [ "$n" = 5 ] && lvl=2; [ "$n" = 1 ] && lvl=4
                      echo "$lvl --models rbf_win --windows $n" ;;
         t1) echo "2 --models rbf_col --alts eq9+exact" ;;
@@ -98,6 +100,7 @@ poll() {
     while true; do
         if status > "$ROOT/status.txt"; then cat "$ROOT/status.txt"; echo "all parts ended"; return 0; fi
         if [ $(( $(date +%s) - t0 )) -ge "${1:-540}" ]; then cat "$ROOT/status.txt"; return 0; fi
+        echo "$(date -u +%H:%M:%S) $(grep -c ': done' "$ROOT/status.txt") done, $(grep -c ': running' "$ROOT/status.txt") running, $(grep -c 'ended without\|failed' "$ROOT/status.txt") failed; $(tail -1 "$ROOT/status.txt")"
         sleep 30
     done
 }
