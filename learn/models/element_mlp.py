@@ -237,12 +237,20 @@ class ElementMLP:
             bc1 = (1 - beta1 ** st).float().to(dev)
             bc2s = (1 - beta2 ** st).sqrt().float().to(dev)
             P, M, cnt_d, act_d = P.to(dev), M.to(dev), cnt.float().to(dev), act.to(dev)
+            # the members still training (the others stopped early: no rows, no step, not computed)
+            sub = None if all(live) else torch.tensor([s for s in range(S) if live[s]], device=dev)
+            if sub is not None:
+                P, M, cnt_d = P[sub], M[sub], cnt_d[:, sub]
+                a_l, b_l, ar_l = a[sub], b[sub], ar[: len(sub)]
             for i in range(nsteps):
                 if not bool(act[i].any()):
                     continue
                 j, msk = P[:, i * bs : (i + 1) * bs], M[:, i * bs : (i + 1) * bs]
-                x, y = a[ar, j], b[ar, j]
-                loss = member_loss(forward(x, unpack(flat)), y, msk.float()[..., None], cnt_d[i]).sum()
+                if sub is None:
+                    x, y, W = a[ar, j], b[ar, j], unpack(flat)
+                else:
+                    x, y, W = a_l[ar_l, j], b_l[ar_l, j], [t[sub] for t in unpack(flat)]
+                loss = member_loss(forward(x, W), y, msk.float()[..., None], cnt_d[i]).sum()
                 (g,) = torch.autograd.grad(loss, flat)
                 with torch.no_grad():
                     am = act_d[i].view(S, 1)
