@@ -17,8 +17,10 @@
 # need first (ours and windows 3 / 7 at nice 0, Table 1 and window 5 at 2 - both recorded by session 9 on these
 # seeds - the map CNN at 3, window 1, our extra row, at 4). collect merges whatever finished; a Table 1 / window 5
 # part that did not is taken from ntype-full-paper[-seedN].json only if that ran on the same dataset and folds.
-# Expected: ~6000 CPU-s in all (local measurements scaled by samples, centres and windows, CHANGELOG "ntype,
-# session 10"), 12-15 min wall on 8 free cores; the GPU parts ~5-10 min each.
+# Expected (CHANGELOG "ntype, session 10"): ~5800 CPU-s in all - Table 1 ~400 and each window ~300 CPU-s a seed
+# (session 9's full runs of Table 1 and window 5 on 2 shared cores), the GPU parts ~1 core each while they run -
+# so 12-15 min wall on 8 free cores; the element MLP ~171k batched steps a seed (5 members, 10 folds, <= 100
+# epochs): ~3-5 min on the H100 at ~1-2 ms a step (33 min a seed on one CPU core: measured 2 CPU-s an epoch).
 #
 # Knobs (environment): NTYPE_MODE=full|tiny (tiny: a seconds-long test of the script), NTYPE_SEEDS="0 1 2",
 # NTYPE_PARTS="emlp cnn w3 w7 w5 t1 w1", NTYPE_GPU=cuda|cpu|auto, NTYPE_ROOT=runs/ntype-full-dev, PY=python3.
@@ -47,6 +49,12 @@ part_args() {  # part -> the arguments of bench/ntype_full_part.py and its nice 
 }
 
 start() {
+    for p in $PARTS; do part_args "$p" > /dev/null || exit 2; done
+    if [ -d "$ROOT/parts" ] && ls "$ROOT"/parts/*/pid >/dev/null 2>&1; then
+        for d in "$ROOT"/parts/*/; do
+            if [ -f "$d/pid" ] && kill -0 "$(cat "$d/pid")" 2>/dev/null; then echo "parts still running under $ROOT (stop first)"; exit 1; fi
+        done
+    fi
     mkdir -p "$ROOT/logs" "$ROOT/parts" "$ROOT/data"
     date +%s > "$ROOT/t_start"
     echo "$PARTS" > "$ROOT/part_names"
@@ -64,7 +72,7 @@ make_data(Path('$ROOT/data/s$s/paper'), NT.scene(md, [], $s, 'paper'), print)
     done
     for s in $SEEDS; do
         for p in $PARTS; do
-            set -- $(part_args "$p") || exit 1
+            set -- $(part_args "$p")
             lvl=$1; shift
             d="$ROOT/parts/s$s-$p"
             rm -rf "$d"; mkdir -p "$d"; cp -r "$ROOT/data/s$s" "$d/data"
