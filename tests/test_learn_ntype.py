@@ -467,3 +467,49 @@ def test_device_full_script_round_trip(tmp_path):
               "nearest_centre_median", "table1_best_spread_exact"):
         assert m["findings"][k] == json.loads(json.dumps(one["findings"][k])), k
     assert m["machine"]["missing"] == [] and m["machine"]["parts"].count(" done ") == 2
+
+
+def test_linear_maps_recover_an_affine_sensor_and_its_crosstalk():
+    """bench/bench_ntype_linear.py's maps: forces that are an affine function of each column's own resistances
+    plus a neighbour's are recovered by Table 1's inputs and the wires' R_z (to round-off), not by the element's
+    own column alone."""
+    import importlib.util
+    from pathlib import Path
+
+    spec = importlib.util.spec_from_file_location("bench_ntype_linear", Path(__file__).resolve().parents[1]
+                                                  / "bench" / "bench_ntype_linear.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    rng = np.random.default_rng(3)
+    N = rng.uniform([32, 32, 16], [50, 50, 25], size=(400, 36, 3))
+    F = 0.5 * (N - [32, 32, 16])
+    m = np.arange(36)[np.arange(36) % 6 > 0]
+    F[:, m, 2] += 0.3 * (N[:, m - 1, 2] - 16)  # element m's F_z also moves with its left neighbour's R_z
+    P = mod.maps(N[:300], F[:300], N[300:], np.array([40.0, 40.0, 20.0]))
+    ref = F[300:]
+    assert np.abs(P["t1_linear"] - ref).max() < 1e-4  # the 1e-6 ridge's bias on inputs of 16-50 units
+    assert np.abs(P["all_columns_linear"] - ref).max() < 1e-4
+    own = np.abs(P["own_column_per_element"][..., 2] - ref[..., 2]).max()
+    assert own > 0.1 and np.abs(P["own_column_per_element"][..., :2] - ref[..., :2]).max() < 1e-4
+    assert np.isnan(P["fz_from_wires_rz"][..., 0]).all() and np.abs(P["fz_from_window5_rz"][..., 2] - ref[..., 2]).max() < 1e-4
+
+
+def test_targets_table_met_and_not_met():
+    """The experiment page's issue-14 table: met / not met from each run's findings, "not run" where a model
+    group is missing (session 9's paper-methods-only files)."""
+    from learn.experiments.ntype import merge_runs, targets_table
+
+    t1 = {"1.0": _e(9, 9, 9), "7.0": _e(4, 4, 3), "10.0": _e(5, 5, 4)}
+    w5 = {"1.0": _e(8, 8, 8), "7.0": _e(3, 3, 3.5), "10.0": _e(3.5, 3.5, 3.6)}
+    full = merge_runs([_part({"elem_mlp": _e(2, 2, 3.6)}, []), _part({"rbf_win": {"5": w5}}, [5]), _part({"rbf_col": t1}, [])])
+    full["protocol"]["samples"] = 3000
+    full["machine"] = {"wall_s": 900.0, "cpu_s": 5000.0, "train_device": ["cuda"]}
+    only = merge_runs([_part({"rbf_col": t1}, [])])
+    only["protocol"]["samples"] = 3000
+    text = targets_table({"full": full, "t1 only": only})
+    rows = {r.split("|")[1].strip(): [c.strip() for c in r.split("|")[2:-1]] for r in text.splitlines()[2:]}
+    assert rows["Table 1 best spread inside the 1-10 sweep (paper 7)"] == ["7 (met)", "7 (met)"]
+    assert rows["window 5 better than no window (F_x, F_y, F_z)"] == ["yes, yes, no (**not met**)", "not run"]
+    assert rows["window 5 within 3x of Table 3 (<= 6.39 / 8.13 / 4.08 %)"][0] == "3.00 / 3.00 / 3.50 % (met)"
+    assert rows["ours (element MLP) better than the best RBF on all three"] == ["2.00 / 2.00 / 3.60 % (**not met**)", "not run"]
+    assert "ours on cuda" in rows["cost"][0]
