@@ -34,7 +34,10 @@ paper's, and our two models on the same folds (elem_mlp: ours, beats the best RB
   cost     the RLS output weights of every sweep are solved in closed form (RLS of forgetting factor 1 from
            P0 = I / delta is the ridge solution, Haykin; learn/models/rbf.py sweep_predict, Cholesky) on one
            distance matrix per fold and network, not sample by sample: the recorded numbers moved by <= 1.5e-6
-           relative (bench/results/experiments/ntype-quick.json, CHANGELOG "ntype, session 9").
+           relative (bench/results/experiments/ntype-quick.json, CHANGELOG "ntype, session 9"). The element
+           MLP's ensemble trains as one batched network (ElementMLP.fit; the same training up to float
+           summation order, session 10), on the CLI's --train-device. The full run on the device machine:
+           bench/device_full_ntype.sh (one process per model group and window, merged by merge_runs).
 
 Modes: "full" = the preset's 3000 samples, 1000 window centres; "quick" = 60 episodes (1200 samples), 800
 window centres, fewer epochs for ours; "tiny" = seconds, for tests only.
