@@ -76,7 +76,8 @@ make_data(Path('$ROOT/data/s$s/paper'), NT.scene(md, [], $s, 'paper'), print)
             lvl=$1; shift
             d="$ROOT/parts/s$s-$p"
             rm -rf "$d"; mkdir -p "$d"; cp -r "$ROOT/data/s$s" "$d/data"
-            setsid nohup nice -n "$lvl" $PY bench/ntype_full_part.py --seed "$s" --mode "$MODE" --out "$d/out" \
+            hide=(); case "$p" in emlp|cnn) ;; *) hide=(env CUDA_VISIBLE_DEVICES=) ;; esac  # CPU parts: no CUDA context
+            setsid nohup nice -n "$lvl" "${hide[@]}" $PY bench/ntype_full_part.py --seed "$s" --mode "$MODE" --out "$d/out" \
                 --data "$d/data" "$@" > "$ROOT/logs/s$s-$p.log" 2>&1 < /dev/null &
             echo $! > "$d/pid"
         done
