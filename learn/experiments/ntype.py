@@ -1075,6 +1075,8 @@ DIFFERENCES = """
 - **Training rows.** We cap the window networks' training rows (win_rows_max) to keep the 10 x 10 (fold x
   spread) sweep within minutes; on press_stroke the window networks train on every loaded element row plus a
   tenth of the unloaded ones (test folds keep every row).
+- **Eq. 13's min and max** are taken over the training folds; the paper normalizes its initial dataset before
+  the split. Ours keeps the test fold out of the scale, which moves it by a few percent of the range at most.
 - **Folds** hold whole episodes, not random frames, so no neighbouring frame of a test sample is in training;
   the paper does not say how its 3000 samples were grouped.
 - **Our model (element MLP) and why it wins.** It uses what the paper's RBF throws away: the resistances are
