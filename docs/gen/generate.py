@@ -883,6 +883,39 @@ def velostat_units_slow() -> str:
     return "\n".join(L) + "\n"
 
 
+def _ntype_linear() -> list[str]:
+    """bench/results/ntype-linear-*.json (bench/bench_ntype_linear.py): the paper's inputs as we build them and
+    affine maps on them, beside Table 1's and the windows' RBF (the experiment files)."""
+    files = sorted((ROOT / "bench" / "results").glob("ntype-linear-*.json"))
+    runs = {p.stem.removeprefix("ntype-linear-"): m for p in files if (m := load(p))}
+    if not runs:
+        return []
+    names = list(runs)
+    labels = {"t1_linear": "Table 1's inputs (36 resistances of column c -> 36 F_c)",
+              "own_column_per_element": "element's own column c alone (per element)",
+              "all_columns_linear": "all 108 resistances -> 36 F_c",
+              "w1_linear_shared": "window 1 inputs, shared", "w5_linear_shared": "window 5 inputs, shared",
+              "w7_linear_shared": "window 7 inputs, shared",
+              "fz_from_window5_rz": "F_z from the window-5 elements' R_z (per element)",
+              "fz_from_wires_rz": "F_z from the R_z of the elements on its two wires (per element)"}
+    keys = list(next(iter(runs.values()))["linear_E_percent"])
+    rows = [[labels.get(k, k)] + [" / ".join("–" if v is None else f"{v:.2f}" for v in runs[n]["linear_E_percent"][k].values())
+                                  for n in names] for k in keys]
+    ins = []
+    for n in names:
+        i = runs[n]["inputs"]
+        ins.append(f"{n}: " + "; ".join(f"{c} {num(v['raw_min_kohm'], 3)}-{num(v['raw_max_kohm'], 3)} kOhm (paper "
+                                        f"{num(v['paper_range_kohm'][0])}-{num(v['paper_range_kohm'][1])}), scaled 1-99 % "
+                                        f"{num(v['scaled_p1_p50_p99'][0], 3)}"
+                                        f"-{num(v['scaled_p1_p50_p99'][2], 3)}, correlation with F_x / F_y / F_z "
+                                        + " / ".join(num(x, 2) for x in v["corr_with_Fx_Fy_Fz"]) for c, v in i.items()))
+    return ["### Affine maps on the paper's inputs (why Table 1's optimum runs to the sweep's edge)\n",
+            "The paper's inputs as the experiment builds them (eq. 13 per column type onto R_x, R_y -> [32, 50], "
+            "R_z -> [16, 25]) and affine least-squares maps on them, same folds and eq. 14 (E_Fx / E_Fy / E_Fz %, "
+            "`bench/bench_ntype_linear.py`; " + ", ".join(f"[`{p.name}`]({rel(p)})" for p in files) + "):\n",
+            table(["map"] + names, rows), "", "Inputs: " + " | ".join(ins) + "\n"]
+
+
 def experiment(family: str) -> str:
     files = experiment_files(family)
     if not files:
@@ -908,6 +941,19 @@ def experiment(family: str) -> str:
             out.append("### Issue 14 targets by run\n\n"
                        + importlib.import_module("learn.experiments.velostat").targets_table(runs) + "\n")
         out.append(velostat_units_slow())
+    if family == "ntype":  # issue 14's targets on the paper's task, one column per recorded run and seed
+        import importlib
+
+        if str(ROOT) not in sys.path:
+            sys.path.insert(0, str(ROOT))
+        order = ("quick", "full-paper", "full")  # the quick runs, session 9's paper methods at full, the device's full runs
+        runs = {p.stem.removeprefix("ntype-"): m for p in files if (m := load(p)) and "findings" in m}
+        runs = dict(sorted(runs.items(), key=lambda kv: (next((i for i, o in enumerate(order)
+                                                                if re.fullmatch(rf"{o}(-seed\d+)?", kv[0])), 9), kv[0])))
+        if runs:
+            out.append("### Issue 14 targets by run (the paper's task)\n\n"
+                       + importlib.import_module("learn.experiments.ntype").targets_table(runs) + "\n")
+        out += _ntype_linear()
     for p in files:
         m = load(p)
         if m is None:

@@ -22,6 +22,7 @@ Static (the current frame only), like the paper's RBF.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -110,6 +111,7 @@ class ElementMLP:
         self.nets: list[nn.Module] = []
         self.scale_: float | None = None
         self.history_: list[dict[str, Any]] = []
+        self.params_: list[torch.Tensor] | None = None  # the batched members' weights [S, ...] (fit)
 
     def get_params(self, deep: bool = True) -> dict[str, Any]:
         return {"rest_ohm": self.rest_ohm.tolist(), "beta": self.beta, **self.h}
@@ -131,11 +133,161 @@ class ElementMLP:
         keep = loaded | (rng.random(len(Y)) < self.h["rest_keep"])
         return A[keep], Y[keep]
 
-    def fit(self, R: list[np.ndarray], F: list[np.ndarray], seed: int = 0) -> ElementMLP:
+    def _member_data(self, E: list[np.ndarray], F: list[np.ndarray], seed: int, s: int):
+        """Member s's draws, in fit_sequential's order: its generator, training rows, validation rows, torch seed."""
         h = self.h
+        rng = np.random.default_rng([seed, s])
+        order = rng.permutation(len(E))
+        nv = max(1, int(round(h["valid_share"] * len(E)))) if len(E) > 1 else 0
+        va, tr = order[:nv], order[nv:]
+        A, Y = self._rows(np.concatenate([E[i] for i in tr]), np.concatenate([F[i] for i in tr]), rng)
+        if nv:
+            Ev, Fv = np.concatenate([E[i] for i in va]), np.concatenate([F[i] for i in va])
+            Av, Yv = self._features(Ev), Fv.reshape(-1, 3)
+        else:
+            Av, Yv = A, Y
+        return A, Y, Av, Yv, int(rng.integers(2**31))
+
+    def fit(self, R: list[np.ndarray], F: list[np.ndarray], seed: int = 0) -> ElementMLP:
+        """Train the ``n_seeds`` members as one batched network (weights [S, ...], torch.baddbmm) on the torch
+        device of the enclosing `learn.train.training_device` block (the CPU outside one). Every member keeps
+        its own draws (rows, validation episodes, initial weights, batch order: fit_sequential's), its own AdamW
+        state and step count, and its own early stopping (a stopped member is frozen at its best epoch): the
+        same training as one net after another, up to float summation order (tests/test_learn_ntype.py)."""
+        from learn.train import current_device
+
+        h = self.h
+        dev = torch.device(current_device())
         E = [invert_strain(r, self.rest_ohm, self.beta) for r in R]
         self.scale_ = float(np.concatenate(E).std()) or 1.0
         self.nets, self.history_ = [], []
+        S, bs, k = int(h["n_seeds"]), int(h["batch_size"]), int(h["hidden"])
+        rel = float(h["rel_floor"])
+        members = [self._member_data(E, F, seed, s) for s in range(S)]
+        n_in = members[0][0].shape[1]
+        sizes = [(n_in, k), (k, k), (k, 3)]
+        gens = []
+        Ws: list[list[torch.Tensor]] = [[] for _ in range(2 * len(sizes))]
+        for m in members:  # nn.Linear's init (kaiming_uniform a=sqrt(5), bias U(+-1/sqrt(fan_in))) from its seed
+            g = torch.Generator().manual_seed(m[4])
+            gens.append(g)
+            for li, (fi, fo) in enumerate(sizes):
+                wb = math.sqrt(3.0) * (math.sqrt(2.0 / 6.0) / math.sqrt(fi))  # kaiming_uniform_'s bound, as torch computes it
+                Ws[2 * li].append(torch.empty(fo, fi).uniform_(-wb, wb, generator=g).T)
+                b = 1.0 / math.sqrt(fi)
+                Ws[2 * li + 1].append(torch.empty(fo).uniform_(-b, b, generator=g)[None, :])
+        # every member's weights in one flat buffer [S, T] (views per layer): one AdamW update of a few
+        # elementwise kernels a step instead of one set per tensor (same arithmetic, element by element)
+        stacked = [torch.stack(w) for w in Ws]
+        shapes = [t.shape[1:] for t in stacked]
+        flat = torch.cat([t.reshape(S, -1) for t in stacked], 1).to(dev).requires_grad_(True)
+
+        def unpack(buf: torch.Tensor) -> list[torch.Tensor]:
+            out, o = [], 0
+            for shp in shapes:
+                sz = math.prod(shp)
+                out.append(buf[:, o : o + sz].view(buf.shape[0], *shp))
+                o += sz
+            return out
+
+        n = [len(m[0]) for m in members]
+
+        def pad(rows: list[np.ndarray], width: int) -> torch.Tensor:
+            out = np.zeros((S, max(len(r) for r in rows), width), np.float32)
+            for s, r in enumerate(rows):
+                out[s, : len(r)] = r
+            return torch.from_numpy(out).to(dev)
+
+        a, b = pad([m[0] for m in members], n_in), pad([m[1] for m in members], 3)
+        av, bv = pad([m[2] for m in members], n_in), pad([m[3] for m in members], 3)
+        nv = torch.tensor([len(m[2]) for m in members], device=dev)
+        vmask = (torch.arange(av.shape[1], device=dev)[None, :] < nv[:, None]).float()[..., None]
+
+        forward = self._forward
+
+        def member_loss(p: torch.Tensor, y: torch.Tensor, mask: torch.Tensor, count: torch.Tensor) -> torch.Tensor:
+            return ((((p - y) ** 2) / (y.abs() + rel)) * mask).sum((1, 2)) / (3.0 * count.clamp(min=1))
+
+        # AdamW as torch.optim.AdamW(lr, weight_decay; betas 0.9, 0.999, eps 1e-8), per member: a member takes a
+        # step only when its batch holds rows and it has not stopped early
+        beta1, beta2, eps, wd = 0.9, 0.999, 1e-8, float(h["weight_decay"])
+        m1 = torch.zeros_like(flat)
+        m2 = torch.zeros_like(flat)
+        steps = torch.zeros(S, dtype=torch.float64)
+        epochs = int(h["max_epochs"])
+        best = [float("inf")] * S
+        state: list[torch.Tensor | None] = [None] * S
+        bad, done, last_ep = [0] * S, [False] * S, [0] * S
+        ar = torch.arange(S, device=dev)[:, None]
+        for ep in range(epochs):
+            lr = h["lr"] * (1 + math.cos(math.pi * ep / epochs)) / 2  # CosineAnnealingLR(T_max = max_epochs)
+            perms = [torch.randperm(n[s], generator=gens[s]) for s in range(S)]
+            live = [not d for d in done]
+            nsteps = max(-(-n[s] // bs) for s in range(S) if live[s])
+            P = torch.zeros((S, nsteps * bs), dtype=torch.long)
+            M = torch.zeros((S, nsteps * bs), dtype=torch.bool)
+            for s in range(S):
+                if live[s]:
+                    P[s, : n[s]] = perms[s]
+                    M[s, : n[s]] = True
+            cnt = M.view(S, nsteps, bs).sum(2).T  # [nsteps, S] rows of each member's batch (CPU: no device sync)
+            act = cnt > 0
+            st = (steps[None, :] + act.double().cumsum(0)).clamp(min=1)  # each member's AdamW step count
+            steps += act.double().sum(0)
+            bc1 = (1 - beta1 ** st).float().to(dev)
+            bc2s = (1 - beta2 ** st).sqrt().float().to(dev)
+            P, M, cnt_d, act_d = P.to(dev), M.to(dev), cnt.float().to(dev), act.to(dev)
+            # the members still training (the others stopped early: no rows, no step, not computed)
+            sub = None if all(live) else torch.tensor([s for s in range(S) if live[s]], device=dev)
+            if sub is not None:
+                P, M, cnt_d = P[sub], M[sub], cnt_d[:, sub]
+                a_l, b_l, ar_l = a[sub], b[sub], ar[: len(sub)]
+            for i in range(nsteps):
+                if not bool(act[i].any()):
+                    continue
+                j, msk = P[:, i * bs : (i + 1) * bs], M[:, i * bs : (i + 1) * bs]
+                if sub is None:
+                    x, y, W = a[ar, j], b[ar, j], unpack(flat)
+                else:
+                    x, y, W = a_l[ar_l, j], b_l[ar_l, j], [t[sub] for t in unpack(flat)]
+                loss = member_loss(forward(x, W), y, msk.float()[..., None], cnt_d[i]).sum()
+                (g,) = torch.autograd.grad(loss, flat)
+                with torch.no_grad():
+                    am = act_d[i].view(S, 1)
+                    nm1 = torch.where(am, m1.lerp(g, 1 - beta1), m1)
+                    nm2 = torch.where(am, m2 * beta2 + (1 - beta2) * g * g, m2)
+                    m1.copy_(nm1)
+                    m2.copy_(nm2)
+                    upd = flat * (1 - lr * wd) - (lr / bc1[i].view(S, 1)) * nm1 / (nm2.sqrt() / bc2s[i].view(S, 1) + eps)
+                    flat.copy_(torch.where(am, upd, flat))
+            with torch.no_grad():
+                vl = (member_loss(forward(av, unpack(flat)), bv, vmask, nv.to(av.dtype))).double().cpu().numpy()
+            for s in range(S):
+                if done[s]:
+                    continue
+                last_ep[s] = ep
+                v = float(vl[s])
+                if v < best[s]:
+                    best[s], bad[s] = v, 0
+                    state[s] = flat[s].detach().clone()
+                else:
+                    bad[s] += 1
+                    if bad[s] > int(h["patience"]):
+                        done[s] = True
+            if all(done):
+                break
+        self.params_ = [t.contiguous() for t in unpack(torch.stack(state).cpu())]
+        self.history_ = [{"epochs": last_ep[s] + 1, "best_valid_loss": best[s], "n_rows": n[s], "device": str(dev)}
+                         for s in range(S)]
+        return self
+
+    def fit_sequential(self, R: list[np.ndarray], F: list[np.ndarray], seed: int = 0) -> ElementMLP:
+        """The reference: the members trained one after another as separate nn.Sequential nets (session 9's fit).
+        `fit` trains them as one batched network with the same draws; the two agree up to float summation order."""
+        h = self.h
+        E = [invert_strain(r, self.rest_ohm, self.beta) for r in R]
+        self.scale_ = float(np.concatenate(E).std()) or 1.0
+        self.nets, self.history_, self.params_ = [], [], None
         rel = float(h["rel_floor"])
 
         def loss(p: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
@@ -181,11 +333,22 @@ class ElementMLP:
             self.history_.append({"epochs": ep + 1, "best_valid_loss": best, "n_rows": len(a)})
         return self
 
+    @staticmethod
+    def _forward(x: torch.Tensor, P: list[torch.Tensor]) -> torch.Tensor:
+        """The members' 2 x hidden GELU MLPs at once: x [S, N, n_in], P = (W1, b1, W2, b2, W3, b3) stacked [S, ...]."""
+        z = torch.nn.functional.gelu(torch.baddbmm(P[1], x, P[0]))
+        z = torch.nn.functional.gelu(torch.baddbmm(P[3], z, P[2]))
+        return torch.baddbmm(P[5], z, P[4])
+
     @torch.inference_mode()
     def predict(self, R: np.ndarray) -> np.ndarray:
-        if not self.nets:
+        if not self.nets and self.params_ is None:
             raise RuntimeError("ElementMLP: not fitted")
         R = np.asarray(R, np.float64)
         A = torch.from_numpy(self._features(invert_strain(R, self.rest_ohm, self.beta)).astype(np.float32))
-        p = np.mean([net(A).double().numpy() for net in self.nets], 0)
+        if self.params_ is not None:  # the batched members (fit): [S, N, 3], averaged in float64
+            S = self.params_[0].shape[0]
+            p = self._forward(A[None].expand(S, -1, -1), self.params_).double().mean(0).numpy()
+        else:
+            p = np.mean([net(A).double().numpy() for net in self.nets], 0)
         return p.reshape(R.shape)

@@ -74,13 +74,14 @@ def kernel_gamma(kernel: str, spread: float) -> float:
     return math.log(2.0) / spread**2 if kernel == "matlab" else 0.5 / spread**2
 
 
-def kernel_phi(kernel: str, spread: float, d2: np.ndarray, d: np.ndarray | None = None) -> np.ndarray:
+def kernel_phi(kernel: str, spread: float, d2: np.ndarray, d: np.ndarray | None = None,
+               out: np.ndarray | None = None) -> np.ndarray:
     """Hidden-unit outputs from squared distances d2 under `kernel` (see the module docstring). d: sqrt(d2), when
-    the caller reuses it over many spreads ("eq9" only; same bits)."""
+    the caller reuses it over many spreads ("eq9" only; same bits). out: where to write them (no temporaries)."""
     g = kernel_gamma(kernel, spread)
-    if kernel == "eq9":
-        return np.exp(-g * (np.sqrt(d2) if d is None else d))
-    return np.exp(-g * d2)
+    x = (np.sqrt(d2) if d is None else d) if kernel == "eq9" else d2
+    out = np.multiply(x, -g, out=out)
+    return np.exp(out, out=out)
 
 
 def ridge_weights(H: np.ndarray, Y: np.ndarray, delta: float = 1e-3) -> np.ndarray:
@@ -127,15 +128,19 @@ def sweep_predict(d2_train: np.ndarray, Y: np.ndarray, d2_test: np.ndarray, kern
     d_tr = np.sqrt(d2_train) if kernel == "eq9" else None
     d_te = np.sqrt(d2_test) if kernel == "eq9" else None
     out: dict[str, dict[float, np.ndarray]] = {k: {} for k in solvers}
+    nb = int(bias and "rls" in solvers)  # the constant unit is the buffers' last column, written once
+    Hb = np.empty((d2_train.shape[0], d2_train.shape[1] + nb))
+    Htb = np.empty((d2_test.shape[0], d2_test.shape[1] + nb))
+    if nb:
+        Hb[:, -1] = 1.0
+        Htb[:, -1] = 1.0
+    K = d2_train.shape[1]
     for s in spreads:
-        H, Ht = kernel_phi(kernel, s, d2_train, d_tr), kernel_phi(kernel, s, d2_test, d_te)
+        H, Ht = kernel_phi(kernel, s, d2_train, d_tr, Hb[:, :K]), kernel_phi(kernel, s, d2_test, d_te, Htb[:, :K])
         if "exact" in solvers:
             out["exact"][s] = Ht @ exact_weights(H, Y)
         if "rls" in solvers:
-            if bias:
-                H = np.concatenate([H, np.ones((len(H), 1))], 1)
-                Ht = np.concatenate([Ht, np.ones((len(Ht), 1))], 1)
-            out["rls"][s] = Ht @ ridge_weights(H, Y, delta)
+            out["rls"][s] = Htb @ ridge_weights(Hb, Y, delta) if nb else Ht @ ridge_weights(H, Y, delta)
     return out
 
 
