@@ -2,18 +2,7 @@
 # The device calls of session 10 (issue 16: ntype's taxel fields and element loads on the device; fabric's
 # streamed first batch A/B), run from the worktree copy on the H100 machine with the packages unpacked in
 # /root/site: `bash bench/h100_s10.sh I|A|F|G|M`. Logs and result files go to $OUT as one tar (at most 8 files come back).
-export PYTHONPATH=/root/site:. PYTHONUNBUFFERED=1 OMP_NUM_THREADS=4
-set -o pipefail
-nvidia-smi --query-gpu=name,driver_version,clocks.sm,clocks.mem --format=csv,noheader
-mkdir -p $OUT/r/logs
-cli() {  # family, episodes, tag: the plain CLI, then MuJoCo Warp stepping the same worlds alone (merged into its file)
-    python3 bench/bench_user_cli.py --families $1 --episodes $2 --tag $3 --timeout 280 2>&1 | tee $OUT/r/logs/user-cli-$3.log | tail -4
-    if [ "$4" != "noalone" ]; then
-        timeout 200 python3 bench/bench_mjw_alone.py --family $1 --episodes $2 --tag $3 2>&1 | grep -v "^Module" | tee -a $OUT/r/logs/user-cli-$3.log | tail -3
-    fi
-    cp bench/results/user-cli-$3.json $OUT/r/
-}
-pack() { tar czf $OUT/results-$1.tgz -C $OUT/r . ; rm -rf $OUT/r; }
+source "$(dirname "$0")/h100_lib.sh"  # environment, cli (plain CLI + MuJoCo Warp alone), pack
 case "$1" in
 I)  # a fresh machine: pytest -m gpu (compiles MuJoCo Warp's kernels for every family's scene, so the CLI runs
     # after are warm; checks the new ntype device path against the host path on CUDA)

@@ -2,18 +2,7 @@
 # The device calls of session 9 (issue 16: velostat's sensor stage on the device, fabric's first batch streamed
 # while it steps), run from the worktree copy on the H100 machine with the packages unpacked in /root/site:
 # `bash bench/h100_s9.sh A|B|C|F|M|N|S|W|X`. Logs and result files go to $OUT as one tar (at most 8 files come back).
-export PYTHONPATH=/root/site:. PYTHONUNBUFFERED=1 OMP_NUM_THREADS=4
-set -o pipefail
-nvidia-smi --query-gpu=name,driver_version,clocks.sm,clocks.mem --format=csv,noheader
-mkdir -p $OUT/r/logs
-cli() {  # family, episodes, tag: the plain CLI, then MuJoCo Warp stepping the same worlds alone (merged into its file)
-    python3 bench/bench_user_cli.py --families $1 --episodes $2 --tag $3 --timeout 280 2>&1 | tee $OUT/r/logs/user-cli-$3.log | tail -4
-    if [ "$4" != "noalone" ]; then
-        timeout 200 python3 bench/bench_mjw_alone.py --family $1 --episodes $2 --tag $3 2>&1 | grep -v "^Module" | tee -a $OUT/r/logs/user-cli-$3.log | tail -3
-    fi
-    cp bench/results/user-cli-$3.json $OUT/r/
-}
-pack() { tar czf $OUT/results-$1.tgz -C $OUT/r . ; rm -rf $OUT/r; }
+source "$(dirname "$0")/h100_lib.sh"  # environment, cli (plain CLI + MuJoCo Warp alone), pack
 case "$1" in
 A)  # pytest -m gpu on the final code (compiles MuJoCo Warp's kernels for every family's scene: the CLI runs after
     # are warm), then the plain CLI of velostat (its sensor stage on the device now) with MuJoCo Warp alone
