@@ -101,7 +101,7 @@ def main() -> None:
                   "corr_with_Fx_Fy_Fz": [float(np.corrcoef(Xall[..., i].ravel(), Yall[..., k].ravel())[0, 1]) for k in range(3)]}
               for i, c in enumerate(cols)}
     res = {"experiment": "ntype", "bench": "linear maps on the paper's inputs", "mode": a.mode, "seed": a.seed,
-           "samples": int(len(Xall)), "folds": md.folds, "min_abs_ref_n": md.min_abs_ref,
+           "samples": len(Xall), "folds": md.folds, "min_abs_ref_n": md.min_abs_ref,
            "dataset": dataset_fingerprint(data), "inputs": inputs,
            "linear_E_percent": {k: {c: (float(np.mean([f[c] for f in v])) if v[0][c] is not None else None)
                                     for c in NT.COMPONENTS} for k, v in errs.items()},

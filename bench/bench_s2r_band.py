@@ -49,7 +49,7 @@ def held_levels(run: Path) -> dict:
     err = fj["error"]["level_run_sd"]
     return {
         "recording": fj["recording"], "fit_runs": fj["fit_runs"], "held_out_runs": [r.key for r in test],
-        "n_presses": int(len(rel)), "band_half_width_log": h, "band_sd_log": sd_band,
+        "n_presses": len(rel), "band_half_width_log": h, "band_sd_log": sd_band,
         "center_offset_log": off, "center_offset_in_band_sd": off / sd_band,
         "held_out_sd_log": sd, "held_out_sd_over_band_sd": sd / sd_band,
         "held_out_within_run_sd_log": float(np.sqrt(np.sum(within ** 2) / dof)) if len(rel) > len(means) else None,

@@ -24,7 +24,11 @@ import numpy as np
 
 import simulate.characterize.velostat as CV
 from scenes import load_scene
-from simulate.protocols.compression_tester import knots_staircase, site_xy_m, unit_centres_m
+from simulate.protocols.compression_tester import (
+    knots_staircase,
+    site_xy_m,
+    unit_centres_m,
+)
 
 LEVELS = np.arange(1.0, 16.0)
 HOLD_S = 5.0

@@ -50,7 +50,7 @@ def cmd_run(a: argparse.Namespace) -> None:
     tcn_dev = resolve_device(a.tcn_device)
     info = {"seed": a.seed, "mode": a.mode, "workers": a.workers, "tcn_workers": a.tcn_workers,
             "tcn_device": tcn_dev, "bp_device": "cpu",
-            "overrides": a.set, "started_utc": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+            "overrides": a.set, "started_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
             "commit": _commit()}
     (out / "run.json").write_text(json.dumps(info, indent=1))
 
@@ -104,7 +104,7 @@ def cmd_collect(a: argparse.Namespace) -> None:
                 "wall_s / cpu_s = this seed's process from its start, data generation included"
                 + (f". PARTIAL: {part}" if part else ""))
         m["machine"] = {"host_platform": platform.platform(), "cpus": os.cpu_count(), "processor": platform.processor(),
-                        "gpu": gpu, "git_commit": info.get("commit", a.commit), "date_utc": dt.datetime.now(dt.timezone.utc).date().isoformat(),
+                        "gpu": gpu, "git_commit": info.get("commit", a.commit), "date_utc": dt.datetime.now(dt.UTC).date().isoformat(),
                         "wall_s": wall, "cpu_s": info.get("cpu_s"), "train_device_tcn": info.get("tcn_device"),
                         "train_device_bp": "cpu", "note": note}
         s = int(m.get("seed", 0))

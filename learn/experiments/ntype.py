@@ -933,7 +933,7 @@ def targets_table(runs: dict[str, dict[str, Any]]) -> str:
     the measured value and met / not met: Table 1's best spread inside the 1-10 sweep, window 5 better than no
     window on all three components, window 5's errors within 3x of Table 3's, ours (element MLP) better than the
     best RBF on all three; and the run's cost (quick: <= 10 min)."""
-    yes = lambda ok: "met" if ok else "**not met**"  # noqa: E731
+    yes = lambda ok: "met" if ok else "**not met**"
     comp = COMPONENTS
 
     def e3(d: dict[str, Any]) -> str:

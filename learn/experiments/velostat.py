@@ -583,10 +583,9 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
     in metrics["run"]. The numbers depend on neither but tcn_device (CUDA vs CPU float rounding)."""
     import torch
 
-    from learn.train import current_device, resolve_device, training_device
-
     from learn.checkpoint import save_checkpoint
     from learn.models.velostat import CreepTracker, search_hidden
+    from learn.train import current_device, resolve_device, training_device
     from sensors.warp_setup import init_warp
     from simulate.generation.run import generate
     from simulate.protocols.compression_tester import unit_centres_m
