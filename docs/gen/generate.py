@@ -912,7 +912,7 @@ def _ntype_linear() -> list[str]:
     return ["### Affine maps on the paper's inputs (why Table 1's optimum runs to the sweep's edge)\n",
             "The paper's inputs as the experiment builds them (eq. 13 per column type onto R_x, R_y -> [32, 50], "
             "R_z -> [16, 25]) and affine least-squares maps on them, same folds and eq. 14 (E_Fx / E_Fy / E_Fz %, "
-            "`bench/bench_ntype_linear.py`; " + ", ".join(f"[`{p.name}`]({rel(p)})" for p in files) + "):\n",
+            "`bench/bench_ntype_linear.py`; " + ", ".join(f"`{rel(p)}`" for p in files) + "):\n",
             table(["map"] + names, rows), "", "Inputs: " + " | ".join(ins) + "\n"]
 
 
