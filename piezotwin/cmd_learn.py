@@ -6,6 +6,8 @@ cli.py imports this module at its bottom.
 
 from __future__ import annotations
 
+import inspect
+import os
 from pathlib import Path
 from typing import Annotated
 
@@ -27,6 +29,10 @@ def experiment(
     train_device: Annotated[str, typer.Option(
         "--train-device", help="Where the gradient-trained nets train: cpu (default: bit-reproducible), cuda, cuda:N "
         "or auto (CUDA when torch sees one). Closed-form and Levenberg-Marquardt fits stay on the CPU.")] = "cpu",
+    workers: Annotated[str, typer.Option(
+        "--workers", help="CPU processes for the parts that run side by side (ntype: its two tasks; velostat: each BP "
+        "hidden-node search), each on one thread: auto (the machine's cores) or a count; 1 runs in this process. "
+        "The same numbers at any count >= 2.")] = "auto",
 ) -> None:
     """Generate (or reuse) data, train the paper's compensators and ours, write report.md + metrics.json + plots."""
     from learn.experiments import EXPERIMENTS, get_experiment
@@ -40,6 +46,12 @@ def experiment(
         resolve_device(train_device)
     except ValueError as exc:
         fail(f"--train-device: {exc}")
+    if workers == "auto":
+        n_workers = os.cpu_count() or 1
+    elif workers.isdigit() and int(workers) >= 1:
+        n_workers = int(workers)
+    else:
+        fail(f"--workers must be auto or a whole number >= 1 (got '{workers}')")
     run_mode = mode or ("quick" if quick else "full")
     sel = [m.strip() for m in models.split(",") if m.strip()] if models else None
     for k in keys:
@@ -55,8 +67,9 @@ def experiment(
         dest = dest or Path("runs") / (f"experiment-{k}" + ("" if run_mode == "full" else f"-{run_mode}"))
         _check_writable(dest)
         try:
+            extra = {"workers": n_workers} if "workers" in inspect.signature(exp.run).parameters else {}
             with training_device(train_device):
                 exp.run(dest, mode=run_mode, data_dir=data, overrides=list(set_ or []), models=sel, seed=seed,
-                        progress=err.is_terminal, log=lambda s: console.print(s, highlight=False))
+                        progress=err.is_terminal, log=lambda s: console.print(s, highlight=False), **extra)
         except ValueError as exc:
             fail(str(exc))

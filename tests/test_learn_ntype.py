@@ -516,3 +516,19 @@ def test_targets_table_met_and_not_met():
     assert rows["window 5 within 3x of Table 3 (<= 6.39 / 8.13 / 4.08 %)"][0] == "3.00 / 3.00 / 3.50 % (met)"
     assert rows["ours (element MLP) better than the best RBF on all three"] == ["2.00 / 2.00 / 3.60 % (**not met**)", "not run"]
     assert "ours on cuda" in rows["cost"][0]
+
+
+def test_tasks_in_processes_give_the_serial_numbers(tmp_path):
+    """`run(workers=2)` (the CLI's default on a multi-core machine: the two tasks in spawned processes, one thread
+    each) gives the serial run's element-MLP numbers on both tasks (torch on one thread in both; same data)."""
+    from learn.experiments import ntype as NT
+
+    kw = dict(mode="tiny", models=["elem_mlp"], progress=False, log=lambda s: None)
+    serial = NT.run(tmp_path / "serial", data_dir=tmp_path / "data", workers=1, **kw)
+    side = NT.run(tmp_path / "side", data_dir=tmp_path / "data", workers=2, **kw)
+    for a, b in ((serial, side), (serial["tasks"]["press_stroke"], side["tasks"]["press_stroke"])):
+        assert a["task"] == b["task"]
+        ea, eb = a["models"]["elem_mlp"], b["models"]["elem_mlp"]
+        errs = [k for k in ea if k.startswith(("E_", "MAE_"))]
+        assert errs and all(ea[k] == eb[k] for k in errs)
+    assert (tmp_path / "side" / "press_stroke").is_dir() and (tmp_path / "side" / "metrics.json").is_file()

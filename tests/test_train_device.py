@@ -79,6 +79,13 @@ def test_cli_train_device_cuda_without_cuda_exits_2(tmp_path):
     assert not (tmp_path / "x").exists()  # nothing made before the check
 
 
+@pytest.mark.parametrize("bad", ["0", "-1", "two", "1.5", ""])
+def test_cli_workers_names_the_allowed_values(tmp_path, bad):
+    r = CliRunner().invoke(app, ["experiment", "ntype", "--quick", "-o", str(tmp_path / "x"), "--workers", bad])
+    assert r.exit_code == 2 and "--workers must be auto or a whole number >= 1" in r.output
+    assert not (tmp_path / "x").exists()  # nothing made before the check
+
+
 @pytest.mark.gpu
 @pytest.mark.parametrize("kind", ["lstm", "tcn", "mlp"])
 def test_cuda_training_learns_as_on_cpu_and_returns_to_cpu(kind):

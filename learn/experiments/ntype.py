@@ -282,37 +282,89 @@ def run(
     seed: int = 0,
     progress: bool = True,
     log: Callable[[str], None] = print,
+    workers: int = 1,
 ) -> dict[str, Any]:
     """Generate (or reuse) the data of each task (the paper's experiment, then our harder one), run the k-fold
-    cross-validation of every model on each, write one report with the tasks side by side."""
+    cross-validation of every model on each, write one report with the tasks side by side. workers > 1: the tasks
+    run side by side in that many spawned processes, each on one thread (OMP / MKL / OpenBLAS / torch), so their
+    numbers equal a serial run under OMP_NUM_THREADS=1; a serial run with a multithreaded BLAS differs from it in
+    summation order only (~1e-9 relative)."""
     md = select_mode(MODES, mode, models)
-    want = set(models or MODELS) | {"mean"}
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    import torch
+    data_root = Path(data_dir) if data_dir else out / "data"
+    jobs = {task: {"mode": mode, "models": models, "overrides": list(overrides or []), "seed": seed, "task": task,
+                   "where": out if i == 0 else out / task, "data_root": data_root}
+            for i, task in enumerate(md.tasks)}
+    if workers > 1 and len(jobs) > 1:
+        runs = _tasks_in_processes(jobs, min(workers, len(jobs)), log)
+    else:
+        import torch
 
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)  # small convs: one thread is faster than two contended ones
-    runs: dict[str, dict[str, Any]] = {}
-    try:
-        for i, task in enumerate(md.tasks):
-            cfg = scene(md, list(overrides or []), seed, task)
-            where = out if i == 0 else out / task
-            where.mkdir(parents=True, exist_ok=True)
-            data = make_data((Path(data_dir) if data_dir else out / "data") / task, cfg, log)
-            seqs = load_sequences(data, INPUTS, TARGETS)
-            fp = dataset_fingerprint(data)
-            folds = kfold_episodes(len(seqs), md.folds, seed)
-            log(f"task {task}: {len(seqs)} episodes, {sum(len(q) for q in seqs)} samples")
-            runs[task] = _run(md, mode, where, data, seqs, fp, folds, want, seed, progress, log, task)
-    finally:
-        torch.set_num_threads(threads)
+        threads = torch.get_num_threads()
+        torch.set_num_threads(1)  # small convs: one thread is faster than two contended ones
+        try:
+            runs = {task: _task(**kw, progress=progress, log=log) for task, kw in jobs.items()}
+        finally:
+            torch.set_num_threads(threads)
     first = md.tasks[0]
     metrics = {**runs[first], "tasks": {t: runs[t] for t in md.tasks[1:]}}
     (out / "metrics.json").write_text(dumps(metrics))
     (out / "report.md").write_text(report(metrics))
     log(f"wrote {out / 'report.md'} and {out / 'metrics.json'}")
     return metrics
+
+
+def _task(mode: str, models: list[str] | None, overrides: list[str], seed: int, task: str, where: Path,
+          data_root: Path, progress: bool, log: Callable[[str], None]) -> dict[str, Any]:
+    """One task of `run`: its data (made or reused under data_root / task), folds and every model's cross-validation."""
+    md = select_mode(MODES, mode, models)
+    want = set(models or MODELS) | {"mean"}
+    cfg = scene(md, overrides, seed, task)
+    where.mkdir(parents=True, exist_ok=True)
+    data = make_data(data_root / task, cfg, log)
+    seqs = load_sequences(data, INPUTS, TARGETS)
+    fp = dataset_fingerprint(data)
+    folds = kfold_episodes(len(seqs), md.folds, seed)
+    log(f"task {task}: {len(seqs)} episodes, {sum(len(q) for q in seqs)} samples")
+    return _run(md, mode, where, data, seqs, fp, folds, want, seed, progress, log, task)
+
+
+_THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMEXPR_NUM_THREADS")
+
+
+def _task_in_process(kw: dict[str, Any]) -> dict[str, Any]:
+    """`_task` in a spawned worker: one torch thread, the parent's training device, log lines printed."""
+    import torch
+
+    from learn.train import training_device
+
+    torch.set_num_threads(1)
+    with training_device(kw.pop("device")):
+        return _task(**kw, progress=False, log=print)
+
+
+def _tasks_in_processes(jobs: dict[str, dict[str, Any]], workers: int, log: Callable[[str], None]) -> dict[str, Any]:
+    """Every task's `_task` in spawned processes (the BLAS thread variables set to 1 while they start)."""
+    import multiprocessing as mp
+    import os
+    from concurrent.futures import ProcessPoolExecutor
+
+    from learn.train import current_device
+
+    saved = {k: os.environ.get(k) for k in _THREAD_VARS}
+    os.environ.update(dict.fromkeys(_THREAD_VARS, "1"))
+    try:
+        log(f"tasks {', '.join(jobs)} side by side in {workers} processes (one thread each)")
+        with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as pool:
+            futures = {t: pool.submit(_task_in_process, {**kw, "device": current_device()}) for t, kw in jobs.items()}
+            return {t: f.result() for t, f in futures.items()}
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
 
 
 def _run(md: Mode, mode: str, out: Path, data: Path, seqs: list, fp: dict, folds: list[np.ndarray], want: set[str],
