@@ -100,7 +100,7 @@ def test_round_trip(tmp_path, compression):
             assert ds.compression is None
         else:
             assert ds.compression == compression and ds.shuffle
-            assert ds.chunks[1:] == (6, 6, 3) and ds.chunks[0] <= 256
+            assert ds.chunks == ds.shape  # 10 kB: the whole episode in one chunk
         summ = r.summary()
     assert summ["n_episodes"] == 3 and summ["channels"]["force"]["units"] == "N"
     assert summ["duration_s"] == pytest.approx((258 + 259 + 267) / 100.0)
@@ -114,9 +114,10 @@ def test_round_trip(tmp_path, compression):
 
 
 def test_chunk_len_divides_when_possible():
-    assert rc._chunk_len(3000, 900) == 250  # divides 3000
-    assert rc._chunk_len(100, 900) == 100
-    assert rc._chunk_len(257, 900) <= 256
+    assert rc._chunk_len(3000, 900) == 1000  # 2.7 MB: <= 1 MiB (1165 frames), the longest that divides 3000
+    assert rc._chunk_len(100, 900) == 100  # fits: the whole series
+    assert rc._chunk_len(5142, 4) == 5142  # fabric_1's narrow frames: one chunk per episode, not 21
+    assert rc._chunk_len(3001, 900) * 900 <= 1 << 20  # no divisor near the cap: still <= 1 MiB
     assert rc._chunk_len(10_000, 4_000_000) == 1  # huge frames: one frame per chunk
 
 

@@ -27,7 +27,7 @@ def _write(path, compression: str) -> np.ndarray:
     return data
 
 
-def _flip_byte_in_chunk(path, name: str = "episodes/ep-000000/force", chunk: int = 1) -> None:
+def _flip_byte_in_chunk(path, name: str = "episodes/ep-000000/force", chunk: int = 0) -> None:
     with h5py.File(path, "r") as f:
         info = f[name].id.get_chunk_info(chunk)
     with open(path, "r+b") as fh:

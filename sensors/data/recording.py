@@ -10,10 +10,17 @@ Layout (see DESIGN.md section 4)::
     /episodes/<id>         attrs: seed, frequency_hz, n_samples, ... (episode_attrs)
     /episodes/<id>/<name>  one dataset per channel; attrs units, dim_names, description
 
-Time series are chunked along time in blocks of whole frames (a length that divides T where one
-is close to the target), compressed with lzf + shuffle by default (gzip level 1 + shuffle, Blosc2 zstd / lz4 level 1 + shuffle, or none).
-Every chunked dataset carries HDF5's Fletcher-32 checksum per chunk: damaged data fails to read
-(RecordingError naming the file) instead of reading back as wrong numbers.
+Time series are chunked along time in blocks of whole frames of at most 1 MiB (the whole episode where it fits;
+else a length that divides T where one is close to the cap), compressed with lzf + shuffle by default (gzip level 1
++ shuffle, Blosc2 zstd / lz4 level 1 + shuffle, or none). Every chunked dataset carries HDF5's Fletcher-32
+checksum per chunk: damaged data fails to read (RecordingError naming the file) instead of reading back as wrong
+numbers.
+
+Storage (not schema): files are written with HDF5's 1.10 object formats (``libver=("v110", "latest")``: checksummed
+object headers, a chunk index without a B-tree for one-chunk datasets), readable by HDF5 >= 1.10 (any h5py >= 2.8);
+files written before (HDF5's earliest formats) read the same. Blosc2 runs one thread per writer (``BLOSC_NTHREADS=1``
+unless the environment sets it): the writers are processes, one per core, and Blosc2's default threads cost more per
+chunk than they save (bench/results/writer-episode-cpu.json).
 
 Attribute values: numbers, strings, bools and numeric arrays are stored as HDF5 attributes; dicts,
 lists of strings and other JSON-able values are stored as JSON strings and the attribute name is
@@ -59,8 +66,11 @@ FORMAT_VERSION = 1
 
 _JSON_ATTRS = "_json_attrs"
 _NAME_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]*$")
-_CHUNK_FRAMES = 256  # target chunk length along time
-_CHUNK_MAX_BYTES = 1 << 20  # cap on one chunk, for very wide frames
+_CHUNK_MAX_BYTES = 1 << 20  # cap on one chunk (HDF5's default chunk cache per dataset); the whole episode where it fits
+# HDF5 object formats of the files written: 1.10's (v2 object headers with checksums, single-chunk / fixed-array
+# chunk indexes, compact link storage) halve the bytes of a short episode against the earliest formats (ntype's
+# 20-sample episodes: 84 -> 43 kB, bench/results/writer-episode-cpu.json) and cut its writes by ~20 %
+_LIBVER = ("v110", "latest")
 _COMPRESSIONS = ("lzf", "gzip", "none", "zstd", "lz4")
 # "zstd" / "lz4": Blosc2 (level 1, byte shuffle) through hdf5plugin; its filters register on import, so a
 # reader needs hdf5plugin too (imported here when installed)
@@ -68,6 +78,10 @@ try:
     import hdf5plugin as _hdf5plugin
 except ImportError:  # pragma: no cover - a dependency; only the Blosc2 options need it
     _hdf5plugin = None
+# Blosc2 reads BLOSC_NTHREADS at every chunk and by default starts several threads per chunk: 0.84-1.25 ms per
+# 147 kB chunk against 0.29 ms with one thread (this 2-core host; more threads, and more writer processes beside
+# them, on a larger one). The writers (and readers) are processes: one thread each, unless the user set it
+os.environ.setdefault("BLOSC_NTHREADS", "1")
 
 
 def _blosc2(cname: str) -> dict[str, Any]:
@@ -344,8 +358,9 @@ def _check_name(name: Any, what: str) -> str:
 
 
 def _chunk_len(n_time: int, frame_bytes: int) -> int:
-    """Frames per chunk: <= 256 and <= 1 MiB, preferring a length that divides ``n_time``."""
-    target = max(1, min(n_time, _CHUNK_FRAMES, _CHUNK_MAX_BYTES // max(1, frame_bytes)))
+    """Frames per chunk: the whole series where it fits in 1 MiB, else <= 1 MiB preferring a length that divides
+    ``n_time`` (a fixed cost per chunk: fabric_1's narrow frames made 294 chunks per episode at <= 256 frames)."""
+    target = max(1, min(n_time, _CHUNK_MAX_BYTES // max(1, frame_bytes)))
     for c in range(target, max(1, target // 2) - 1, -1):
         if n_time % c == 0:
             return c
@@ -428,7 +443,7 @@ class _Template:
     def __init__(self, channels: Mapping[str, Channel], encoded: Mapping[str, tuple[Any, bool]],
                  arrays: Mapping[str, np.ndarray], compression: str, checksum: bool = True):
         self.file = h5py.File(f"piezotwin-template-{next(_template_names)}", "w", driver="core",
-                              backing_store=False)
+                              backing_store=False, libver=_LIBVER)
         try:
             g = self.file.create_group("ep")
             _write_attrs(g, encoded)
@@ -530,7 +545,7 @@ class RecordingWriter:
     def __enter__(self) -> RecordingWriter:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         try:
-            self._f = h5py.File(self.tmp, "w", track_order=True)
+            self._f = h5py.File(self.tmp, "w", track_order=True, libver=_LIBVER)
             _set_attrs(self._f, self._root, "root")
             _set_attrs(self._f.create_group("sensor"), self._sensor_attrs, "sensor")
             if self._mjcf is not None:

@@ -1,0 +1,207 @@
+"""The shard writer's cost per episode, split by part, per family's default preset and compression, at two revisions.
+
+    python bench/bench_writer_episode.py [--base 344a0a0] [--families cnt_pdms,fabric_1,velostat,ntype]
+                                         [--codecs lzf,lz4,zstd,none] [--repeats 3] [--tag cpu]
+
+Episodes of each preset's default protocol and record (C MuJoCo, numpy sensor chain; cnt_pdms one episode per
+frequency of its preset, so the mean length is the preset's) are simulated once and cached (``--cache``). Then one
+shard of the preset's ``episodes_per_shard`` episodes (the simulated ones cycled under new ids and global indices)
+is written as a shard writer writes it (`RecordingWriter.add_episode`, then the manifest entry), with each
+compression, in a fresh process per (revision, family, compression, repeat), interleaved; best of ``repeats``.
+``--base REV`` runs the same at an earlier commit (a temporary `git worktree`; its default Blosc2 threads, i.e. the
+environment as given) beside this checkout. Per episode, split by part:
+
+- "objects, attributes": copying the episode's cached group (`_Template`: group, datasets, attributes) and writing
+  the attributes that changed;
+- "data": writing the channels' arrays (chunking, shuffle + compression, Fletcher-32, the writes to the file);
+- "digest": the episode's part of the content hash (`_episode_digest`: SHA-256 over its data and attributes);
+- "other": the rest of `add_episode` (checks, attribute encoding, the template lookup);
+- "close": the shard's content hash, closing the file (HDF5 metadata), fsync and rename (per episode);
+- "manifest": the manifest entry the writer makes (`shard_entry`: SHA-256 of the file's bytes; per episode).
+
+Also bytes per episode on disk against the channels' raw bytes. Writes bench/results/writer-episode-<tag>.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pickle
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+CODECS = ("lzf", "lz4", "zstd", "none")
+PARTS = ("objects, attributes", "data", "digest", "other", "close", "manifest")
+
+
+def episodes_of(fam: str, cache: Path) -> tuple[list[tuple[str, dict, dict]], int]:
+    """((id, channels, attrs) of the cached episodes of a family's preset, its episodes_per_shard); simulated and
+    cached if absent."""
+    path = cache / f"{fam}.pkl"
+    if path.exists():
+        return pickle.loads(path.read_bytes())
+    from scenes import load_scene
+    from sensors.data.manifest import episode_seed
+    from sensors.registry import make_sensor
+    from simulate.generation.run import _episode_attrs, simulate_episodes
+
+    cfg = load_scene(fam, [])
+    freqs = cfg.protocol.frequencies_hz if cfg.protocol.kind == "sinusoid" else [None]
+    eps = []
+    for k, f in enumerate(freqs):
+        c = load_scene(fam, [f"protocol.frequencies_hz=[{f}]"] if f is not None else [])
+        seed = episode_seed(0, k)
+        r = simulate_episodes(c, [seed], [f"ep-{k:06d}"], make_sensor(c, "numpy", "cpu"), indices=[k])[0]
+        eps.append((r.ep_id, r.channels, _episode_attrs(r, k)))
+    out = (eps, cfg.generation.episodes_per_shard)
+    cache.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(pickle.dumps(out))
+    return out
+
+
+def write_shard_timed(path: Path, eps: list, n: int, codec: str) -> dict[str, float]:
+    """Write n episodes (eps cycled) into one shard as a shard writer does, timing each part (seconds)."""
+    from sensors.data import recording as R
+    from sensors.data.manifest import shard_entry
+
+    parts = dict.fromkeys(PARTS, 0.0)
+    orig_write, orig_digest = R._Template.write, R._episode_digest
+
+    def timed_write(self, dest, ep_id, channels, arrays):  # `_Template.write`, objects and data timed apart
+        t0 = time.perf_counter()
+        R.h5o.copy(self.file.id, b"ep", dest.id, ep_id.encode())
+        gid = R.h5g.open(dest.id, ep_id.encode())
+        for key, arr in arrays.items():
+            if R._value_key(arr) != self.values[key]:
+                R.h5a.open(gid, key.encode()).write(arr, mtype=self.mtypes[key])
+        t1 = time.perf_counter()
+        for name, ch in channels.items():
+            R.h5d.open(gid, name.encode()).write(R.h5s.ALL, R.h5s.ALL, R.np.asarray(ch.data, order="C"))
+        t2 = time.perf_counter()
+        parts["objects, attributes"] += t1 - t0
+        parts["data"] += t2 - t1
+
+    def timed_digest(*a, **k):
+        t0 = time.perf_counter()
+        d = orig_digest(*a, **k)
+        parts["digest"] += time.perf_counter() - t0
+        return d
+
+    R._Template.write, R._episode_digest = timed_write, timed_digest
+    try:
+        w = R.RecordingWriter(path, source="sim", config_json="{}", root_seed=0, shard_index=0,
+                              sensor_attrs={"family": "x"}, mjcf="<mujoco/>", compression=codec)
+        with w:
+            t0 = time.perf_counter()
+            for k in range(n):
+                _, ch, attrs = eps[k % len(eps)]
+                w.add_episode(f"ep-{k:06d}", ch, {**attrs, "global_index": k})
+            t1 = time.perf_counter()
+        t2 = time.perf_counter()
+        shard_entry(path, [f"ep-{k:06d}" for k in range(n)], list(range(n)), "0" * 64)
+        t3 = time.perf_counter()
+    finally:
+        R._Template.write, R._episode_digest = orig_write, orig_digest
+    parts["other"] = (t1 - t0) - parts["objects, attributes"] - parts["data"] - parts["digest"]
+    parts["close"] = t2 - t1
+    parts["manifest"] = t3 - t2
+    parts["total"] = t3 - t0
+    return parts
+
+
+def one(fam: str, codec: str, cache: Path, scratch: Path) -> dict:
+    """One timed shard in this process (the code on sys.path): ms per episode by part, bytes per episode."""
+    eps, n = episodes_of(fam, cache)
+    p = scratch / f"{fam}-{codec}-{os.getpid()}.h5"
+    try:
+        parts = write_shard_timed(p, eps, n, codec)
+        size = p.stat().st_size / n
+    finally:
+        p.unlink(missing_ok=True)
+    return {"ms_per_episode": {k: 1e3 * v / n for k, v in parts.items()}, "bytes_per_episode": size,
+            "episodes_per_shard": n, "blosc_nthreads_env": os.environ.get("BLOSC_NTHREADS")}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--base", default=None, help="an earlier commit to measure beside this checkout")
+    ap.add_argument("--families", default="cnt_pdms,fabric_1,velostat,ntype")
+    ap.add_argument("--codecs", default=",".join(CODECS))
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--tag", default="cpu")
+    ap.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "piezotwin-writer-episodes-v2")
+    ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results")
+    ap.add_argument("--one", nargs=2, metavar=("FAMILY", "CODEC"), help=argparse.SUPPRESS)
+    ap.add_argument("--scratch", type=Path, default=None, help="where the shards are written (default: beside results)")
+    a = ap.parse_args()
+    if a.one:
+        print(json.dumps(one(*a.one, a.cache, a.scratch)))
+        return
+    env = dict(os.environ)  # as given: the base revision keeps Blosc2's default threads unless this sets them
+    codecs, fams = a.codecs.split(","), a.families.split(",")
+    subprocess.run([sys.executable, "-c", "import sys; sys.path.insert(0, '.');"
+                    "from bench.bench_writer_episode import episodes_of; from pathlib import Path;"
+                    + "".join(f"episodes_of({f!r}, Path({str(a.cache)!r}));" for f in fams)],
+                   cwd=ROOT, env={**env, "PYTHONPATH": str(ROOT)}, check=True)  # simulate + cache once
+    head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
+    dirty = bool(subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=ROOT, capture_output=True,
+                                text=True).stdout.strip())
+    res = {"host": platform.node(), "cpus": os.cpu_count(), "machine": f"this {os.cpu_count()}-core host",
+           "head": head + ("+changes" if dirty else ""), "base": a.base, "repeats": a.repeats,
+           "loadavg_at_start": list(os.getloadavg()), "families": {}}
+    with tempfile.TemporaryDirectory() as tmp:
+        revs = {"head": ROOT}
+        if a.base:
+            base = Path(tmp) / "base"
+            subprocess.run(["git", "worktree", "add", "-q", "--detach", str(base), a.base], cwd=ROOT, check=True)
+            revs["base"] = base
+        scratch = a.scratch or Path(tempfile.mkdtemp(dir=ROOT / "bench"))
+        try:
+            best: dict = {}
+            for r in range(a.repeats):
+                for fam in fams:
+                    for codec in codecs:
+                        for rev in (list(revs) if r % 2 == 0 else list(revs)[::-1]):
+                            out = subprocess.run(
+                                [sys.executable, str(Path(__file__).resolve()), "--one", fam, codec, "--cache", str(a.cache),
+                                 "--scratch", str(scratch)],
+                                cwd=revs[rev], env={**env, "PYTHONPATH": str(revs[rev])}, capture_output=True, text=True,
+                                check=True)
+                            got = json.loads(out.stdout.strip().splitlines()[-1])
+                            key = (rev, fam, codec)
+                            if key not in best or got["ms_per_episode"]["total"] < best[key]["ms_per_episode"]["total"]:
+                                best[key] = got
+                print(f"repeat {r + 1}/{a.repeats} done", flush=True)
+        finally:
+            if a.base:
+                subprocess.run(["git", "worktree", "remove", "--force", str(revs["base"])], cwd=ROOT, check=False)
+            if a.scratch is None:
+                subprocess.run(["rm", "-rf", str(scratch)], check=False)
+    for fam in fams:
+        eps, n = episodes_of(fam, a.cache)
+        raw = sum(c.data.nbytes for _, ch, _ in eps for c in ch.values()) / len(eps)
+        samples = sum(ch["time"].data.shape[0] for _, ch, _ in eps) / len(eps)
+        res["families"][fam] = {"samples_per_episode": samples, "channels": len(eps[0][1]), "raw_bytes_per_episode": raw,
+                                "episodes_per_shard": n,
+                                **{rev: {c: best[(rev, fam, c)] for c in codecs} for rev in revs}}
+        for rev in revs:
+            for c in codecs:
+                b = best[(rev, fam, c)]
+                ms = b["ms_per_episode"]
+                print(f"{fam} {rev} {c}: {ms['total']:.2f} ms/episode (" + ", ".join(f"{k} {ms[k]:.2f}" for k in PARTS)
+                      + f"), {b['bytes_per_episode'] / 1e3:.0f} kB of {raw / 1e3:.0f} kB", flush=True)
+    res["loadavg_at_end"] = list(os.getloadavg())
+    a.out.mkdir(parents=True, exist_ok=True)
+    path = a.out / f"writer-episode-{a.tag}.json"
+    path.write_text(json.dumps(res, indent=1) + "\n")
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
