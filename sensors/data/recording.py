@@ -51,6 +51,7 @@ import os
 import re
 import subprocess
 import sys
+import threading
 from collections import OrderedDict
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
@@ -317,10 +318,18 @@ def _put(h: hashlib._Hash, *parts: bytes | str) -> None:
         h.update(b)
 
 
+@functools.lru_cache(maxsize=1024)
+def _channel_head(name: str, units: str, dim_names: tuple[str, ...], description: str, dtype: str,
+                  shape: tuple[int, ...]) -> bytes:
+    """The length-prefixed parts `_put` feeds before a channel's data (cached: the same for every episode of a layout)."""
+    parts = ("channel", name, units, json.dumps(list(dim_names)), description, dtype, json.dumps(list(shape)))
+    return b"".join(len(b).to_bytes(8, "little") + b for b in (p.encode("utf-8") for p in parts))
+
+
 def _channel_hash(h: hashlib._Hash, name: str, data: np.ndarray, units: str, dim_names: tuple[str, ...],
                   description: str) -> None:
     a = np.ascontiguousarray(data)
-    _put(h, "channel", name, units, json.dumps(list(dim_names)), description, a.dtype.str, json.dumps(list(a.shape)))
+    h.update(_channel_head(name, units, tuple(dim_names), description, a.dtype.str, a.shape))
     if a.size:
         h.update(memoryview(a.reshape(-1)).cast("B"))  # the bytes in place, no copy
 
@@ -416,8 +425,13 @@ def _check_episode(ep_id: str, channels: Mapping[str, Channel]) -> None:
         ch.validate(f"episode {ep_id!r} channel {name!r}")
 
 
-_TEMPLATES_PER_WRITER = 8  # episode layouts kept by one writer (e.g. a few episode lengths)
+_TEMPLATES_PER_PROCESS = 16  # episode layouts kept (e.g. a few episode lengths, for a few families or codecs)
 _template_names = itertools.count()
+# the templates of this process, shared by its writers (a writer process of the GPU feed writes shard after shard of
+# the same layouts: building a layout's template, ~5 ms for cnt_pdms' 15 channels, was paid per shard), and the
+# lock that keeps one thread's copy from a template another evicts
+_TEMPLATES: OrderedDict[tuple, _Template] = OrderedDict()
+_TEMPLATES_LOCK = threading.Lock()
 _VLEN_STR = h5py.string_dtype()
 
 
@@ -481,7 +495,8 @@ class RecordingWriter:
 
     The file is built at ``<path>.tmp``; episodes must be added in the order they should be stored.
     Lets a producer simulate the next episodes while this writes (and compresses) the previous ones.
-    An episode whose layout was seen before is copied from a cached `_Template`, then filled in.
+    An episode whose layout was seen before (by any writer of this process) is copied from a cached `_Template`,
+    then filled in.
     """
 
     def __init__(
@@ -536,7 +551,7 @@ class RecordingWriter:
         self._f: h5py.File | None = None
         self._eps: h5py.Group | None = None
         self._fast = _fast
-        self._templates: OrderedDict[tuple, _Template] = OrderedDict()
+        self._layouts: set[tuple] = set()  # the episode layouts this writer has written through templates
         self._digests: dict[str, bytes] = {}
         self.content_sha256: str | None = None  # set when the file is complete
         self.n_episodes = 0
@@ -563,7 +578,8 @@ class RecordingWriter:
         encoded = _encode_attrs(dict(attrs or {}), f"episode {ep_id}")
         if self._fast and all(ch.data.ndim >= 1 and ch.data.size > 0 for ch in channels.values()):
             arrays = {key: _attr_array(stored) for key, (stored, _) in encoded.items()}
-            self._template(channels, encoded, arrays).write(self._eps, ep_id, channels, arrays)
+            with _TEMPLATES_LOCK:
+                self._template(channels, encoded, arrays).write(self._eps, ep_id, channels, arrays)
         else:
             g = self._eps.create_group(ep_id)
             _write_attrs(g, encoded)
@@ -578,22 +594,24 @@ class RecordingWriter:
 
     def _template(self, channels: Mapping[str, Channel], encoded: Mapping[str, tuple[Any, bool]],
                   arrays: Mapping[str, np.ndarray]) -> _Template:
-        """The cached template of this episode layout (channels and attribute types), built if new."""
+        """The process's cached template of this episode layout (channels, attribute types, compression), built if
+        new (call with _TEMPLATES_LOCK held)."""
         key = (
             tuple((name, ch.data.dtype.str, ch.data.shape, ch.units, ch.dim_names, ch.description)
                   for name, ch in channels.items()),
             tuple((k, encoded[k][1], arr.dtype.str, arr.shape) for k, arr in arrays.items()),
+            self.compression, self.checksum,
         )
-        tmpl = self._templates.get(key)
+        self._layouts.add(key)
+        tmpl = _TEMPLATES.get(key)
         if tmpl is None:
-            tmpl = self._templates[key] = _Template(channels, encoded, arrays, self.compression, self.checksum)
-            if len(self._templates) > _TEMPLATES_PER_WRITER:
-                self._templates.popitem(last=False)[1].close()
-        self._templates.move_to_end(key)
+            tmpl = _TEMPLATES[key] = _Template(channels, encoded, arrays, self.compression, self.checksum)
+            if len(_TEMPLATES) > _TEMPLATES_PER_PROCESS:
+                _TEMPLATES.popitem(last=False)[1].close()
+        _TEMPLATES.move_to_end(key)
         return tmpl
 
     def _abort(self) -> None:
-        self._close_templates()
         if self._f is not None:
             try:
                 self._f.close()
@@ -605,10 +623,6 @@ class RecordingWriter:
         except FileNotFoundError:
             pass
 
-    def _close_templates(self) -> None:
-        while self._templates:
-            self._templates.popitem()[1].close()
-
     def __exit__(self, exc_type, exc, tb) -> None:
         if exc_type is None and self.n_episodes == 0:
             self._abort()
@@ -617,7 +631,6 @@ class RecordingWriter:
             self._abort()
             return
         try:
-            self._close_templates()
             self.content_sha256 = content_sha256(_get_attrs(self._f), _get_attrs(self._f["sensor"]), self._mjcf,
                                                  self._digests)
             self._f.attrs["content_sha256"] = self.content_sha256
