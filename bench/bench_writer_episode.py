@@ -20,9 +20,13 @@ environment as given) beside this checkout. Per episode, split by part:
 - "close": the shard's content hash, closing the file (HDF5 metadata), fsync and rename (per episode);
 - "manifest": the manifest entry the writer makes (`shard_entry`: SHA-256 of the file's bytes; per episode).
 
-The parts are this thread's CPU time (`time.thread_time`: robust to other jobs on a shared machine; HDF5's writes
-into the page cache count, the disk's fsync wait does not), "total" their sum, "wall" the wall time of the same
-(close, fsync and manifest included). Also bytes per episode on disk against the channels' raw bytes. Writes bench/results/writer-episode-<tag>.json.
+The parts are the writer process's CPU time (`time.process_time`, all its threads: Blosc2's too; robust to other
+jobs on a shared machine; HDF5's writes into the page cache count, the disk's fsync wait does not), "total" their
+sum, "wall" the wall time of the same (close, fsync and manifest included).
+
+Scaling (``--scale-codec``, default lz4; this checkout only): ``--scale-shards`` shards of each family written by
+W = 1 and W = ``os.cpu_count()`` writer processes at once (spawned, one shard per task, as the GPU feed's pool),
+wall time from the first submit to the last file, best of ``repeats``; speedup = wall(1) / wall(W). Also bytes per episode on disk against the channels' raw bytes. Writes bench/results/writer-episode-<tag>.json.
 """
 
 from __future__ import annotations
@@ -40,7 +44,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 CODECS = ("lzf", "lz4", "zstd", "none")
-_clock = time.thread_time
+_clock = time.process_time
 PARTS = ("objects, attributes", "data", "digest", "other", "close", "manifest")
 
 
@@ -136,6 +140,30 @@ def one(fam: str, codec: str, cache: Path, scratch: Path) -> dict:
             "episodes_per_shard": n, "blosc_nthreads_env": os.environ.get("BLOSC_NTHREADS")}
 
 
+def _scale_task(fam: str, codec: str, cache: str, scratch: str, k: int) -> float:
+    eps, n = episodes_of(fam, Path(cache))
+    p = Path(scratch) / f"scale-{fam}-{k}.h5"
+    t = time.perf_counter()
+    write_shard_timed(p, eps, n, codec)
+    dt = time.perf_counter() - t
+    p.unlink()
+    return dt
+
+
+def scale(fam: str, codec: str, cache: Path, scratch: Path, shards: int, workers: int) -> float:
+    """Wall seconds for `shards` shards written by `workers` spawned writer processes (started and warmed first)."""
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as pool:
+        list(pool.map(_scale_task, [fam] * workers, [codec] * workers, [str(cache)] * workers, [str(scratch)] * workers,
+                      range(workers)))  # start-up, imports, templates: not timed
+        t = time.perf_counter()
+        list(pool.map(_scale_task, [fam] * shards, [codec] * shards, [str(cache)] * shards, [str(scratch)] * shards,
+                      range(shards)))
+        return time.perf_counter() - t
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--base", default=None, help="an earlier commit to measure beside this checkout")
@@ -147,6 +175,8 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results")
     ap.add_argument("--one", nargs=2, metavar=("FAMILY", "CODEC"), help=argparse.SUPPRESS)
     ap.add_argument("--scratch", type=Path, default=None, help="where the shards are written (default: beside results)")
+    ap.add_argument("--scale-codec", default="lz4")
+    ap.add_argument("--scale-shards", type=int, default=8)
     a = ap.parse_args()
     if a.one:
         print(json.dumps(one(*a.one, a.cache, a.scratch)))
@@ -186,6 +216,17 @@ def main() -> None:
                             if key not in best or got["ms_per_episode"]["total"] < best[key]["ms_per_episode"]["total"]:
                                 best[key] = got
                 print(f"repeat {r + 1}/{a.repeats} done", flush=True)
+            ncpu = os.cpu_count() or 1
+            walls: dict = {}
+            if a.scale_shards:
+                sys.path.insert(0, str(ROOT))  # spawned workers import this module from the checkout
+                os.environ["PYTHONPATH"] = str(ROOT)
+                for r in range(a.repeats):
+                    for fam in fams:
+                        for w in ((1, ncpu) if r % 2 == 0 else (ncpu, 1)):
+                            dt = scale(fam, a.scale_codec, a.cache, scratch, a.scale_shards, w)
+                            walls[(fam, w)] = min(walls.get((fam, w), float("inf")), dt)
+                print("scaling done", flush=True)
         finally:
             if a.base:
                 subprocess.run(["git", "worktree", "remove", "--force", str(revs["base"])], cwd=ROOT, check=False)
@@ -198,6 +239,13 @@ def main() -> None:
         res["families"][fam] = {"samples_per_episode": samples, "channels": len(eps[0][1]), "raw_bytes_per_episode": raw,
                                 "episodes_per_shard": n,
                                 **{rev: {c: best[(rev, fam, c)] for c in codecs} for rev in revs}}
+        if walls:
+            w1, wn = walls[(fam, 1)], walls[(fam, ncpu)]
+            res["families"][fam]["scaling"] = {"codec": a.scale_codec, "shards": a.scale_shards, "workers": [1, ncpu],
+                                               "wall_s": [w1, wn], "speedup": w1 / wn,
+                                               "ms_wall_per_episode": [1e3 * w / (a.scale_shards * n) for w in (w1, wn)]}
+            print(f"{fam} scaling ({a.scale_codec}): {a.scale_shards} shards, 1 writer {w1:.2f} s, {ncpu} writers {wn:.2f} s, "
+                  f"x{w1 / wn:.2f}", flush=True)
         for rev in revs:
             for c in codecs:
                 b = best[(rev, fam, c)]

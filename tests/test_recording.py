@@ -338,3 +338,24 @@ def test_blosc2_compressions_round_trip(tmp_path, comp):
         np.testing.assert_array_equal(rec.read("ep-000000", "pressure"), ch["pressure"].data)
         np.testing.assert_array_equal(rec.read("ep-000000", "time"), ch["time"].data)
     assert paths[0].stat().st_size < none.stat().st_size
+
+
+@pytest.mark.parametrize("compression", ["lzf", "lz4"])
+def test_files_of_the_earlier_storage_read_the_same(tmp_path, monkeypatch, compression):
+    """Shards written before session 11 (HDF5's earliest object formats, chunks of <= 256 frames) read back as the
+    same recording: same data, attributes and content hash; the 1.10 formats take fewer bytes for short episodes."""
+    new, eps = write_shard(tmp_path / "new.h5", compression=compression)
+    monkeypatch.setattr(rc, "_LIBVER", ("earliest", "latest"))
+    monkeypatch.setattr(rc, "_CHUNK_MAX_BYTES", 256 * 36 * 2)  # 256 frames of the (n, 36) uint16 channel
+    monkeypatch.setattr(rc, "_TEMPLATES", type(rc._TEMPLATES)())  # no template of the new storage
+    old, _ = write_shard(tmp_path / "old.h5", compression=compression)
+    with h5py.File(old, "r") as f:
+        assert f["episodes/ep-0/adc"].chunks == (150, 36)  # the earlier layout: 300 frames in two chunks
+    with Recording(old) as a, Recording(new) as b:
+        assert a.episode_ids == b.episode_ids == list(eps)
+        for ep in eps:
+            assert a.episode_attrs(ep) == b.episode_attrs(ep)
+            for name in eps[ep]:
+                assert a.read(ep, name).tobytes() == b.read(ep, name).tobytes() == eps[ep][name].data.tobytes()
+        assert a.compute_content_sha256() == b.compute_content_sha256() == a.content_sha256 == b.content_sha256
+    assert new.stat().st_size < old.stat().st_size
