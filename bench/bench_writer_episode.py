@@ -24,6 +24,12 @@ The parts are the writer process's CPU time (`time.process_time`, all its thread
 jobs on a shared machine; HDF5's writes into the page cache count, the disk's fsync wait does not), "total" their
 sum, "wall" the wall time of the same (close, fsync and manifest included).
 
+Stacked estimate (this checkout, the scaling codec): the same shard's episodes of one length written as a layout
+the format does not have, to price the next step: one dataset per channel holding all of them (episodes, time, ...),
+one chunk per episode, the per-episode attributes as columns, the same per-episode content digests; CPU per
+episode, same process and conditions, closing the file but no fsync and no manifest entry: compare it with the parts
+before "close" ("stacked_estimate" in the file; not a format, nothing reads it).
+
 Scaling (``--scale-codec``, default lz4; this checkout only): ``--scale-shards`` shards of each family written by
 W = 1 and W = ``os.cpu_count()`` writer processes at once (spawned, one shard per task, as the GPU feed's pool),
 wall time from the first submit to the last file, best of ``repeats``; speedup = wall(1) / wall(W). Also bytes per episode on disk against the channels' raw bytes. Writes bench/results/writer-episode-<tag>.json.
@@ -140,6 +146,44 @@ def one(fam: str, codec: str, cache: Path, scratch: Path) -> dict:
             "episodes_per_shard": n, "blosc_nthreads_env": os.environ.get("BLOSC_NTHREADS")}
 
 
+def stacked_estimate(fam: str, codec: str, cache: Path, scratch: Path) -> dict:
+    """CPU ms per episode (and bytes) of the shard's same-length episodes written stacked (see the module docstring)."""
+    import h5py
+    import numpy as np
+
+    from sensors.data import recording as R
+
+    eps, n = episodes_of(fam, cache)
+    eps = [e for e in eps if e[1]["time"].data.shape == eps[0][1]["time"].data.shape]
+    rows = [eps[k % len(eps)] for k in range(n)]
+    p = scratch / f"stacked-{fam}-{os.getpid()}.h5"
+    best = float("inf")
+    for _ in range(2):  # the second: warm
+        t0 = _clock()
+        with h5py.File(p, "w", libver=R._LIBVER) as f:
+            g = f.create_group("stack")
+            for name, c in rows[0][1].items():
+                a = np.stack([r[1][name].data for r in rows])
+                kw = {"fletcher32": True}
+                kw.update({"lzf": dict(compression="lzf", shuffle=True), "gzip": dict(compression="gzip", compression_opts=1, shuffle=True),
+                           "none": {}}.get(codec) or R._blosc2(codec))
+                ds = g.create_dataset(name, data=a, chunks=(1,) + a.shape[1:], **kw)
+                ds.attrs["units"], ds.attrs["dim_names"], ds.attrs["description"] = c.units, json.dumps(list(c.dim_names)), c.description
+            cols = g.create_group("_attrs")
+            for key in rows[0][2]:
+                vals = [{**r[2], "global_index": k}[key] for k, r in enumerate(rows)]
+                arr = np.array(vals, dtype=h5py.string_dtype()) if isinstance(vals[0], str) else np.asarray(vals)
+                cols.create_dataset(key, data=arr)
+            g.create_dataset("_ids", data=np.array([f"ep-{k:06d}" for k in range(n)], dtype=h5py.string_dtype()))
+            for k, (_, ch, attrs) in enumerate(rows):
+                R._episode_digest(f"ep-{k:06d}", R._decoded_attrs(R._encode_attrs({**attrs, "global_index": k}, "x")),
+                                  {nm: (c.data, c.units, c.dim_names, c.description) for nm, c in ch.items()})
+        best = min(best, _clock() - t0)
+    size = p.stat().st_size
+    p.unlink()
+    return {"codec": codec, "episodes": n, "ms_per_episode": 1e3 * best / n, "bytes_per_episode": size / n}
+
+
 def _scale_task(fam: str, codec: str, cache: str, scratch: str, k: int) -> float:
     eps, n = episodes_of(fam, Path(cache))
     p = Path(scratch) / f"scale-{fam}-{k}.h5"
@@ -216,6 +260,12 @@ def main() -> None:
                             if key not in best or got["ms_per_episode"]["total"] < best[key]["ms_per_episode"]["total"]:
                                 best[key] = got
                 print(f"repeat {r + 1}/{a.repeats} done", flush=True)
+            stacked: dict = {}
+            for r in range(a.repeats):
+                for fam in fams:
+                    got = stacked_estimate(fam, a.scale_codec, a.cache, scratch)
+                    if fam not in stacked or got["ms_per_episode"] < stacked[fam]["ms_per_episode"]:
+                        stacked[fam] = got
             ncpu = os.cpu_count() or 1
             walls: dict = {}
             if a.scale_shards:
@@ -239,6 +289,10 @@ def main() -> None:
         res["families"][fam] = {"samples_per_episode": samples, "channels": len(eps[0][1]), "raw_bytes_per_episode": raw,
                                 "episodes_per_shard": n,
                                 **{rev: {c: best[(rev, fam, c)] for c in codecs} for rev in revs}}
+        if fam in stacked:
+            res["families"][fam]["stacked_estimate"] = stacked[fam]
+            print(f"{fam} stacked estimate ({a.scale_codec}): {stacked[fam]['ms_per_episode']:.2f} ms CPU/episode, "
+                  f"{stacked[fam]['bytes_per_episode'] / 1e3:.0f} kB", flush=True)
         if walls:
             w1, wn = walls[(fam, 1)], walls[(fam, ncpu)]
             res["families"][fam]["scaling"] = {"codec": a.scale_codec, "shards": a.scale_shards, "workers": [1, ncpu],

@@ -117,7 +117,9 @@ def test_chunk_len_divides_when_possible():
     assert rc._chunk_len(3000, 900) == 1000  # 2.7 MB: <= 1 MiB (1165 frames), the longest that divides 3000
     assert rc._chunk_len(100, 900) == 100  # fits: the whole series
     assert rc._chunk_len(5142, 4) == 5142  # fabric_1's narrow frames: one chunk per episode, not 21
-    assert rc._chunk_len(3001, 900) * 900 <= 1 << 20  # no divisor near the cap: still <= 1 MiB
+    c = rc._chunk_len(3001, 900)  # no divisor near the cap (3001 is prime): three equal parts, <= 1 MiB
+    assert c == 1001 and c * 900 <= 1 << 20
+    assert rc._chunk_len(1505, 1152) == 753  # velostat's shear: two chunks, not 910 + 595 (stored as 910)
     assert rc._chunk_len(10_000, 4_000_000) == 1  # huge frames: one frame per chunk
 
 

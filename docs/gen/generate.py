@@ -412,6 +412,45 @@ def bench_checksum() -> str:
                      "read time", "file, plain (bytes)", "checksums (bytes)", "file size"], rows) + hashed)
 
 
+def bench_writer() -> str:
+    d = load("writer-episode-cpu.json")
+    if not d:
+        return missing("The writers' cost per episode", "Run `PYTHONPATH=. python bench/bench_writer_episode.py --base REV`.")
+    fams = d["families"]
+    base = d.get("base")
+    codecs = list(next(iter(fams.values()))["head"])
+    rows = []
+    for fam, r in fams.items():
+        for c in codecs:
+            h = r["head"][c]
+            b = r.get("base", {}).get(c)
+            rows.append([fam, c, num(b["ms_per_episode"]["total"]) if b else "–", num(h["ms_per_episode"]["total"]),
+                         num(b["bytes_per_episode"] / 1e3) if b else "–", num(h["bytes_per_episode"] / 1e3)])
+    parts = ["objects, attributes", "data", "digest", "other", "close", "manifest"]
+    prow = [[fam, num(r["samples_per_episode"]), num(r["raw_bytes_per_episode"] / 1e3), r["episodes_per_shard"]]
+            + [num(r["head"]["lz4"]["ms_per_episode"][k], 2) for k in parts] for fam, r in fams.items() if "lz4" in r["head"]]
+    srows = [[fam, r["scaling"]["shards"], num(r["scaling"]["wall_s"][0]), f"{r['scaling']['workers'][1]}",
+              num(r["scaling"]["wall_s"][1]), f"x{num(r['scaling']['speedup'])}"] for fam, r in fams.items() if "scaling" in r]
+    load_s = ", ".join(f"{x:.1f}" for x in d.get("loadavg_at_start", [])[:1] + d.get("loadavg_at_end", [])[:1])
+    out = (f"The writers' cost per episode (`bench/bench_writer_episode.py`, `writer-episode-cpu.json`): one shard of "
+           f"each preset's `episodes_per_shard` default episodes written as a shard writer writes it (episodes, "
+           f"close + fsync, the manifest entry's file hash), the second shard of a writer process, CPU time of the "
+           f"process (all its threads), best of {d['repeats']}, on {d['machine']} (shared; load average {load_s} at "
+           f"start / end). `{base}`: the code before this storage; now: {d['head']}.\n\n"
+           + table(["family", "compression", f"ms CPU / episode, {base}", "ms CPU / episode, now",
+                    f"kB / episode, {base}", "kB / episode, now"], rows)
+           + "\n\nWhere the time goes now with lz4 (ms CPU per episode): the episode's HDF5 objects and attributes "
+             "(copied from a cached template), the data (chunks, shuffle + compression, Fletcher-32, the writes), "
+             "the content digest (SHA-256 of the data), the rest of `add_episode`, closing the shard (content hash, "
+             "HDF5 metadata, fsync) and the manifest entry (SHA-256 of the file):\n\n"
+           + table(["family", "samples / episode", "raw kB / episode", "episodes / shard"] + parts, prow))
+    if srows:
+        out += ("\n\nWriters in parallel (lz4; spawned processes, one shard per task, as the GPU feed's pool; wall "
+                "time, on the shared machine):\n\n"
+                + table(["family", "shards", "1 writer (s)", "writers", "wall (s)", "speedup"], srows))
+    return out
+
+
 # ----------------------------------------------------------------------------------------------- sim2real
 # the columns every "measured by a rule fixed before scoring" comparison of the sim2real rounds reports
 RULE_HEADER = ["pre-train sim valid (N)", "pre-trained on training runs (N)", "fine-tuned validation (N)",
@@ -1424,6 +1463,7 @@ def outputs() -> dict[Path, Callable[[], str]]:
         GEN / "bench-gpu.md": bench_gpu,
         GEN / "bench-streaming.md": bench_streaming,
         GEN / "bench-checksum.md": bench_checksum,
+        GEN / "bench-writer.md": bench_writer,
         GEN / "channels-common.md": channels_common,
         GEN / "cli.md": cli,
         GEN / "sim2real.md": sim2real_results,

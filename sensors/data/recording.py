@@ -367,13 +367,15 @@ def _check_name(name: Any, what: str) -> str:
 
 
 def _chunk_len(n_time: int, frame_bytes: int) -> int:
-    """Frames per chunk: the whole series where it fits in 1 MiB, else <= 1 MiB preferring a length that divides
-    ``n_time`` (a fixed cost per chunk: fabric_1's narrow frames made 294 chunks per episode at <= 256 frames)."""
+    """Frames per chunk: the whole series where it fits in 1 MiB, else <= 1 MiB: a length that divides ``n_time``
+    where one is within half of the cap, else the series in equal parts (the last chunk short by < one frame per
+    chunk: HDF5 stores a partial chunk at full size when uncompressed). A fixed cost per chunk: fabric_1's narrow
+    frames made 294 chunks per episode at <= 256 frames."""
     target = max(1, min(n_time, _CHUNK_MAX_BYTES // max(1, frame_bytes)))
     for c in range(target, max(1, target // 2) - 1, -1):
         if n_time % c == 0:
             return c
-    return target
+    return -(-n_time // -(-n_time // target))
 
 
 def _write_channel(

@@ -37,17 +37,16 @@ GPU_CONTROLS = ("displacement", "force")
 # Measured (8 episodes of the default protocol each): velostat_mix 5 ms = 2.6e-3 of full scale, 10 ms 6.7e-3 (the
 # preset's 2 ms: 5.9e-4); fabric_1 staircase 5 ms (the preset's) 3.6e-3, 10 ms 3.0e-2
 GPU_PHYSICS_STEP_S: dict[str, float] = {"staircase": 0.005, **{k: 0.005 for k in _VELOSTAT_KINDS}}
-# where the GPU feed runs and the scene names no compression: Blosc2 lz4 (level 1 + shuffle). The plain CLI on the
-# H100 (`generate cnt_pdms --episodes 4096`, 8 writers) ran 117 s with lz4 against 156 s with zstd for 14 % more
-# bytes (bench/results/user-cli-h100-cnt-lz4.json vs user-cli-h100-cnt.json): the writers' compression was the
-# bound. The CPU path keeps lzf (the same bytes as before). Only for cnt_pdms (sensor family): Blosc2 pays a fixed
-# cost per chunk (~1 ms on the project machine), and the narrow frames of the other families make small chunks
-# (fabric_1: 294 chunks of 1-3 kB per episode): their writers spend 221.7 / 51.3 / 22.3 ms per episode with lz4
-# against 11.2 / 19.7 / 9.1 ms with lzf, for more bytes (fabric_1 / velostat / ntype,
-# bench/results/writer-codec-cpu.json; the H100 CLI run of fabric_1 with lz4: 143 ms per episode, the writers its
-# bound after the physics, user-cli-h100-s8-fabric.json), so they keep the scene's compression
+# where the GPU feed runs and the scene names no compression: Blosc2 lz4 (level 1 + shuffle, one thread per writer
+# process), for every family: the writers' CPU per episode of each preset's default episodes (this 2-core host,
+# bench/results/writer-episode-cpu.json) is lowest with lz4 in every family: cnt_pdms 16.5 ms (lzf 50.2, zstd 19.1),
+# fabric_1 3.6 (4.6, 4.4), velostat 12.5 (16.0, 13.0), ntype 3.0 (3.5, 3.4), for 8 % more bytes than lzf
+# (cnt_pdms), 21 % (fabric_1), 28 % fewer (velostat), 14 % more (ntype); zstd makes 11-34 % fewer bytes than lz4 for
+# 4-23 % more writer CPU (--set generation.compression=zstd). Before session 11 only cnt_pdms took lz4: Blosc2 then
+# started its default threads for every chunk (0.8-1.3 ms per chunk here; 252 writer-seconds for cnt_pdms' 4096
+# episodes on the H100, user-cli-h100-s10-cnt.json), which the narrow chunks of the other families multiplied.
+# The CPU path keeps the scene's lzf (its config, so its content hash, stays as before).
 GPU_COMPRESSION = "lz4"
-GPU_COMPRESSION_FAMILIES = ("cnt_pdms",)
 # writer processes of the GPU feed: all cores but 4 (the driver, the physics, the OS), at most 12: on the 16-core
 # H100 host 12 writers ran the 4096-episode CLI run in 122 s against 156 s with 8 (user-cli-h100-cnt-w12.json)
 MAX_AUTO_WRITERS = 12
@@ -152,8 +151,7 @@ def choose(cfg: SceneConfig, physics: str = "auto", device: str = "auto", worker
     if physics == "mujoco_warp":
         overrides += ["generation.physics=mujoco_warp", f"generation.device={'cuda' if device.startswith('cuda') else 'cpu'}"]
         physics_device = device
-        if (physics_device.startswith("cuda") and "compression" not in g.model_fields_set
-                and cfg.sensor.family in GPU_COMPRESSION_FAMILIES):
+        if physics_device.startswith("cuda") and "compression" not in g.model_fields_set:
             overrides.append(f"generation.compression={GPU_COMPRESSION}")
         step = gpu_physics_step(cfg) if why.startswith("auto") and not step_asked else None
         if step is not None:
