@@ -428,7 +428,10 @@ def bench_writer() -> str:
                          num(b["bytes_per_episode"] / 1e3) if b else "–", num(h["bytes_per_episode"] / 1e3)])
     parts = ["objects, attributes", "data", "digest", "other", "close", "manifest"]
     prow = [[fam, num(r["samples_per_episode"]), num(r["raw_bytes_per_episode"] / 1e3), r["episodes_per_shard"]]
-            + [num(r["head"]["lz4"]["ms_per_episode"][k], 2) for k in parts] for fam, r in fams.items() if "lz4" in r["head"]]
+            + [num(r["head"]["lz4"]["ms_per_episode"][k], 2) for k in parts]
+            + [num(sum(r["head"]["lz4"]["ms_per_episode"][k] for k in parts[:4]), 2),
+               num(r["stacked_estimate"]["ms_per_episode"], 2) if "stacked_estimate" in r else "–"]
+            for fam, r in fams.items() if "lz4" in r["head"]]
     srows = [[fam, r["scaling"]["shards"], num(r["scaling"]["wall_s"][0]), f"{r['scaling']['workers'][1]}",
               num(r["scaling"]["wall_s"][1]), f"x{num(r['scaling']['speedup'])}"] for fam, r in fams.items() if "scaling" in r]
     load_s = ", ".join(f"{x:.1f}" for x in d.get("loadavg_at_start", [])[:1] + d.get("loadavg_at_end", [])[:1])
@@ -442,8 +445,32 @@ def bench_writer() -> str:
            + "\n\nWhere the time goes now with lz4 (ms CPU per episode): the episode's HDF5 objects and attributes "
              "(copied from a cached template), the data (chunks, shuffle + compression, Fletcher-32, the writes), "
              "the content digest (SHA-256 of the data), the rest of `add_episode`, closing the shard (content hash, "
-             "HDF5 metadata, fsync) and the manifest entry (SHA-256 of the file):\n\n"
-           + table(["family", "samples / episode", "raw kB / episode", "episodes / shard"] + parts, prow))
+             "HDF5 metadata, fsync) and the manifest entry (SHA-256 of the file). The last column prices a layout the "
+             "format does not have (one dataset per channel for all the shard's episodes of a length, chunks of one episode, "
+             "attributes as columns, the same digests; no fsync, no manifest entry), to compare with the "
+             "parts before closing:\n\n"
+           + table(["family", "samples / episode", "raw kB / episode", "episodes / shard"] + parts
+                   + ["before close", "stacked estimate"], prow))
+    est = load("writer-h100-estimate-s11.json")
+    if est:
+        erows = []
+        for fam, e in est["families"].items():
+            alone = e.get("of_stepping_alone")
+            erows.append([fam, e["episodes"], f"`{e['from']}`", f"{e['codec_before']} -> {e['codec_now']}",
+                          f"{num(e['writer_seconds'][0])} -> {num(e['writer_seconds'][1])}",
+                          f"{num(e['wait_for_writers_s'][0])} -> {num(e['wait_for_writers_s'][1])}",
+                          f"{num(e['seconds'][0])} -> {num(e['seconds'][1])}",
+                          f"{num(e['samples_per_s'][0])} -> {num(e['samples_per_s'][1])}",
+                          f"{pct(e['of_raw'][0])} -> {pct(e['of_raw'][1])}",
+                          f"{pct(alone[0])} -> {pct(alone[1])}" if alone else "–"])
+        out += ("\n\n**Estimate, not measured** (`bench/estimate_h100_writers.py`, `writer-h100-estimate-s11.json`): "
+                "session 10's plain-CLI runs on the H100 with this machine's before / after writer cost carried over "
+                "(writer-seconds of the episodes scaled by the CPU ratio of the parts before closing, close / fsync / "
+                "file hash by the bytes ratio; the wait for the writers shrinks by the writer-seconds saved over 12 "
+                "writers; nothing else changes). Targets: >= 50 % of raw or >= 1e6 samples/s; >= 80 % of stepping "
+                "alone where the stepping bounds:\n\n"
+                + table(["family", "episodes", "run", "compression", "writer-s", "wait for writers (s)", "run (s)",
+                         "samples/s", "of raw", "of stepping alone"], erows))
     if srows:
         out += ("\n\nWriters in parallel (lz4; spawned processes, one shard per task, as the GPU feed's pool; wall "
                 "time, on the shared machine):\n\n"
