@@ -11,7 +11,7 @@ Layout (see DESIGN.md section 4)::
     /episodes/<id>/<name>  one dataset per channel; attrs units, dim_names, description
 
 Time series are chunked along time in blocks of whole frames of at most 1 MiB (the whole episode where it fits;
-else a length that divides T where one is close to the cap), compressed with lzf + shuffle by default (gzip level 1
+else a length that divides T where one is close to the cap, or T in equal parts), compressed with lzf + shuffle by default (gzip level 1
 + shuffle, Blosc2 zstd / lz4 level 1 + shuffle, or none). Every chunked dataset carries HDF5's Fletcher-32
 checksum per chunk: damaged data fails to read (RecordingError naming the file) instead of reading back as wrong
 numbers.
@@ -70,7 +70,7 @@ _NAME_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.\-]*$")
 _CHUNK_MAX_BYTES = 1 << 20  # cap on one chunk (HDF5's default chunk cache per dataset); the whole episode where it fits
 # HDF5 object formats of the files written: 1.10's (v2 object headers with checksums, single-chunk / fixed-array
 # chunk indexes, compact link storage) halve the bytes of a short episode against the earliest formats (ntype's
-# 20-sample episodes: 84 -> 43 kB, bench/results/writer-episode-cpu.json) and cut its writes by ~20 %
+# 20-sample episodes with lzf: 84 -> 43 kB, bench/results/writer-episode-cpu.json)
 _LIBVER = ("v110", "latest")
 _COMPRESSIONS = ("lzf", "gzip", "none", "zstd", "lz4")
 # "zstd" / "lz4": Blosc2 (level 1, byte shuffle) through hdf5plugin; its filters register on import, so a
@@ -79,9 +79,10 @@ try:
     import hdf5plugin as _hdf5plugin
 except ImportError:  # pragma: no cover - a dependency; only the Blosc2 options need it
     _hdf5plugin = None
-# Blosc2 reads BLOSC_NTHREADS at every chunk and by default starts several threads per chunk: 0.84-1.25 ms per
-# 147 kB chunk against 0.29 ms with one thread (this 2-core host; more threads, and more writer processes beside
-# them, on a larger one). The writers (and readers) are processes: one thread each, unless the user set it
+# Blosc2 reads BLOSC_NTHREADS at every chunk and by default starts several threads for each: velostat's episodes
+# took 27.8 ms of writer CPU with lz4 (data 22.6) before session 11, 8.3 (4.4) with one thread and the storage
+# below (this 2-core host, bench/results/writer-episode-cpu.json; a larger host starts more threads per chunk).
+# The writers (and readers) are processes: one thread each, unless the user set it
 os.environ.setdefault("BLOSC_NTHREADS", "1")
 
 
@@ -430,8 +431,9 @@ def _check_episode(ep_id: str, channels: Mapping[str, Channel]) -> None:
 _TEMPLATES_PER_PROCESS = 16  # episode layouts kept (e.g. a few episode lengths, for a few families or codecs)
 _template_names = itertools.count()
 # the templates of this process, shared by its writers (a writer process of the GPU feed writes shard after shard of
-# the same layouts: building a layout's template, ~5 ms for cnt_pdms' 15 channels, was paid per shard), and the
-# lock that keeps one thread's copy from a template another evicts
+# the same layouts: building them per shard cost 1.1-2.9 ms per episode of cnt_pdms, fabric_1 and velostat shards,
+# "other" at 344a0a0 in bench/results/writer-episode-cpu.json), and the lock that keeps one thread's copy from a
+# template another evicts
 _TEMPLATES: OrderedDict[tuple, _Template] = OrderedDict()
 _TEMPLATES_LOCK = threading.Lock()
 _VLEN_STR = h5py.string_dtype()

@@ -39,10 +39,10 @@ GPU_CONTROLS = ("displacement", "force")
 GPU_PHYSICS_STEP_S: dict[str, float] = {"staircase": 0.005, **{k: 0.005 for k in _VELOSTAT_KINDS}}
 # where the GPU feed runs and the scene names no compression: Blosc2 lz4 (level 1 + shuffle, one thread per writer
 # process), for every family: the writers' CPU per episode of each preset's default episodes (this 2-core host,
-# bench/results/writer-episode-cpu.json) is lowest with lz4 in every family: cnt_pdms 16.5 ms (lzf 50.2, zstd 19.1),
-# fabric_1 3.6 (4.6, 4.4), velostat 12.5 (16.0, 13.0), ntype 3.0 (3.5, 3.4), for 8 % more bytes than lzf
-# (cnt_pdms), 21 % (fabric_1), 28 % fewer (velostat), 14 % more (ntype); zstd makes 11-34 % fewer bytes than lz4 for
-# 4-23 % more writer CPU (--set generation.compression=zstd). Before session 11 only cnt_pdms took lz4: Blosc2 then
+# bench/results/writer-episode-cpu.json) is lowest with lz4 in every family: cnt_pdms 16.5 ms (lzf 48.4, zstd 18.5),
+# fabric_1 3.6 (5.5, 4.6), velostat 8.3 (15.3, 9.8), ntype 2.9 (3.2, 3.3), for 8 % more bytes than lzf
+# (cnt_pdms), 21 % (fabric_1), 26 % fewer (velostat), 14 % more (ntype); zstd makes 11-35 % fewer bytes than lz4 for
+# 11-29 % more writer CPU (--set generation.compression=zstd). Before session 11 only cnt_pdms took lz4: Blosc2 then
 # started its default threads for every chunk (0.8-1.3 ms per chunk here; 252 writer-seconds for cnt_pdms' 4096
 # episodes on the H100, user-cli-h100-s10-cnt.json), which the narrow chunks of the other families multiplied.
 # The CPU path keeps the scene's lzf (its config, so its content hash, stays as before).
