@@ -11,7 +11,7 @@ mix() {  # tag, schedule: compact 6 x 6 mixed 0.1-2 Hz end to end (the command o
 }
 case "$1" in
 W)  # a fresh machine: a small mixed run compiles MuJoCo Warp's kernels for the bench scene (not timed)
-    timeout 300 python3 bench/bench_gpu_pipeline.py --parts e2e --workers 2 --shard-episodes 1024 \
+    timeout 300 python3 bench/bench_gpu_pipeline.py --parts e2e --workers 2 --shard-episodes 256 \
         --override "protocol.frequencies_hz=[0.1,0.5,1.0,2.0]" --tag warm 2>&1 | grep -v "^Module" | tail -1 | cut -c1-600
     pack W ;;
 M)  # the mixed run scheduled by length (today's default), then by whole shards (session 10's batches): the A/B

@@ -308,7 +308,8 @@ def test_feed_on_fabric_writes_the_serial_files(tmp_path):
 def test_feed_schedules_mixed_lengths_short_first_and_writes_the_serial_files(tmp_path, monkeypatch):
     """Mixed episode lengths (1 and 4 Hz, one cycle: 120 and 45 samples, more than LENGTH_SPLIT apart): `_schedule`
     puts the short episodes of every shard first, then the long ones in windows of shards, so a shard's episodes
-    come in two batches (shard 0 only short ones, shard 1 only long ones, shard 4 one short episode); the feed
+    come in two batches (shard 0 only short ones, shard 1 only long ones, shard 4 one short episode: its window of
+    long ones steps nothing); the feed
     still writes the serial loop's files: same episodes in the same order, same bytes, same manifest."""
     from simulate.generation import feed
 
@@ -319,10 +320,10 @@ def test_feed_schedules_mixed_lengths_short_first_and_writes_the_serial_files(tm
 
     seeds = [episode_seed(3, k) for k in range(9)]
     assert [p.n_samples for p in run.episode_protocols(mixed, seeds, list(range(9)))] == [45, 45, 120, 120, 120, 45, 45, 120, 45]
-    monkeypatch.setattr(feed, "FEED_WORLDS", 4)  # short batches of <= 4 episodes; long windows of >= 2 long ones
+    monkeypatch.setattr(feed, "FEED_WORLDS", 3)  # short batches of <= 3 x 1.25 episodes; long windows of ~1 long one
     sched = feed._schedule(mixed, [0, 1, 2, 3, 4], 4)
     short, long = feed.Select(False, 60), feed.Select(True, 60)
-    assert sched == [([0, 1, 2], short), ([3, 4], short), ([0, 1, 2], long), ([3, 4], long)]
+    assert sched == [([0, 1, 2], short), ([3, 4], short), ([0, 1], long), ([2], long), ([3], long), ([4], long)]
     monkeypatch.setattr(feed, "LENGTH_SCHEDULE", False)  # the A/B switch: whole shards
     assert all(sel is None for _, sel in feed._schedule(mixed, [0, 1, 2, 3, 4], 4))
     monkeypatch.setattr(feed, "LENGTH_SCHEDULE", True)
@@ -331,8 +332,8 @@ def test_feed_schedules_mixed_lengths_short_first_and_writes_the_serial_files(tm
     seen = []
     executors.generate(mixed, out, workers=2, feed=True, on_shard=lambda s, n, skip: seen.append((s, n)))
     assert [(b["select"], b["episodes"], b["max_samples"]) for b in feed.LAST_RUN_BATCHES] == [
-        ("short <= 60 samples", 3, 45), ("short <= 60 samples", 2, 45), ("long > 60 samples", 3, 120),
-        ("long > 60 samples", 1, 120)]
+        ("short <= 60 samples", 3, 45), ("short <= 60 samples", 2, 45), ("long > 60 samples", 2, 120),
+        ("long > 60 samples", 1, 120), ("long > 60 samples", 1, 120), ("long > 60 samples", 0, 0)]  # shard 4: none
     assert sorted(seen) == [(0, 2), (1, 2), (2, 2), (3, 2), (4, 1)]
     a, b = _episodes(ref, 5), _episodes(out, 5)
     assert list(a) == list(b) == [f"ep-{k:06d}" for k in range(9)]

@@ -349,6 +349,7 @@ def _groups(cfg: SceneConfig, todo: list[int], worlds: int) -> list[list[int]]:
 LENGTH_SCHEDULE = True  # schedule runs of mixed episode lengths by length (`_schedule`); False: `_groups` always
 LENGTH_SPLIT = 2.0  # a run whose longest episodes are more than this many times its shortest is scheduled by length ...
 LENGTH_SAMPLE = 512  # ... judged on the protocols of its first this many episodes (drawn in the driver, ~30 us each)
+SAMPLE_MARGIN = 1.25  # batches by length sized on the sample's shares, with this margin (see _schedule)
 
 
 def _schedule(cfg: SceneConfig, todo: list[int], worlds: int) -> list[tuple[list[int], Select | None]]:
@@ -381,12 +382,14 @@ def _schedule(cfg: SceneConfig, todo: list[int], worlds: int) -> list[tuple[list
     total = sum(eps.values())
 
     def windows(lengths: list[int], min_parts: int) -> list[list[int]]:
-        """Consecutive runs of the shards, about equal in episodes, each with at most FEED_WORLDS of these lengths'
-        episodes per length and their sensordata (float64, 20 values per sample) within `ram` (expected from the
-        sample's share and mean length)."""
+        """Consecutive runs of the shards, about equal in episodes, each with about FEED_WORLDS of these lengths'
+        episodes per length at most and their sensordata (float64, 20 values per sample) within `ram`, as
+        expected from the sample's share and mean length (SAMPLE_MARGIN: a share a little above the sample's
+        does not split a batch in two: two batches of short episodes would step side by side first and hold the
+        long ones back, as the H100 measured: -s11-mix-split)."""
         share = len(lengths) / len(n)
         cap = min(FEED_WORLDS * len(set(lengths)), ram / (8 * 20 * (sum(lengths) / len(lengths) + 1)))
-        parts = min(len(todo), max(1, min_parts, math.ceil(total * share / max(1.0, cap))))
+        parts = min(len(todo), max(1, min_parts, math.ceil(total * share / (SAMPLE_MARGIN * max(1.0, cap)))))
         out, acc = [[]], 0
         for s in todo:
             if out[-1] and acc >= len(out) * total / parts:
@@ -396,7 +399,7 @@ def _schedule(cfg: SceneConfig, todo: list[int], worlds: int) -> list[tuple[list
         return out
 
     short, long = [k for k in n if k <= cutoff], [k for k in n if k > cutoff]
-    long_parts = int(total * len(long) / len(n)) // max(1, FEED_WORLDS // 2)
+    long_parts = round(total * len(long) / len(n) / max(1, FEED_WORLDS // 2))
     return ([(w, Select(False, cutoff)) for w in windows(short, 1)]
             + [(w, Select(True, cutoff)) for w in windows(long, long_parts)])
 
