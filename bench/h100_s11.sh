@@ -18,6 +18,12 @@ M)  # the mixed run scheduled by length (today's default), then by whole shards 
     mix h100-s11-mix length
     mix h100-s11-mix-shards shards
     pack M ;;
+L)  # the mixed run scheduled by length alone
+    mix h100-s11-mix length
+    pack L ;;
+O)  # the mixed run by whole shards alone (session 10's batches)
+    mix h100-s11-mix-shards shards
+    pack O ;;
 Q)  # the old single-frequency bench config (compact 6 x 6 at 0.5 Hz, 131072 episodes, as -s9-single-w): one
     # length, so the schedule is session 10's
     timeout 300 python3 bench/bench_gpu_pipeline.py --parts e2e --workers 8 --shards-per-worker 2 --tag h100-s11-single \
