@@ -38,6 +38,12 @@ S)  # fabric_1's driver stage alone on 8192 made-up episodes, profiled; then the
         | tee $OUT/r/logs/transduction-h100-s11.log | tail -4
     cp bench/results/transduction-h100-s11.json $OUT/r/
     pack S ;;
+T)  # second machine: fabric_1's driver stage with load_batch's host passes on 1 and 4 threads, interleaved, not
+    # profiled (the A/B of load_field.HOST_PASS_THREADS)
+    timeout ${2:-240} python3 bench/bench_feed_stage.py --family fabric_1 --episodes 8192 --host-threads 1,4,1,4 --no-profile \
+        --tag h100-s11-threads 2>&1 | grep -v "^Module" | tee $OUT/r/logs/feed-stage-fabric_1-h100-s11-threads.log | tail -6
+    cp bench/results/feed-stage-fabric_1-h100-s11-threads.json $OUT/r/
+    pack T ;;
 G)  # pytest -m gpu on this session's code
     timeout ${2:-400} python3 -m pytest -q -m gpu -p no:cacheprovider 2>&1 | grep -v "^Module" | tee $OUT/r/logs/pytest-gpu-h100-s11.log | tail -12
     echo "pytest rc $?" | tee -a $OUT/r/logs/pytest-gpu-h100-s11.log
