@@ -46,7 +46,7 @@ GPU_E2E = "gpu-pipeline-h100-s9-single-w.json"  # the single-frequency bench con
 GPU_E2E_MIX = "gpu-pipeline-h100-s11-mix.json"  # the compact 6 x 6 record with mixed frequencies, session 11's code: batches by episode length (was -s10-mix-ramp2, -s9-mix-w, -s9-mix, -s7-mix-final, -s6-mix, -s5-mix)
 GPU_E2E_MIX_AB = ["gpu-pipeline-h100-s11-mix-shards.json", "gpu-pipeline-h100-s11-mix-split.json",
                   "gpu-pipeline-h100-s10-mix-ramp2.json"]  # the same command with other batches (the A/B of that record)
-FEED_STAGE = ["feed-stage-fabric_1-h100-s11.json"]  # the feed's driver stage alone, profiled (bench/bench_feed_stage.py)
+FEED_STAGE = ["feed-stage-fabric_1-h100-s11.json", "feed-stage-fabric_1-h100-s11-threads.json"]  # the feed's driver stage alone (bench/bench_feed_stage.py): profiled; the A/B of load_batch's host-pass threads
 USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w12.json", "user-cli-h100-cnt-lz4.json",
             "user-cli-h100-s6.json", "user-cli-h100-s6-fabric-w8.json", "user-cli-h100-s6-cnt-cold.json",
             "user-cli-h100-s6-cnt.json", "user-cli-h100-s6-cnt-handon.json", "user-cli-h100-s7-cnt.json",
@@ -380,6 +380,13 @@ def bench_gpu() -> str:
     for name in FEED_STAGE:
         fs = load(name)
         if not fs:
+            continue
+        if fs.get("runs") and not any(r["profiled"] for r in fs["runs"]):
+            rows = [[r["host_pass_threads"], num(r["seconds"])] + [num(r["feed_seconds"].get(k)) for k in ("simulate", "pack")]
+                    for r in fs["runs"]]
+            out += [f"The same stage not profiled, `load_batch`'s host passes over the sensordata on 1 or more threads "
+                    f"(`{name}`, {fs['device_name']}, {fs['family']}, {fs['episodes']} episodes, runs in the order made):\n",
+                    table(["host-pass threads", "stage s", "simulate s", "pack s"], rows)]
             continue
         rows = [[k, num(v)] for k, v in fs["feed_seconds"].items()]
         rows += [[f"`{t['fn']}` (own time; with what it calls {num(t['cumtime_s'])} s)", num(t["tottime_s"])]

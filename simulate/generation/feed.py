@@ -15,6 +15,10 @@ batches. Here a three-stage pipeline runs over batches of several shards' episod
 3. writer processes (spawned; one shard per task, at most PENDING_PER_WRITER queued each) write the shards and
    make their manifest entries.
 
+Where the run mixes episode lengths (cnt_pdms at 0.1-2 Hz), the batches go by length instead (`_schedule`): every
+shard's short episodes first, then the long ones in windows of shards; a shard is handed on when its last episode is
+packed (`Producer` keeps its pieces across batches).
+
 The files are those of `simulate.generation.run.write_shard`: an episode's channels do not depend on the batch it ran in.
 A writer that dies is replaced and its shard resubmitted (up to max_retries); finished shards stay, so a
 rerun resumes at the missing ones. Where /dev/shm has no room, the arrays travel pickled instead.
