@@ -354,8 +354,9 @@ def end_to_end(device: str, per_shard: int, workers: int, shards_per_worker: int
         from simulate.generation import feed
 
         fw = feed.feed_worlds(cfg)
-        r["feed_batches_episodes"] = [sum(min(per_shard, episodes - s * per_shard) for s in g)
-                                      for g in feed._groups(cfg, list(range(r["shards"])), fw)]
+        r["feed_batches_episodes"] = [b["episodes"] for b in feed.LAST_RUN_BATCHES]
+        r["feed_batches"] = [dict(b) for b in feed.LAST_RUN_BATCHES]  # in the order stepped (feed._schedule)
+        r["feed_length_schedule"] = feed.LENGTH_SCHEDULE
         r["feed_worlds_per_batch"] = fw
     print(f"end to end, {workers} worker(s), {mode}, {episodes} episodes ({per_shard} per shard): {samples / dt:.3g} samples/s, "
           f"{nbytes / dt / 1e6:.0f} MB/s on disk = {r['fraction_of_raw_write']:.0%} of raw write ({raw:.0f} MB/s), incl. start-up; "
@@ -375,6 +376,9 @@ def main() -> None:
     ap.add_argument("--shards-per-worker", type=int, default=1)
     ap.add_argument("--physics-processes", type=int, default=None, help="e2e: the GPU feed's physics processes")
     ap.add_argument("--ramp-batches", type=int, default=None, help="e2e: the GPU feed's RAMP_BATCHES (default: the module's)")
+    ap.add_argument("--schedule", choices=["length", "shards"], default="length",
+                    help="e2e: the GPU feed's batches: by episode length where lengths mix (feed._schedule, the default) "
+                         "or whole shards (feed._groups, session 10)")
     ap.add_argument("--batch-ram-fraction", type=float, default=None, help="e2e: the GPU feed's BATCH_RAM_FRACTION")
     ap.add_argument("--override", action="append", default=[], help="e2e: a scene override on top of the bench scene")
     ap.add_argument("--parts", default="physics,equivalence,stages,e2e")
@@ -416,6 +420,7 @@ def main() -> None:
             feed.RAMP_BATCHES = a.ramp_batches
         if a.batch_ram_fraction is not None:
             feed.BATCH_RAM_FRACTION = a.batch_ram_fraction
+        feed.LENGTH_SCHEDULE = a.schedule == "length"
         res["physics_processes"], res["e2e_overrides"] = feed.PHYSICS_PROCESSES, a.override
         res["ramp_batches"], res["batch_ram_fraction"] = feed.RAMP_BATCHES, feed.BATCH_RAM_FRACTION
         res["end_to_end"] = [end_to_end(a.device, a.shard_episodes, int(w), a.shards_per_worker, a.override) for w in a.workers.split(",")]

@@ -303,3 +303,49 @@ def test_feed_on_fabric_writes_the_serial_files(tmp_path):
                 assert ra.channels(ep) == rb.channels(ep)
                 for ch in ra.channels(ep):
                     assert ra.read(ep, ch).tobytes() == rb.read(ep, ch).tobytes(), (ep, ch)
+
+
+def test_feed_schedules_mixed_lengths_short_first_and_writes_the_serial_files(tmp_path, monkeypatch):
+    """Mixed episode lengths (1 and 4 Hz, one cycle: 120 and 45 samples, more than LENGTH_SPLIT apart): `_schedule`
+    puts the short episodes of every shard first, then the long ones in windows of shards, so a shard's episodes
+    come in two batches (shard 0 only short ones, shard 1 only long ones, shard 4 one short episode: its window of
+    long ones steps nothing); the feed
+    still writes the serial loop's files: same episodes in the same order, same bytes, same manifest."""
+    from simulate.generation import feed
+
+    mixed = load_scene("cnt_pdms", ["protocol.frequencies_hz=[1.0,4.0]", "protocol.cycles=1", "pad.taxels_x=3",
+                                    "pad.taxels_y=2", "generation.episodes=9", "generation.episodes_per_shard=2",
+                                    "generation.root_seed=3"])
+    from sensors.data.manifest import episode_seed
+
+    seeds = [episode_seed(3, k) for k in range(9)]
+    assert [p.n_samples for p in run.episode_protocols(mixed, seeds, list(range(9)))] == [45, 45, 120, 120, 120, 45, 45, 120, 45]
+    monkeypatch.setattr(feed, "FEED_WORLDS", 3)  # short batches of <= 3 x 1.25 episodes; long windows of ~1 long one
+    sched = feed._schedule(mixed, [0, 1, 2, 3, 4], 4)
+    short, long = feed.Select(False, 60), feed.Select(True, 60)
+    assert sched == [([0, 1, 2], short), ([3, 4], short), ([0, 1], long), ([2], long), ([3], long), ([4], long)]
+    monkeypatch.setattr(feed, "LENGTH_SCHEDULE", False)  # the A/B switch: whole shards
+    assert all(sel is None for _, sel in feed._schedule(mixed, [0, 1, 2, 3, 4], 4))
+    monkeypatch.setattr(feed, "LENGTH_SCHEDULE", True)
+    ref, out = tmp_path / "serial", tmp_path / "feed"
+    run.generate(mixed, ref)
+    seen = []
+    executors.generate(mixed, out, workers=2, feed=True, on_shard=lambda s, n, skip: seen.append((s, n)))
+    assert [(b["select"], b["episodes"], b["max_samples"]) for b in feed.LAST_RUN_BATCHES] == [
+        ("short <= 60 samples", 3, 45), ("short <= 60 samples", 2, 45), ("long > 60 samples", 2, 120),
+        ("long > 60 samples", 1, 120), ("long > 60 samples", 1, 120), ("long > 60 samples", 0, 0)]  # shard 4: none
+    assert sorted(seen) == [(0, 2), (1, 2), (2, 2), (3, 2), (4, 1)]
+    a, b = _episodes(ref, 5), _episodes(out, 5)
+    assert list(a) == list(b) == [f"ep-{k:06d}" for k in range(9)]
+    for ep in a:
+        assert list(a[ep]) == list(b[ep])
+        for ch in a[ep]:
+            assert a[ep][ch].dtype == b[ep][ch].dtype and a[ep][ch].tobytes() == b[ep][ch].tobytes(), (ep, ch)
+    for i in range(5):
+        with Recording(shard_path(ref, i)) as ra, Recording(shard_path(out, i)) as rb:
+            assert ra.episode_ids == rb.episode_ids
+            for ep in ra.episode_ids:
+                np.testing.assert_equal(rb.episode_attrs(ep), ra.episode_attrs(ep))
+    ma, mb = read_manifest(ref), read_manifest(out)
+    assert [s["episode_seeds"] for s in mb["shards"]] == [s["episode_seeds"] for s in ma["shards"]]
+    assert ma["splits"] == mb["splits"] and ma["config_sha256"] == mb["config_sha256"]

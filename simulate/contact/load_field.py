@@ -338,6 +338,41 @@ def iter_load_batches(
         yield sl, load_batch(cfg, sens[sl], target[sl], device_fields)
 
 
+HOST_PASS_THREADS = 4  # threads for load_batch's host passes over a large batch's sensordata (numpy copies release
+# the GIL): on the H100 host fabric_1's 8192 episodes (6.7 GB of float64 sensordata) spent 3.6 s in those passes
+# and 1.2 s more making the pose contiguous for the upload, on one thread (feed-stage-fabric_1-h100-s11.json) ...
+HOST_PASS_MIN_BYTES = 1 << 28  # ... for batches of at least this much sensordata (256 MiB; smaller ones: one thread)
+_HOST_PASSES = None
+
+
+def _columns_threaded(sens: np.ndarray, top: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """load_batch's pose (contiguous), world position, force (tangential x, y, normal compressive z) and contact
+    count out of sensordata (E, T, ns), episodes split over HOST_PASS_THREADS threads: the same elementwise
+    operations as the one-thread expressions, so the same values bit for bit (tests/test_load_field_host_passes.py)."""
+    global _HOST_PASSES
+    if _HOST_PASSES is None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        _HOST_PASSES = ThreadPoolExecutor(HOST_PASS_THREADS, thread_name_prefix="load-batch")
+    E, T, _ = sens.shape
+    q = np.empty((E, T, 3))
+    pos_world = np.empty((E, T, 3))
+    force = np.empty((E, T, 3))
+    found = np.empty((E, T), np.int64)
+    off = np.array([0.0, 0.0, top])
+
+    def part(e: slice) -> None:
+        np.copyto(q[e], sens[e, :, _POS])
+        np.add(q[e], off, out=pos_world[e])
+        np.copyto(force[e, :, :2], sens[e, :, _FORCE.start : _FORCE.start + 2])
+        np.negative(sens[e, :, _FORCE.start + 2], out=force[e, :, 2])
+        np.copyto(found[e], sens[e, :, _FOUND], casting="unsafe")
+
+    step = max(1, -(-E // (4 * HOST_PASS_THREADS)))
+    list(_HOST_PASSES.map(part, [slice(a, min(E, a + step)) for a in range(0, E, step)]))
+    return q, pos_world, force, found
+
+
 def load_batch(cfg: SceneConfig, sens: np.ndarray, target: np.ndarray, device_fields: str | None = None,
                fields: tuple | None = None) -> LoadBatch:
     """LoadBatch of episodes from their sensordata (E, T, nsensordata) and target (E, T): pose and net force
@@ -345,10 +380,14 @@ def load_batch(cfg: SceneConfig, sens: np.ndarray, target: np.ndarray, device_fi
     kernels on the physics device (kept there as flat Warp arrays when device_fields names that device).
     fields: (deformation, pressure, shear) made already (the GPU feed's time chunks), not computed again."""
     top = cfg.pad.thickness_m
-    q = sens[..., _POS]
-    pos_world = q + np.array([0.0, 0.0, top])
-    f_pad = sens[..., _FORCE]  # force on the pad, global frame
-    force = np.concatenate([f_pad[..., :2], -f_pad[..., 2:3]], axis=-1)
+    if sens.nbytes >= HOST_PASS_MIN_BYTES and HOST_PASS_THREADS > 1:
+        q, pos_world, force, found = _columns_threaded(sens, top)
+    else:
+        q = sens[..., _POS]
+        pos_world = q + np.array([0.0, 0.0, top])
+        f_pad = sens[..., _FORCE]  # force on the pad, global frame
+        force = np.concatenate([f_pad[..., :2], -f_pad[..., 2:3]], axis=-1)
+        found = sens[..., _FOUND].astype(np.int64)
     engine, device = physics_engine(cfg)
     if fields is not None:
         deform, pressure, shear = fields
@@ -364,7 +403,7 @@ def load_batch(cfg: SceneConfig, sens: np.ndarray, target: np.ndarray, device_fi
         target=target,
         indenter_pos_m=pos_world,
         contact_force_n=force,
-        contact_points=sens[..., _FOUND].astype(np.int64),
+        contact_points=found,
         deformation_m=deform,
         pressure_pa=pressure,
         shear_pa=shear,

@@ -15,6 +15,10 @@ batches. Here a three-stage pipeline runs over batches of several shards' episod
 3. writer processes (spawned; one shard per task, at most PENDING_PER_WRITER queued each) write the shards and
    make their manifest entries.
 
+Where the run mixes episode lengths (cnt_pdms at 0.1-2 Hz), the batches go by length instead (`_schedule`): every
+shard's short episodes first, then the long ones in windows of shards; a shard is handed on when its last episode is
+packed (`Producer` keeps its pieces across batches).
+
 The files are those of `simulate.generation.run.write_shard`: an episode's channels do not depend on the batch it ran in.
 A writer that dies is replaced and its shard resubmitted (up to max_retries); finished shards stay, so a
 rerun resumes at the missing ones. Where /dev/shm has no room, the arrays travel pickled instead.
@@ -43,6 +47,21 @@ PHYSICS_PROCESSES = 2  # each steps its own batch: one's host work (protocols, c
 # summed over the writer processes, "writers: episodes" (HDF5), "writers: close, fsync", "writers: sha256"; and
 # summed over the physics tasks, "physics: ..." (see step_worlds; the first batch's apart)
 LAST_RUN_SECONDS: dict[str, float] = {}
+# the batches of that run in the order stepped: shards (first, last), episodes, their select ("all", "short <= n
+# samples", "long > n samples") and the longest episode's samples (for bench/)
+LAST_RUN_BATCHES: list[dict] = []
+
+
+@dataclass(frozen=True)
+class Select:
+    """Which episodes of a feed batch its physics task steps: those longer than `cutoff` samples (long=True) or
+    the others (see `_schedule`)."""
+
+    long: bool
+    cutoff: int
+
+    def keeps(self, n_samples: int) -> bool:
+        return (n_samples > self.cutoff) == self.long
 
 
 def _shm_room(nbytes: int) -> bool:
@@ -69,8 +88,10 @@ def _views(buf, where: list[tuple[int, str, tuple[int, ...]]]) -> list[np.ndarra
     return [np.ndarray(shape, np.dtype(dt), buffer=buf, offset=off) for off, dt, shape in where]
 
 
-def step_worlds(cfg: SceneConfig, gids: list[int], threads: int = 1, submitted: float | None = None) -> tuple[list, dict, dict]:
-    """Physics task (in the feed's physics process): the protocols of episodes `gids` and, per length group,
+def step_worlds(cfg: SceneConfig, gids: list[int], threads: int = 1, submitted: float | None = None,
+                select: Select | None = None) -> tuple[list, dict, dict]:
+    """Physics task (in the feed's physics process): the protocols of episodes `gids` (with `select`, only those
+    it keeps, in the order of gids; each protocol's `index` is its episode's id) and, per length group,
     their (sensordata, target) from `simulate_sensors`, written straight into a shared-memory block the
     receiver unlinks: ({n_samples: (block name, layout)} or the arrays themselves where /dev/shm has no room);
     and where the task's time went ("waiting to start" since `submitted`, a time.time(), "imports", "protocols",
@@ -86,6 +107,8 @@ def step_worlds(cfg: SceneConfig, gids: list[int], threads: int = 1, submitted: 
 
     t1 = time.time()
     protos = episode_protocols(cfg, [episode_seed(cfg.generation.root_seed, k) for k in gids], gids)
+    if select is not None:
+        protos = [p for p in protos if select.keeps(p.n_samples)]
     t2 = time.time()
     spent = {"waiting to start": t0 - (submitted or t0), "imports": t1 - t0, "protocols": t2 - t1}
     out = {}
@@ -327,6 +350,64 @@ def _groups(cfg: SceneConfig, todo: list[int], worlds: int) -> list[list[int]]:
     return [g for g in groups if g]
 
 
+LENGTH_SCHEDULE = True  # schedule runs of mixed episode lengths by length (`_schedule`); False: `_groups` always
+LENGTH_SPLIT = 2.0  # a run whose longest episodes are more than this many times its shortest is scheduled by length ...
+LENGTH_SAMPLE = 512  # ... judged on the protocols of its first this many episodes (drawn in the driver, ~30 us each)
+SAMPLE_MARGIN = 1.25  # batches by length sized on the sample's shares, with this margin (see _schedule)
+
+
+def _schedule(cfg: SceneConfig, todo: list[int], worlds: int) -> list[tuple[list[int], Select | None]]:
+    """The feed's batches in the order the physics steps them: (shards, select), select None for all their episodes.
+
+    A batch's length groups step one after another, each for its length's sequential steps, and below ~15k
+    worlds a step costs about the same whatever the worlds (STEP_S_FLOOR in `simulate.contact.load_field`). So
+    a batch of whole shards of mixed lengths takes as long as its longest episodes whatever its size (session 10,
+    cnt_pdms at 0.1-2 Hz: the first batch 43 s, at 2/3 the episodes 41 s), and the driver and the writers idle
+    meanwhile. Where the run's longest episodes are more than LENGTH_SPLIT times its shortest (judged on its first
+    LENGTH_SAMPLE episodes), the short episodes (<= longest / LENGTH_SPLIT samples) of every shard step first, in
+    batches of at most FEED_WORLDS episodes per length and BATCH_RAM_FRACTION of the host's memory; the driver runs
+    their sensor chain and packs them while the long ones step in windows of consecutive shards of at least
+    FEED_WORLDS / 2 long episodes each (fewer windows repeat the long episodes' sequential steps less often, more
+    let the first windows' writes overlap the later windows' stepping); a shard goes to the writers when the last
+    of its episodes is packed. An episode's channels do not depend on its batch, and each file lists its episodes
+    in id order as before. Otherwise the batches of `_groups` (whole shards, `worlds` episodes after a ramp)."""
+    import math
+
+    from sensors.data.manifest import episode_seed
+    from simulate.generation.run import episode_ids_of_shard, episode_protocols
+
+    eps = {s: len(episode_ids_of_shard(cfg, s)) for s in todo}
+    sample = [k for s in todo for k in episode_ids_of_shard(cfg, s)[:LENGTH_SAMPLE]][:LENGTH_SAMPLE]
+    n = [p.n_samples for p in episode_protocols(cfg, [episode_seed(cfg.generation.root_seed, k) for k in sample], sample)]
+    if not LENGTH_SCHEDULE or not n or max(n) <= LENGTH_SPLIT * min(n):
+        return [(g, None) for g in _groups(cfg, todo, worlds)]
+    cutoff = int(max(n) / LENGTH_SPLIT)
+    ram = BATCH_RAM_FRACTION * os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    total = sum(eps.values())
+
+    def windows(lengths: list[int], min_parts: int) -> list[list[int]]:
+        """Consecutive runs of the shards, about equal in episodes, each with about FEED_WORLDS of these lengths'
+        episodes per length at most and their sensordata (float64, 20 values per sample) within `ram`, as
+        expected from the sample's share and mean length (SAMPLE_MARGIN: a share a little above the sample's
+        does not split a batch in two: two batches of short episodes would step side by side first and hold the
+        long ones back, as the H100 measured: -s11-mix-split)."""
+        share = len(lengths) / len(n)
+        cap = min(FEED_WORLDS * len(set(lengths)), ram / (8 * 20 * (sum(lengths) / len(lengths) + 1)))
+        parts = min(len(todo), max(1, min_parts, math.ceil(total * share / (SAMPLE_MARGIN * max(1.0, cap)))))
+        out, acc = [[]], 0
+        for s in todo:
+            if out[-1] and acc >= len(out) * total / parts:
+                out.append([])
+            out[-1].append(s)
+            acc += eps[s]
+        return out
+
+    short, long = [k for k in n if k <= cutoff], [k for k in n if k > cutoff]
+    long_parts = round(total * len(long) / len(n) / max(1, FEED_WORLDS // 2))
+    return ([(w, Select(False, cutoff)) for w in windows(short, 1)]
+            + [(w, Select(True, cutoff)) for w in windows(long, long_parts)])
+
+
 def produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, seconds: dict | None = None,
             stepped: tuple[list, dict] | None = None, pool: BlockPool | None = None) -> list[PackedShard]:
     """`iter_produce`'s shards in the order of `shards`."""
@@ -341,71 +422,98 @@ SLICES_PER_LENGTH = 4  # slices (at most SENSOR_SLICE episodes each) per length 
 def iter_produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, seconds: dict | None = None,
                  stepped: tuple[list, dict] | None = None, pool: BlockPool | None = None) -> Iterator[PackedShard]:
     """Simulate the episodes of `shards` as one batch and pack each shard's recorded channels, yielding each
-    shard as soon as all its episodes are packed (seconds: adds the time spent simulating and packing).
-    stepped: `step_worlds` of these episodes, run in the physics process; this process then runs only the load
-    field and the sensor chain. pool: pack into its shared blocks. Each slice's outputs come back from the GPU
-    into reused page-locked buffers (`host_staging`) and are packed before the next slice runs; each length
-    group goes in SLICES_PER_LENGTH slices or more."""
-    import time
+    shard as soon as all its episodes are packed (`Producer.batch` of a fresh producer)."""
+    return Producer(cfg, sensor, threads, seconds, pool).batch(shards, stepped)
 
-    from sensors.data.manifest import episode_seed
-    from sensors.warp_setup import host_staging
-    from simulate.generation.run import (
-        episode_attrs,
-        episode_ids_of_shard,
-        simulate_slices,
-    )
 
-    gids = [k for s in shards for k in episode_ids_of_shard(cfg, s)]
-    owner = {k: s for s in shards for k in episode_ids_of_shard(cfg, s)}
-    seeds = [episode_seed(cfg.generation.root_seed, k) for k in gids]
-    packs = {s: PackedShard(s) for s in shards}
-    left = {s: len(episode_ids_of_shard(cfg, s)) for s in shards}
-    placed: dict[int, tuple[str, dict, int, int]] = {}
-    seconds = {} if seconds is None else seconds
-    protos, physics, blocks = None, None, []
-    if stepped is not None:
-        protos, physics = stepped[0], {}
-        for n, handed in stepped[1].items():
-            if isinstance(handed[0], str):  # (block name, layout): views of the block, unlinked below
-                blocks.append(_attach(handed[0]))
-                handed = tuple(_views(blocks[-1].buf, handed[1]))
-            physics[n] = handed
-    try:
-        with host_staging():
-            t0 = time.perf_counter()
-            for pos, protos_s, arrays in simulate_slices(cfg, seeds, sensor, threads, gids, protos, physics, SLICES_PER_LENGTH):
-                t1 = time.perf_counter()
-                seconds["simulate"] = seconds.get("simulate", 0.0) + t1 - t0
-                runs: dict[int, list[int]] = {}
-                for j, i in enumerate(pos):
-                    runs.setdefault(owner[gids[i]], []).append(j)
-                done = []
-                for s, rows in runs.items():
-                    p = packs[s]
-                    p.specs = {n: (c.units, c.dims, c.description, c.per_episode) for n, c in arrays.items()}
-                    take = slice(rows[0], rows[-1] + 1) if rows[-1] - rows[0] + 1 == len(rows) else rows
-                    p.add_piece({n: (c.data[take] if c.per_episode else c.data) for n, c in arrays.items()}, pool)
-                    for r, j in enumerate(rows):
-                        i = pos[j]
-                        placed[gids[i]] = (f"ep-{gids[i]:06d}", episode_attrs(seeds[i], protos_s[j], gids[i]), len(p.pieces) - 1, r)
-                    left[s] -= len(rows)
-                    if not left[s]:
-                        p.episodes = [placed.pop(k) for k in episode_ids_of_shard(cfg, s)]
-                        done.append(p)
+class Producer:
+    """The driver's side of the feed: runs the load field and sensor chain of batch after batch and packs each
+    shard's recorded channels, keeping a shard's pieces across batches until its last episode is packed (a
+    shard's episodes may come in several batches: `_schedule`). seconds: adds the time spent simulating and
+    packing. pool: pack into its shared blocks."""
+
+    def __init__(self, cfg: SceneConfig, sensor, threads: int = 1, seconds: dict | None = None, pool: BlockPool | None = None):
+        self.cfg, self.sensor, self.threads, self.pool = cfg, sensor, threads, pool
+        self.seconds = {} if seconds is None else seconds
+        self.packs: dict[int, PackedShard] = {}
+        self.left: dict[int, int] = {}  # shard -> its episodes not yet packed
+        self.placed: dict[int, tuple[str, dict, int, int]] = {}  # episode id -> (id, attrs, piece, row)
+        self.finished: set[int] = set()  # shards yielded
+
+    def batch(self, shards: list[int], stepped: tuple[list, dict] | None = None) -> Iterator[PackedShard]:
+        """Simulate a batch of the episodes of `shards` and pack them, yielding each shard as soon as all its
+        episodes (of this batch and earlier ones) are packed. stepped: `step_worlds` of these episodes (all of
+        them, or those its select kept: the protocols' indices say which), run in the physics process; this
+        process then runs only the load field and the sensor chain. Each slice's outputs come back from the GPU
+        into reused page-locked buffers (`host_staging`) and are packed before the next slice runs; each length
+        group goes in SLICES_PER_LENGTH slices or more."""
+        import time
+
+        from sensors.data.manifest import episode_seed
+        from sensors.warp_setup import host_staging
+        from simulate.generation.run import (
+            episode_attrs,
+            episode_ids_of_shard,
+            simulate_slices,
+        )
+
+        cfg, seconds, packs, left, placed = self.cfg, self.seconds, self.packs, self.left, self.placed
+        ids = {s: episode_ids_of_shard(cfg, s) for s in shards}
+        owner = {k: s for s in shards for k in ids[s]}
+        for s in shards:
+            if s not in packs and s not in self.finished:
+                packs[s], left[s] = PackedShard(s), len(ids[s])
+        protos, physics, blocks = None, None, []
+        if stepped is not None:
+            protos, physics = stepped[0], {}
+            gids = [p.index for p in protos]
+            for n, handed in stepped[1].items():
+                if isinstance(handed[0], str):  # (block name, layout): views of the block, unlinked below
+                    blocks.append(_attach(handed[0]))
+                    handed = tuple(_views(blocks[-1].buf, handed[1]))
+                physics[n] = handed
+        else:
+            gids = [k for s in shards for k in ids[s]]
+        seeds = [episode_seed(cfg.generation.root_seed, k) for k in gids]
+        try:
+            with host_staging():
                 t0 = time.perf_counter()
-                seconds["pack"] = seconds.get("pack", 0.0) + t0 - t1
-                for p in sorted(done, key=lambda p: p.shard):
-                    yield p
-                t0 = time.perf_counter()
-    finally:
-        physics = None
-        for shm in blocks:
-            try:
-                shm.close()
-            except BufferError:  # a view still alive (an error unwinding): the memory goes with it
-                pass
-            shm.unlink()
+                for pos, protos_s, arrays in simulate_slices(cfg, seeds, self.sensor, self.threads, gids, protos, physics,
+                                                             SLICES_PER_LENGTH):
+                    t1 = time.perf_counter()
+                    seconds["simulate"] = seconds.get("simulate", 0.0) + t1 - t0
+                    runs: dict[int, list[int]] = {}
+                    for j, i in enumerate(pos):
+                        runs.setdefault(owner[gids[i]], []).append(j)
+                    done = []
+                    for s, rows in runs.items():
+                        p = packs[s]
+                        p.specs = {n: (c.units, c.dims, c.description, c.per_episode) for n, c in arrays.items()}
+                        take = slice(rows[0], rows[-1] + 1) if rows[-1] - rows[0] + 1 == len(rows) else rows
+                        p.add_piece({n: (c.data[take] if c.per_episode else c.data) for n, c in arrays.items()}, self.pool)
+                        for r, j in enumerate(rows):
+                            i = pos[j]
+                            placed[gids[i]] = (f"ep-{gids[i]:06d}", episode_attrs(seeds[i], protos_s[j], gids[i]),
+                                               len(p.pieces) - 1, r)
+                        left[s] -= len(rows)
+                        if not left[s]:
+                            p.episodes = [placed.pop(k) for k in ids[s]]
+                            done.append(packs.pop(s))
+                            del left[s]
+                            self.finished.add(s)
+                    t0 = time.perf_counter()
+                    seconds["pack"] = seconds.get("pack", 0.0) + t0 - t1
+                    for p in sorted(done, key=lambda p: p.shard):
+                        yield p
+                    t0 = time.perf_counter()
+        finally:
+            physics = None
+            for shm in blocks:
+                try:
+                    shm.close()
+                except BufferError:  # a view still alive (an error unwinding): the memory goes with it
+                    pass
+                shm.unlink()
 
 
 def generate_feed(
@@ -432,6 +540,7 @@ def generate_feed(
     from simulate.generation.shards import ShardFailedError, check_written
 
     LAST_RUN_SECONDS.clear()
+    LAST_RUN_BATCHES.clear()
     seconds = LAST_RUN_SECONDS
     t_start = time.perf_counter()
 
@@ -439,12 +548,16 @@ def generate_feed(
         seconds[key] = seconds.get(key, 0.0) + time.perf_counter() - t0
 
     ctx = mp.get_context("spawn")
-    groups = _groups(cfg, todo, worlds or feed_worlds(cfg))
     # the worlds step in their own processes, batches ahead of the load field + sensor chain here (kinds with
     # their own contact stage run it here); they start first, so their start-up overlaps the driver's
     physics = None if cfg.protocol.kind in CONTACT_STAGES else ProcessPoolExecutor(PHYSICS_PROCESSES, mp_context=ctx)
+    batches = (_schedule(cfg, todo, worlds or feed_worlds(cfg)) if physics
+               else [(g, None) for g in _groups(cfg, todo, worlds or feed_worlds(cfg))])
+    groups = [g for g, _ in batches]
+
     def step(b: int):
-        return physics.submit(step_worlds, cfg, [k for s in groups[b] for k in episode_ids_of_shard(cfg, s)], threads, time.time())
+        return physics.submit(step_worlds, cfg, [k for s in groups[b] for k in episode_ids_of_shard(cfg, s)], threads,
+                              time.time(), batches[b][1])
 
     ahead = [step(b) for b in range(min(PHYSICS_PROCESSES, len(groups)))] if physics else []
     try:
@@ -526,11 +639,15 @@ def generate_feed(
                                                "writer process died (complete shards are kept: rerun to resume)")
                     submit(p)
 
+    produce = Producer(cfg, sensor, threads, seconds, shared)
     add("start-up", t_start)
     try:
         for b, group in enumerate(groups):
             t0 = time.perf_counter()
-            collect(len(group))  # bounded memory: at most PENDING_PER_WRITER shards per writer not yet written
+            select = batches[b][1]
+            # bounded memory: at most PENDING_PER_WRITER shards per writer not yet written (a batch of short
+            # episodes completes only the shards without long ones: none where the run has many episodes)
+            collect(0 if select is not None and not select.long else len(group))
             add("wait for writers", t0)
             stepped = None
             if physics:
@@ -548,7 +665,12 @@ def generate_feed(
                     ahead.append(step(b + PHYSICS_PROCESSES))
                 elif not ahead:  # the last batch is here: the physics processes exit (free the GPU) meanwhile
                     physics.shutdown(wait=False)
-            for p in iter_produce(cfg, group, sensor, threads, seconds, stepped, shared):
+            LAST_RUN_BATCHES.append({
+                "shards": [group[0], group[-1]], "select": "all" if select is None else
+                f"{'long >' if select.long else 'short <='} {select.cutoff} samples",
+                "episodes": len(stepped[0]) if stepped else sum(len(episode_ids_of_shard(cfg, s)) for s in group),
+                "max_samples": max((p.n_samples for p in stepped[0]), default=0) if stepped else None})
+            for p in produce.batch(group, stepped):
                 submit(p)  # as soon as its episodes are packed: the writers start while the batch's last slices run
                 collect(0, block=False)
         shared.drain()
