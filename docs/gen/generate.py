@@ -55,7 +55,8 @@ USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w
             "user-cli-h100-s8-velostat-lzf.json", "user-cli-h100-s9-velostat.json", "user-cli-h100-s9-fabric.json",
             "user-cli-h100-s9-ntype.json", "user-cli-h100-s9-cnt.json", "user-cli-h100-s9-velostat-f32.json",
             "user-cli-h100-s9-cnt-f32.json", "user-cli-h100-s10-ntype.json", "user-cli-h100-s10-cnt.json",
-            "user-cli-h100-s10-velostat.json", "user-cli-h100-s10-fabric.json", "user-cli-h100-s10-fabric-nostream.json"]
+            "user-cli-h100-s10-velostat.json", "user-cli-h100-s10-fabric.json", "user-cli-h100-s10-fabric-nostream.json",
+            "user-cli-h100-s11-fabric.json"]
 PHYSICS_STEP_FAMILIES = ["cnt_pdms", "fabric_1", "velostat", "ntype"]  # physics-step-<family>.json (bench_physics_step.py)
 TRANSDUCTION_GPU = "transduction-h100-s11.json"  # chain with the fused pad sum, re-measured on session 11's machine (kernels as in s7; s9: 9.23e10; s7: first measured; s6: the parallel readout)
 FUSED_VARIANTS = "fused-variants-h100-s7.json"  # where the fused kernel's time goes (variants with parts left out)
