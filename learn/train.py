@@ -139,6 +139,12 @@ def evaluate(net: nn.Module, x: torch.Tensor, y: torch.Tensor, bs: int = 1024,
     return tot / max(n, 1)
 
 
+def _probe(fn: Callable[[int, nn.Module], None], epoch: int, net: nn.Module) -> None:
+    net.eval()
+    with torch.no_grad():
+        fn(epoch, net)
+
+
 def train_model(
     net: nn.Module,
     train: tuple[torch.Tensor, torch.Tensor],
@@ -149,6 +155,7 @@ def train_model(
     description: str = "train",
     keep_initial: bool = False,
     penalty: Callable[[], torch.Tensor] | None = None,
+    on_epoch: Callable[[int, nn.Module], None] | None = None,
 ) -> TrainHistory:
     """Train ``net`` so that ``net(x) ~ y`` in MSE; returns the history; leaves the best weights loaded.
 
@@ -181,6 +188,8 @@ def train_model(
     bad = 0
     if keep_initial and valid is not None:
         hist.best_loss, hist.best_epoch = evaluate(net, *valid), -1
+    if on_epoch is not None:
+        _probe(on_epoch, -1, net)
     t0 = time.perf_counter()
     cols = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("epochs"),
             TimeElapsedColumn(), TextColumn("{task.fields[info]}"))
@@ -203,6 +212,8 @@ def train_model(
             hist.train_loss.append(tot / max(n, 1))
             vl = evaluate(net, *valid) if valid is not None else hist.train_loss[-1]
             hist.valid_loss.append(vl)
+            if on_epoch is not None:
+                _probe(on_epoch, epoch, net)
             if vl < hist.best_loss - cfg.min_delta:
                 hist.best_loss, hist.best_epoch, bad = vl, epoch, 0
                 best_state = copy.deepcopy(net.state_dict())
