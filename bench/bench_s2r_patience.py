@@ -27,20 +27,6 @@ from pathlib import Path
 import numpy as np
 
 
-def replay(curve: list[float], patience: int) -> int:
-    """The epoch train_model(keep_initial=True) restores: curve[0] is epoch -1 (the arriving weights), curve[i + 1]
-    epoch i; strict improvement, stop after ``patience`` epochs without one. Returns the epoch (-1 ...)."""
-    best, best_e, bad = curve[0], -1, 0
-    for e, v in enumerate(curve[1:]):
-        if v < best:
-            best, best_e, bad = v, e, 0
-        else:
-            bad += 1
-        if bad >= patience:
-            break
-    return best_e
-
-
 def one_fit(base, heads, tails, kw: dict, seed: int, cap: int) -> dict:
     import torch
 
@@ -66,8 +52,10 @@ def one_fit(base, heads, tails, kw: dict, seed: int, cap: int) -> dict:
 
 
 def score(rec: dict, patience: int) -> dict:
-    e = replay(rec["valid_z"], patience)
-    e1 = replay(rec["t1_z"], patience)
+    from learn.train import stopping_epoch
+
+    e = stopping_epoch(rec["valid_z"], patience)
+    e1 = stopping_epoch(rec["t1_z"], patience)
     return {"best_epoch": e, "valid_tail_rmse_n": rec["tail_n"][e + 1], "held_out_best_epoch": e1,
             "held_out_second_half_rmse_n": rec["t2_n"][e1 + 1]}
 

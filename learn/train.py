@@ -28,7 +28,8 @@ from typing import Any
 import torch
 from torch import nn
 
-__all__ = ["TrainConfig", "TrainHistory", "current_device", "resolve_device", "seeded", "train_model", "training_device"]
+__all__ = ["TrainConfig", "TrainHistory", "current_device", "resolve_device", "seeded", "stopping_epoch", "train_model",
+           "training_device"]
 
 TRAIN_DEVICES = ("cpu", "cuda", "auto")  # what --train-device accepts (also "cuda:N")
 _DEVICE: contextvars.ContextVar[str] = contextvars.ContextVar("piezotwin_train_device", default="cpu")
@@ -137,6 +138,22 @@ def evaluate(net: nn.Module, x: torch.Tensor, y: torch.Tensor, bs: int = 1024,
         tot += float(loss_fn(net(xb), yb, reduction="sum"))
         n += yb.numel()
     return tot / max(n, 1)
+
+
+def stopping_epoch(curve: list[float], patience: int, keep_initial: bool = True) -> int:
+    """The epoch `train_model` restores on a validation curve, replayed: with ``keep_initial`` curve[0] is epoch -1
+    (the arriving weights) and curve[i + 1] epoch i, else curve[i] is epoch i; an epoch is best when it lowers the
+    best loss so far (min_delta 0), training stops after ``patience`` epochs without one. Training itself does not
+    depend on the patience, so one run to the epoch cap gives every patience's result (bench/bench_s2r_patience.py)."""
+    best, best_e, bad = (curve[0], -1, 0) if keep_initial else (math.inf, -1, 0)
+    for e, v in enumerate(curve[1:] if keep_initial else curve):
+        if v < best:
+            best, best_e, bad = v, e, 0
+        else:
+            bad += 1
+        if bad >= patience:
+            break
+    return best_e
 
 
 def _probe(fn: Callable[[int, nn.Module], None], epoch: int, net: nn.Module) -> None:
