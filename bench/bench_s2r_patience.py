@@ -51,13 +51,51 @@ def one_fit(base, heads, tails, kw: dict, seed: int, cap: int) -> dict:
     return rec
 
 
-def score(rec: dict, patience: int) -> dict:
+def scratch_fit(base, heads, tails, seed: int, cap: int, patience: int) -> dict:
+    """learn.finetune.train_from_scratch(base.kind, base.hparams, heads, tails, seed, max_epochs=cap, patience=...)
+    step by step (Compensator.fit, TorchCompensator._fit), to the cap, probed like one_fit. Scratch has no epoch -1
+    candidate: its records start at epoch 0."""
+    import torch
+
+    from learn import finetune as FT
+    from learn.models.base import make_model
+    from learn.normalize import ZScore
+    from learn.train import evaluate, seeded, train_model
+
+    t1, t2 = FT.split_tail(tails, 0.5)
+    comp = make_model(base.kind, **{**base.hparams, "max_epochs": cap, "patience": patience})
+    comp.n_in, comp.n_out = heads[0].x.shape[1], heads[0].y.shape[1]
+    comp.inputs, comp.targets, comp.units = list(heads[0].inputs), list(heads[0].targets), dict(heads[0].units)
+    comp.x_norm, comp.y_norm = ZScore.fit([s.x for s in heads]), ZScore.fit([s.y for s in heads])
+    z = lambda seqs: ([comp.x_norm.apply(s.x) for s in seqs], [comp.y_norm.apply(s.y) for s in seqs])
+    zx, zy = z(heads)
+    with seeded(seed):
+        comp.net = comp._build()
+    comp._prepare(zx)
+    tr, va, e1 = comp._examples(zx, zy, True), comp._examples(*z(tails), False), comp._examples(*z(t1), False)
+    rec: dict[str, list[float]] = {"valid_z": [], "tail_n": [], "t1_z": [], "t2_n": []}
+
+    def probe(epoch: int, net) -> None:
+        if epoch < 0:
+            return
+        with torch.no_grad():
+            rec["t1_z"].append(evaluate(net, *e1))
+        rec["tail_n"].append(FT.rmse_on(comp, tails))
+        rec["t2_n"].append(FT.rmse_on(comp, t2))
+
+    hist = train_model(comp.net, tr, va, comp.train_config(seed), progress=False, description="scratch", on_epoch=probe)
+    rec["valid_z"] = list(hist.valid_loss)
+    return rec
+
+
+def score(rec: dict, patience: int, keep_initial: bool = True) -> dict:
     from learn.train import stopping_epoch
 
-    e = stopping_epoch(rec["valid_z"], patience)
-    e1 = stopping_epoch(rec["t1_z"], patience)
-    return {"best_epoch": e, "valid_tail_rmse_n": rec["tail_n"][e + 1], "held_out_best_epoch": e1,
-            "held_out_second_half_rmse_n": rec["t2_n"][e1 + 1]}
+    o = 1 if keep_initial else 0  # index of epoch 0 in the records
+    e = stopping_epoch(rec["valid_z"], patience, keep_initial)
+    e1 = stopping_epoch(rec["t1_z"], patience, keep_initial)
+    return {"best_epoch": e, "valid_tail_rmse_n": rec["tail_n"][e + o], "held_out_best_epoch": e1,
+            "held_out_second_half_rmse_n": rec["t2_n"][e1 + o]}
 
 
 def main(argv=None):
@@ -75,6 +113,7 @@ def main(argv=None):
     ap.add_argument("--work", required=True, type=Path)
     ap.add_argument("--pipeline-seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--patience", type=int, nargs="+", default=[20, 120], help="the stopping rules replayed")
+    ap.add_argument("--scratch", action="store_true", help="also the scratch nets (one set: they do not depend on p)")
     ap.add_argument("-o", "--out", required=True, type=Path)
     a = ap.parse_args(argv)
     bm = json.loads((a.base / "metrics.json").read_text())
@@ -91,6 +130,22 @@ def main(argv=None):
     sizes = sorted({k for k in (1, 2, 4) if k < len(sp.train)} | {len(sp.train)})
     seeds = [int(k) for k in range(int(B["n_train_seeds"]))]
     kw = dict(policy=B["policy"], lr=B["lr"], norm=B["finetune_norm"], method="plain")
+    if a.scratch and "scratch" not in out:
+        base = load_checkpoint(a.base / "checkpoints" / "pretrained")  # its kind and hparams only
+        fits, t0 = [], time.perf_counter()
+        for k in sizes:
+            tr = [s for s in sp.train if s.key in order[:k]]
+            heads, tails = FT.split_tail(tr, float(B["valid_tail"]))
+            for sd in seeds:
+                rec = scratch_fit(base, heads, tails, sd, cap, int(B["finetune_patience"]))
+                fits.append({"n_runs": k, "seed": sd, **{f"P{P}": score(rec, P, keep_initial=False) for P in a.patience},
+                             "curve": {k2: [round(float(v), 6) for v in vals] for k2, vals in rec.items()}})
+                print(f"scratch n={k} seed={sd}: " + ", ".join(f"P{P} {fits[-1][f'P{P}']}" for P in a.patience), flush=True)
+        out["scratch"] = {"fits": fits, "seconds": time.perf_counter() - t0,
+                          **{f"P{P}": {"valid_tail_mean": float(np.mean([f[f"P{P}"]["valid_tail_rmse_n"] for f in fits])),
+                                       "held_out_second_half_mean": float(np.mean([f[f"P{P}"]["held_out_second_half_rmse_n"]
+                                                                                   for f in fits]))} for P in a.patience}}
+        a.out.write_text(json.dumps(out, indent=1, default=float))
     for p in a.pipeline_seeds:
         key = f"p{p}"
         if key in out["runs"]:
