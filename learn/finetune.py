@@ -287,7 +287,8 @@ def finetune(comp: Compensator, train: Seq[Sequence], valid: Seq[Sequence], *, p
              lr: float = 3e-4, max_epochs: int = 300, patience: int = 30, batch_size: int | None = None,
              seed: int = 0, progress: bool = False, norm: str = "real",
              rehearsal: Seq[Sequence] = (), method: str = "plain", l2sp_alpha: float = L2SP_ALPHA,
-             l2sp_beta: float = L2SP_BETA) -> tuple[Compensator, dict[str, Any]]:
+             l2sp_beta: float = L2SP_BETA,
+             on_epoch: Callable[[int, Compensator], None] | None = None) -> tuple[Compensator, dict[str, Any]]:
     """Fine-tune a copy of ``comp`` on mapped real runs; returns (compensator, info). See the module docstring.
 
     ``norm``: ``real`` re-estimates the input z-score on the real training runs (step 3 of the input map);
@@ -298,11 +299,16 @@ def finetune(comp: Compensator, train: Seq[Sequence], valid: Seq[Sequence], *, p
     ``rehearsal``: simulated episodes (same input map) added to the training examples (the pre-training
     distribution kept in view while adapting: limits forgetting when the real runs are few); early
     stopping still on the real valid runs only.
-    ``method``: ``plain``, ``l2sp`` (``l2sp_alpha``, ``l2sp_beta``) or ``lpft`` (see the module docstring)."""
+    ``method``: ``plain``, ``l2sp`` (``l2sp_alpha``, ``l2sp_beta``) or ``lpft`` (see the module docstring).
+    ``on_epoch``: a probe called as on_epoch(epoch, compensator) before training (epoch -1) and after each epoch,
+    with a copy of the net as it stands, its input affine folded (learn.train.train_model's ``on_epoch``; plain and
+    l2sp only). None: nothing runs."""
     if norm not in ("real", "checkpoint"):
         raise ValueError(f"norm must be 'real' or 'checkpoint'; got {norm!r}")
     if method not in FINETUNE_METHODS:
         raise ValueError(f"fine-tuning method must be one of {', '.join(FINETUNE_METHODS)}; got {method!r}")
+    if method == "lpft" and on_epoch is not None:
+        raise ValueError("on_epoch: plain and l2sp only (lpft runs two stages)")
     if method == "lpft":
         kw = dict(lr=lr, max_epochs=max_epochs, patience=patience, batch_size=batch_size, seed=seed, rehearsal=rehearsal)
         lp, lp_info = finetune(comp, train, valid, policy="head", norm=norm, **kw)
@@ -338,13 +344,18 @@ def finetune(comp: Compensator, train: Seq[Sequence], valid: Seq[Sequence], *, p
                       patience=patience, grad_clip=1.0, seed=seed)
     # the pre-trained weights stay a candidate: no step that worsens the validation loss is kept
     pen = l2sp_penalty(wrapped, float(l2sp_alpha), float(l2sp_beta), new=("a", "b")) if method == "l2sp" else None
+    probe = None
+    if on_epoch is not None:
+        def probe(epoch: int, _net: nn.Module) -> None:
+            snap = copy.deepcopy(c)
+            _fold_affine(snap, wrapped)
+            snap.net.eval()
+            on_epoch(epoch, snap)
     hist = train_model(wrapped, tr, va, cfg, progress=progress, description=f"finetune[{policy}]", keep_initial=True,
-                       penalty=pen)
+                       penalty=pen, on_epoch=probe)
     a = wrapped.a.detach().double().numpy()
     b = wrapped.b.detach().double().numpy()
-    # fold z' = a (x - m) / s + b into the z-score: mean m - b s / a, std s / a
-    m, s = c.x_norm.mean, c.x_norm.std
-    c.x_norm = ZScore(m - b * s / a, s / a)
+    _fold_affine(c, wrapped)
     for p in c.net.parameters():
         p.requires_grad_(True)
     c.net.eval()
@@ -356,6 +367,14 @@ def finetune(comp: Compensator, train: Seq[Sequence], valid: Seq[Sequence], *, p
             "n_train_runs": len(train), "n_valid_runs": len(valid), **hist.to_json()}
     c.history = {k: v for k, v in info.items() if k not in ("train_loss", "valid_loss")}
     return c, info
+
+
+def _fold_affine(c: Compensator, wrapped: _InputAffine) -> None:
+    """Fold the input affine z' = a (x - m) / s + b of ``wrapped`` into ``c``'s z-score: mean m - b s / a, std s / a."""
+    a = wrapped.a.detach().double().numpy()
+    b = wrapped.b.detach().double().numpy()
+    m, s = c.x_norm.mean, c.x_norm.std
+    c.x_norm = ZScore(m - b * s / a, s / a)
 
 
 def train_from_scratch(kind: str, hparams: dict[str, Any], train: Seq[Sequence], valid: Seq[Sequence], *,

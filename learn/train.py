@@ -28,7 +28,8 @@ from typing import Any
 import torch
 from torch import nn
 
-__all__ = ["TrainConfig", "TrainHistory", "current_device", "resolve_device", "seeded", "train_model", "training_device"]
+__all__ = ["TrainConfig", "TrainHistory", "current_device", "resolve_device", "seeded", "stopping_epoch", "train_model",
+           "training_device"]
 
 TRAIN_DEVICES = ("cpu", "cuda", "auto")  # what --train-device accepts (also "cuda:N")
 _DEVICE: contextvars.ContextVar[str] = contextvars.ContextVar("piezotwin_train_device", default="cpu")
@@ -139,6 +140,28 @@ def evaluate(net: nn.Module, x: torch.Tensor, y: torch.Tensor, bs: int = 1024,
     return tot / max(n, 1)
 
 
+def stopping_epoch(curve: list[float], patience: int, keep_initial: bool = True) -> int:
+    """The epoch `train_model` restores on a validation curve, replayed: with ``keep_initial`` curve[0] is epoch -1
+    (the arriving weights) and curve[i + 1] epoch i, else curve[i] is epoch i; an epoch is best when it lowers the
+    best loss so far (min_delta 0), training stops after ``patience`` epochs without one. Training itself does not
+    depend on the patience, so one run to the epoch cap gives every patience's result (bench/bench_s2r_patience.py)."""
+    best, best_e, bad = (curve[0], -1, 0) if keep_initial else (math.inf, -1, 0)
+    for e, v in enumerate(curve[1:] if keep_initial else curve):
+        if v < best:
+            best, best_e, bad = v, e, 0
+        else:
+            bad += 1
+        if bad >= patience:
+            break
+    return best_e
+
+
+def _probe(fn: Callable[[int, nn.Module], None], epoch: int, net: nn.Module) -> None:
+    net.eval()
+    with torch.no_grad():
+        fn(epoch, net)
+
+
 def train_model(
     net: nn.Module,
     train: tuple[torch.Tensor, torch.Tensor],
@@ -149,6 +172,7 @@ def train_model(
     description: str = "train",
     keep_initial: bool = False,
     penalty: Callable[[], torch.Tensor] | None = None,
+    on_epoch: Callable[[int, nn.Module], None] | None = None,
 ) -> TrainHistory:
     """Train ``net`` so that ``net(x) ~ y`` in MSE; returns the history; leaves the best weights loaded.
 
@@ -181,6 +205,8 @@ def train_model(
     bad = 0
     if keep_initial and valid is not None:
         hist.best_loss, hist.best_epoch = evaluate(net, *valid), -1
+    if on_epoch is not None:
+        _probe(on_epoch, -1, net)
     t0 = time.perf_counter()
     cols = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("epochs"),
             TimeElapsedColumn(), TextColumn("{task.fields[info]}"))
@@ -203,6 +229,8 @@ def train_model(
             hist.train_loss.append(tot / max(n, 1))
             vl = evaluate(net, *valid) if valid is not None else hist.train_loss[-1]
             hist.valid_loss.append(vl)
+            if on_epoch is not None:
+                _probe(on_epoch, epoch, net)
             if vl < hist.best_loss - cfg.min_delta:
                 hist.best_loss, hist.best_epoch, bad = vl, epoch, 0
                 best_state = copy.deepcopy(net.state_dict())

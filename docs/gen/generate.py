@@ -872,6 +872,50 @@ def sim2real_results() -> str:
                 "the fit's run-level sd (ANOVA; with the prior):\n\n"
                 + table(["split", "presses", "inside", "half width (ln)", "center offset (band sd)", "sd ratio",
                          "inside, own center", "inside, own sd", "run sd ANOVA", "run sd used"], brow))
+    pat = sorted(RESULTS.glob("s2r-patience-*.json"))
+    if pat:
+        prow, lrow = [], []
+        for f in pat:
+            d = json.loads(f.read_text())
+            split = f.stem.removeprefix("s2r-patience-")
+            st = d.get("stats") or {}
+            ps = sorted(d["runs"])
+            for P in d["patience_replayed"]:
+                k = f"P{P}"
+                cand = k == st.get("candidate")
+                vt, ho = st.get("valid_tail", {}), st.get("held_out_second_half", {})
+                prow.append([split, f"{P}" + (" (candidate)" if cand else " (default)"),
+                             ", ".join(f"{p}: {num(d['runs'][p][k]['valid_tail_mean'], 3)}" for p in ps),
+                             ", ".join(f"{p}: {num(d['runs'][p][k]['held_out_second_half_mean'], 3)}" for p in ps),
+                             f"{num(vt['diff_mean'], 2)} ± {num(vt['diff_se'], 2)}" if cand and vt else "",
+                             f"{num(ho['diff_mean'], 2)} ± {num(ho['diff_se'], 2)}" if cand and ho else "",
+                             (f"{'yes' if vt['improves'] else 'no'} / {'yes' if ho['improves'] else 'no'}") if cand and vt else ""])
+            sizes = sorted({fi["n_runs"] for fi in d["runs"][ps[0]]["fits"]})
+            P0, P1 = (f"P{P}" for P in d["patience_replayed"][:2])
+            for n in sizes:
+                ft = [fi for p in ps for fi in d["runs"][p]["fits"] if fi["n_runs"] == n]
+                sc = [fi for fi in (d.get("scratch") or {}).get("fits", []) if fi["n_runs"] == n]
+                mean = lambda fits, P, m: num(sum(fi[P][m] for fi in fits) / len(fits)) if fits else "–"
+                lrow.append([split, n, f"{mean(ft, P0, 'valid_tail_rmse_n')} / {mean(ft, P1, 'valid_tail_rmse_n')}",
+                             f"{mean(sc, P0, 'valid_tail_rmse_n')} / {mean(sc, P1, 'valid_tail_rmse_n')}",
+                             f"{mean(ft, P0, 'held_out_second_half_rmse_n')} / {mean(ft, P1, 'held_out_second_half_rmse_n')}",
+                             f"{mean(sc, P0, 'held_out_second_half_rmse_n')} / {mean(sc, P1, 'held_out_second_half_rmse_n')}",
+                             ", ".join(str(fi[P1]["best_epoch"]) for fi in ft if fi in d["runs"][ps[0]]["fits"]),
+                             ", ".join(str(fi[P1]["best_epoch"]) for fi in sc) or "–"])
+        out += ("\n\nEarly stopping of the fine-tuning (`bench/bench_s2r_patience.py`, `bench/results/s2r-patience-*.json`; "
+                "tenth round, rule written before scoring): each fine-tuning runs its whole 120-epoch cap once, probed per "
+                "epoch, and the stopping rules are replayed on its curve (training does not depend on the patience). The "
+                "fine-tuned RMSE on the training runs' validation tails (N, mean over budgets and fine-tuning seeds) per "
+                "pipeline seed, and the held-out check: stopped on the first half of each tail, scored on its second half. "
+                "Candidate minus default, mean ± se over p; adopt only if both improve (below minus their se) in both "
+                "Lupasic directions:\n\n"
+                + table(["split", "patience (epochs)", "validation tail per p (N)", "held-out second half per p (N)",
+                         "paired difference, tail", "paired difference, held-out", "improves (tail / held-out)"], prow))
+        out += ("\n\nFine-tuned against scratch on the same tails, both replayed with the same stopping (default / "
+                "candidate patience; N, mean over fine-tuning seeds and pipeline seeds; scratch does not depend on p), and "
+                "the epochs the whole-cap run restores (pipeline seed 0 for fine-tuning):\n\n"
+                + table(["split", "real runs", "fine-tuned, tail", "scratch, tail", "fine-tuned, held-out half",
+                         "scratch, held-out half", "fine-tuned best epochs (cap)", "scratch best epochs (cap)"], lrow))
     abl = sorted(RESULTS.glob("s2r-ablation-*.json"))
     if abl:
         arows = []
