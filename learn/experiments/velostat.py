@@ -77,6 +77,10 @@ class Mode:
     # input sets of ours (TCN_INPUTS) trained side by side; the one with the lower validation RMSE is ours.
     # "calibrated" holds every input of "compensated" plus the static calibrations' force estimates
     tcn_inputs: tuple[str, ...] = ("raw", "calibrated", "aged")
+    # every member of every input set trained as ONE batched network (learn.models.ensemble.fit_ensembles: each
+    # member its own seed, batch order, Adam state and early stopping; equal to one after another up to float
+    # summation order); False: the members one after another (tcn_workers then spreads the input sets)
+    tcn_batched: bool = True
     # the paper's membership band (eqs. 8-9) drives the compensation; our K-means band is fitted and reported
     tracker: dict[str, Any] = field(default_factory=lambda: {"smooth": 5, "lag": 5, "domain": "conductance",
                                                              "bounds": tuple(PAPER["bounds"])})
@@ -567,9 +571,28 @@ def _fit_tcn(xs, ys, vx, vy, names, device: str | None, *, seed: int, n_members:
     t0 = time.perf_counter()
     with (training_device(device) if device is not None else _cl.nullcontext()):
         tcn.fit(xs, ys, valid=(vx, vy), seed=seed, progress=progress, inputs=names, targets=TARGETS,
-                units={**{n: ("mS" if n.startswith("conductance") else "mm" if n.endswith("_mm") else "N" if n.endswith("_n") else "1")
-                          for n in names}, "force": "N"})
+                units=tcn_units(names))
     return tcn, time.perf_counter() - t0
+
+
+def tcn_units(names: list[str]) -> dict[str, str]:
+    return {**{n: ("mS" if n.startswith("conductance") else "mm" if n.endswith("_mm") else "N" if n.endswith("_n") else "1")
+               for n in names}, "force": "N"}
+
+
+def _fit_tcn_batched(data: dict[str, tuple], *, seed: int, n_members: int, member_hparams: dict):
+    """Ours on every input set at once: data[variant] = (xs, ys, vx, vy); all members of all sets trained as one
+    batched network on the current training device -> ({variant: ensemble}, seconds of the whole group)."""
+    from learn.models import make_model
+    from learn.models.ensemble import fit_ensembles
+
+    ens = {v: make_model("ensemble", member="tcn", n_members=n_members, member_hparams=member_hparams, batched=True)
+           for v in data}
+    t0 = time.perf_counter()
+    fit_ensembles([(ens[v], {"xs": xs, "ys": ys, "valid": (vx, vy), "seed": seed, "inputs": TCN_INPUTS[v],
+                             "targets": TARGETS, "units": tcn_units(TCN_INPUTS[v])})
+                   for v, (xs, ys, vx, vy) in data.items()])
+    return ens, time.perf_counter() - t0
 
 
 @single_thread
@@ -796,7 +819,7 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
             "creep": creep, "clustering": clustering, "bp_search": bp_search, "models": results, "paper": PAPER,
             "findings": findings(results, creep, clustering, bp_search),
             "run": {"workers": int(workers), "tcn_workers": int(tcn_workers), "bp_device": bp_device,
-                    "tcn_device": tcn_dev},
+                    "tcn_device": tcn_dev, "tcn_batched": bool(md.tcn_batched)},
         }
         if partial:
             metrics["partial"] = partial
@@ -825,7 +848,14 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
                 jobs[variant] = (lambda t, c, a: (lambda s: tcn_features(s, t, c, a)))(trk, chs, rate if variant == "aged" else None)
             fit_kw = {"seed": seed, "n_members": md.tcn_members, "member_hparams": md.tcn, "progress": progress}
             pool = None
-            if tcn_workers > 1 and len(jobs) > 1:  # the input sets side by side, each in its own process
+            batched = None
+            if md.tcn_batched and jobs:
+                batched = _fit_tcn_batched({v: ([f(s) for s in tr], [s.y for s in tr], [f(s) for s in va], [s.y for s in va])
+                                            for v, f in jobs.items()}, seed=seed, n_members=md.tcn_members,
+                                           member_hparams=md.tcn)
+                log(f"TCN ensembles, {len(jobs)} input sets x {md.tcn_members} members as one batched network on "
+                    f"{current_device()}: {batched[1]:.0f} s")
+            elif tcn_workers > 1 and len(jobs) > 1:  # the input sets side by side, each in its own process
                 import multiprocessing as mp
                 from concurrent.futures import ProcessPoolExecutor
 
@@ -834,7 +864,9 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
                                        [s.y for s in va], TCN_INPUTS[v], current_device(), **fit_kw)
                         for v, f in jobs.items()}
             for variant, feats in jobs.items():
-                if pool is not None:
+                if batched is not None:
+                    tcn, fit_s = batched[0][variant], batched[1]
+                elif pool is not None:
                     tcn, fit_s = futs[variant].result()
                 else:
                     tcn, fit_s = _fit_tcn([feats(s) for s in tr], [s.y for s in tr], [feats(s) for s in va],
