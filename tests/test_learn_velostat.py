@@ -1,6 +1,7 @@
 """velostat paper compensators: K-means / G_J, silhouette, memberships, creep tracking, BP net, experiment."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -578,3 +579,35 @@ def test_ae_errors_top_steps_by_loading_speed():
     assert a["n"] == 30 and a["max_abs_n"] == pytest.approx(1.5)
     assert a["top_signed_by_speed_n"] == {"1": pytest.approx(-1.5), "6": pytest.approx(0.5)}
     assert a["worst_point"][0] == "A" and a["worst_point"][1] >= 13 and a["worst_point"][3] == 1.0
+
+
+@pytest.mark.slow  # two tiny runs (~25 s each on 2 cores), the second's shards in 2 spawned processes
+def test_ours_only_run_merges_into_the_record_of_the_same_data(tmp_path):
+    """bench/device_full_velostat.py's ours-only path: a run with ours_only (data shards in processes) makes the same
+    data and the same ours as the whole run, and merge_ours puts ours into the record (chains kept, findings
+    recomputed, partial dropped); a record of other data is refused."""
+    import importlib.util
+    import json as _json
+
+    from learn.experiments import velostat as V
+
+    spec = importlib.util.spec_from_file_location("dfv", Path(__file__).parents[1] / "bench" / "device_full_velostat.py")
+    dfv = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(dfv)
+    kw = dict(mode="tiny", progress=False, log=lambda s: None)
+    rec = V.run(tmp_path / "rec", **kw)
+    new = V.run(tmp_path / "ours", ours_only=True, gen_workers=2, **kw)
+    assert new["ours_only"] and set(new["models"]) == {"mean", "raw_bp", "paper_unit", "tcn"}
+    assert new["datasets"]["mix"]["content_sha256"] == rec["datasets"]["mix"]["content_sha256"]
+    old = _json.loads(_json.dumps(rec))
+    old["models"].pop("tcn")
+    old["partial"] = "the paper's chains only"
+    m = dfv.merge_ours(old, new, {"commit": "abc", "tcn_device": "cpu"}, "none", "abc")
+    assert "partial" not in m and m["machine"]["ours"]["replaced_partial"] == "the paper's chains only"
+    assert m["models"]["tcn"]["test"] == rec["models"]["tcn"]["test"]  # the same ours as the whole run
+    assert m["models"]["literal_unit"] == rec["models"]["literal_unit"]  # the record's chains untouched
+    assert all(c["equal"] for c in m["machine"]["ours"]["chains_refitted_vs_record"].values())
+    assert m["findings"]["ours_vs_every_paper_model"] == rec["findings"]["ours_vs_every_paper_model"]
+    old["datasets"]["cal"]["content_sha256"] = "0" * 64
+    with pytest.raises(ValueError, match="content_sha256"):
+        dfv.merge_ours(old, new, {}, "none", "abc")

@@ -599,11 +599,17 @@ def _fit_tcn_batched(data: dict[str, tuple], *, seed: int, n_members: int, membe
 def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None = None,
         overrides: list[str] | None = None, models: list[str] | None = None, seed: int = 0,
         progress: bool = True, log: Callable[[str], None] = print, workers: int = 1,
-        tcn_device: str | None = None, tcn_workers: int = 1) -> dict[str, Any]:
+        tcn_device: str | None = None, tcn_workers: int = 1, gen_workers: int = 1,
+        ours_only: bool = False) -> dict[str, Any]:
     """workers > 1: each BP hidden-node search trains its nets in that many CPU processes (same nets);
     tcn_workers > 1: ours' input sets train side by side in that many processes (same nets on the CPU);
     tcn_device: where ours trains (default: the current training device, as the BP nets); both are recorded
-    in metrics["run"]. The numbers depend on neither but tcn_device (CUDA vs CPU float rounding)."""
+    in metrics["run"]. The numbers depend on neither but tcn_device (CUDA vs CPU float rounding).
+    gen_workers > 1: each data folder's shards made in that many processes (the same data, content hash).
+    ours_only: ours (TCN) and what its inputs need (the creep tracker, the units, the BP chains CALIBRATED_FROM),
+    tested with the trivial mean and those chains; none of the paper-side diagnostics (K-means readings, readout
+    sensitivity, Fig. 22a, the other chains, plots): the run that adds ours to a recorded run of the same data
+    (bench/device_full_velostat.py merge). metrics["ours_only"] says so."""
     import torch
 
     from learn.checkpoint import save_checkpoint
@@ -619,6 +625,8 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
     unknown = [k for k in (models or []) if k not in md_models(md)]
     if unknown:
         raise ValueError(f"unknown model(s) {unknown}; known: {sorted(md_models(md))}")
+    if ours_only:  # ours and the chains its "calibrated" / "aged" inputs read
+        models = ["tcn", CALIBRATED_FROM[0], CALIBRATED_FROM[1][0]]
     want = lambda k: models is None or k in models or k == "mean"
     bp_device = current_device() if workers <= 1 else "cpu"
     tcn_dev = resolve_device(tcn_device) if tcn_device is not None else current_device()
@@ -630,7 +638,12 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
     seqs, fps = {}, {}
     for name, cfg in cfgs.items():
         t0 = time.perf_counter()
-        generate(cfg, base / name)
+        if gen_workers > 1:  # the shards in processes: the same per-episode channels (content hash) as serially
+            from simulate.generation.executors import generate as generate_parallel
+
+            generate_parallel(cfg, base / name, workers=gen_workers, feed=False, threads=1)
+        else:
+            generate(cfg, base / name)
         seqs[name] = _load(base / name, cfg)
         fps[name] = dataset_fingerprint(base / name)
         log(f"data {name}: {base / name} ({len(seqs[name])} episodes, {time.perf_counter() - t0:.1f} s incl. reuse)")
@@ -656,14 +669,15 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
              "silhouette": tracker.silhouette_, "n_samples": tracker.n_samples_seen_, "r_open_ohm": tracker.r_open,
              "fit_recordings": len(fit_on), "fit_kinds": list(md.tracker_fit_kinds),
              "fit_seconds": time.perf_counter() - t0, **md.tracker}
-    one = CreepTracker(seed=seed, **{**md.tracker, "lag": ONE_CYCLE_LAG}).fit([s.x[:, 0] for s in fit_on])
-    creep["one_cycle"] = {"lag": ONE_CYCLE_LAG, "kmeans_bounds": list(one.kmeans_bounds_),
-                          "centres": one.kmeans.cluster_centers_[:, 0].tolist(), "silhouette": one.silhouette_}
-    lit = CreepTracker(seed=seed, **{**md.tracker, **PAPER_READING}).fit([s.x[:, 0] for s in fit_on])
-    creep["paper_reading"] = {**PAPER_READING, "kmeans_bounds": list(lit.kmeans_bounds_),
-                              "centres": lit.kmeans.cluster_centers_[:, 0].tolist(),
-                              "counts": lit.kmeans.counts_.tolist(), "silhouette": lit.silhouette_}
-    creep["by_speed"] = kmeans_by_speed(fit_on, md.tracker, seed)
+    if not ours_only:  # the K-means readings beside the compensation's (diagnostics: nothing downstream reads them)
+        one = CreepTracker(seed=seed, **{**md.tracker, "lag": ONE_CYCLE_LAG}).fit([s.x[:, 0] for s in fit_on])
+        creep["one_cycle"] = {"lag": ONE_CYCLE_LAG, "kmeans_bounds": list(one.kmeans_bounds_),
+                              "centres": one.kmeans.cluster_centers_[:, 0].tolist(), "silhouette": one.silhouette_}
+        lit = CreepTracker(seed=seed, **{**md.tracker, **PAPER_READING}).fit([s.x[:, 0] for s in fit_on])
+        creep["paper_reading"] = {**PAPER_READING, "kmeans_bounds": list(lit.kmeans_bounds_),
+                                  "centres": lit.kmeans.cluster_centers_[:, 0].tolist(),
+                                  "counts": lit.kmeans.counts_.tolist(), "silhouette": lit.silhouette_}
+        creep["by_speed"] = kmeans_by_speed(fit_on, md.tracker, seed)
     ckd.mkdir(parents=True, exist_ok=True)
     (ckd / "creep_tracker.json").write_text(dumps(tracker.state()))
     log(f"creep tracker: K-means band {tracker.kmeans_bounds_[0]:.4f}/{tracker.kmeans_bounds_[1]:.4f}, used "
@@ -672,7 +686,7 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
     dr_raw, dr_comp, diag = r_drift(tracker, te, [s.x[:, 0] for s in te], rate)
     creep["r_drift_raw_mean"], creep["r_drift_comp_mean"] = float(np.mean(dr_raw)), float(np.mean(dr_comp))
     creep["hold_diagnostics"] = hold_diagnostics(np.asarray(diag, float), cfg)
-    if all("resistance" in s.extra for s in fit_on + te):
+    if not ours_only and all("resistance" in s.extra for s in fit_on + te):
         t0 = time.perf_counter()
         creep["readout_sensitivity"] = readout_sensitivity(fit_on, te, cfg, md.tracker, seed, rate)
         log(f"readout sensitivity ({time.perf_counter() - t0:.0f} s): " + "; ".join(
@@ -744,7 +758,7 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
     # Fig. 22a / Figs. 9-10: one calibrated sensor, its output before and after the compensation. The same
     # compensated-calibration BP (paper_unit) read on the measured R and on the compensated R of every test hold
     same_of = next((k for k in ("paper_unit", "paper_cluster") if k in chains), None)
-    if same_of is not None:
+    if same_of is not None and not ours_only:
         pu = chains[same_of]
         same, stair = {}, {}
         for name, comp in (("raw", False), ("compensated", True)):
@@ -819,8 +833,12 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
             "creep": creep, "clustering": clustering, "bp_search": bp_search, "models": results, "paper": PAPER,
             "findings": findings(results, creep, clustering, bp_search),
             "run": {"workers": int(workers), "tcn_workers": int(tcn_workers), "bp_device": bp_device,
-                    "tcn_device": tcn_dev, "tcn_batched": bool(md.tcn_batched)},
+                    "tcn_device": tcn_dev, "tcn_batched": bool(md.tcn_batched), "gen_workers": int(gen_workers)},
         }
+        if ours_only:
+            metrics["ours_only"] = ("ours (TCN) with the chains its inputs read (" + ", ".join(k for k in chains)
+                                    + ") and the trivial mean; no paper-side diagnostics: to be merged into a recorded "
+                                    "run of the same data")
         if partial:
             metrics["partial"] = partial
         (out / "metrics.json").write_text(dumps(metrics))
@@ -887,6 +905,9 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
     if "tcn" in comps:
         evaluate("tcn")
     metrics = write_metrics()
+    if ours_only:
+        log(f"wrote {out / 'metrics.json'} (ours only)")
+        return metrics
     try:
         plots(out, tracker, tr, cl, units, curves, levels, te, preds, results, dpi=50 if mode == "tiny" else 110)
     except Exception as exc:  # noqa: BLE001
