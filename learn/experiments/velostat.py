@@ -1019,9 +1019,14 @@ def targets_table(runs: dict[str, dict[str, Any]]) -> str:
             if key == "time":
                 w, c = m["machine"]["wall_s"], m["machine"].get("cpu_s")
                 dev = m["machine"].get("train_device_tcn")
+                o = m["machine"].get("ours") or {}
                 return (f"{w / 60:.1f} min" + (f" ({yes(w < 600)})" if m.get("mode") == "quick" else "")
-                        + (f" (device machine, ours on {dev})" if dev and dev != "cpu" else "")
-                        + (f"; {c / 60:.1f} CPU-min" if c else ""))
+                        + (f" (device machine, ours on {dev})" if dev and dev != "cpu" and not o else "")
+                        + (" (device machine: the paper's chains)" if o else "")
+                        + (f"; {c / 60:.1f} CPU-min" if c else "")
+                        + (f"; ours in a later run of the same data: {o['wall_s'] / 60:.1f} min wall (data, the chains "
+                           f"ours reads and ours; its {o.get('fit_seconds', 0) / 60:.1f} min of training on "
+                           f"{o.get('train_device_tcn')}, one batched network)" if o.get("wall_s") else ""))
         except (KeyError, TypeError, IndexError):
             return "–"
         return "–"
@@ -1176,6 +1181,16 @@ def report(m: dict[str, Any]) -> str:
                             f"{r['kmeans_bounds'][0]:.4f} / {r['kmeans_bounds'][1]:.4f}", f"{r['silhouette']:.3f}",
                             f"{100 * r['r_drift_removed_frac']:.0f} %"] for r in C["readout_sensitivity"]]))
     L += ["", "## Models on the held-out recordings", ""]
+    o = (m.get("machine") or {}).get("ours") if isinstance(m.get("machine"), dict) else None
+    if o:
+        ch = {k: v for k, v in (o.get("chains_refitted_vs_record") or {}).items() if k != "mean"}
+        L += [f"Ours (TCN) comes from a later run on the same data (content hashes and split checked against this "
+              f"record; commit {o.get('git_commit')}, {o.get('gpu')}): its input sets x members trained as one batched "
+              f"network on {o.get('train_device_tcn')} in {fmt(o.get('fit_seconds'), 0)} s. The chains its inputs read ("
+              + ", ".join(ch) + ") were fitted again in that run: "
+              + ("equal to the recorded ones." if ch and all(c["equal"] for c in ch.values()) else
+                 "test RMSE " + "; ".join(f"{k} {fmt(c['rmse_refitted'])} against the recorded {fmt(c['rmse_recorded'])} N"
+                                          for k, c in ch.items()) + ".") + " The other rows are this record's.", ""]
     rows = []
     for k in MODEL_KEYS:
         if k not in R:
