@@ -387,6 +387,8 @@ def train_tcn_group(nets: list[CausalTCN], trains: list[tuple[torch.Tensor, torc
         n, b = idx.shape
         return xb.transpose(0, 1).reshape(b, n * cmax, -1), Y[uid[:, None], idx].transpose(0, 1)
 
+    if dev.type == "cuda":  # the grouped dilated convolutions: let cuDNN time its algorithms once per shape
+        torch.backends.cudnn.benchmark = True
     gens = [torch.Generator().manual_seed(int(c.seed)) for c in cfgs]
     hist = [TrainHistory(device=str(dev)) for _ in range(G)]
     best = [r.clone() for r in blocks]  # each member's best weights, [G, size] per layer (CPU)
