@@ -611,3 +611,46 @@ def test_ours_only_run_merges_into_the_record_of_the_same_data(tmp_path):
     old["datasets"]["cal"]["content_sha256"] = "0" * 64
     with pytest.raises(ValueError, match="content_sha256"):
         dfv.merge_ours(old, new, {}, "none", "abc")
+
+
+@pytest.mark.slow  # two tiny runs through the shell script (~1 min on 2 cores)
+def test_device_script_ours_only_start_poll_collect(tmp_path):
+    """bench/device_full_velostat.sh as the coordinator types it, at the tiny scale on the CPU: a recorded run
+    (start, poll, collect), then VF_ONLY=ours (start, poll, collect) merges ours into that record (exit 0); with the
+    record's data hash changed, collect refuses (exit 3) and leaves the record as it was."""
+    import os
+    import subprocess
+    import sys
+
+    root = Path(__file__).parents[1]
+    dest = tmp_path / "dest"
+    env = {**os.environ, "PY": sys.executable, "PYTHONPATH": str(root), "OUT": str(tmp_path / "out"), "VF_MODE": "tiny",
+           "VF_SEEDS": "0", "VF_WORKERS": "1", "VF_TCN": "cpu", "VF_DEST": str(dest), "VF_POLL_S": "240",
+           "VF_COMMIT": "test"}
+
+    def sh(cmd: str, **extra) -> subprocess.CompletedProcess:
+        return subprocess.run(["bash", str(root / "bench" / "device_full_velostat.sh"), cmd], cwd=root,
+                              env={**env, **extra}, capture_output=True, text=True, timeout=600)
+
+    rec = {"VF_RUN": str(tmp_path / "rec")}
+    for c in ("start", "poll", "collect"):
+        assert sh(c, **rec).returncode == 0, c
+    path = dest / "velostat-tiny.json"
+    m = json.loads(path.read_text())
+    tcn = m["models"].pop("tcn")
+    m["partial"] = "the paper's chains only"
+    path.write_text(json.dumps(m))
+    ours = {"VF_RUN": str(tmp_path / "ours"), "VF_ONLY": "ours", "VF_GEN_WORKERS": "2"}
+    for c in ("start", "poll"):
+        assert sh(c, **ours).returncode == 0, c
+    r = sh("collect", **ours)
+    assert r.returncode == 0, r.stdout + r.stderr
+    merged = json.loads(path.read_text())
+    assert merged["models"]["tcn"]["test"] == tcn["test"] and "partial" not in merged
+    assert merged["machine"]["ours"]["git_commit"] == "test" and merged["machine"]["ours"]["gen_workers"] == 2
+    merged["datasets"]["mix"]["content_sha256"] = "0" * 64
+    path.write_text(json.dumps(merged))
+    before = path.read_text()
+    r = sh("collect", **ours)
+    assert r.returncode == 3 and "REFUSED" in r.stdout
+    assert path.read_text() == before

@@ -15,7 +15,8 @@ and our TCN, on the same held-out recordings; the paper's numbers beside ours.
            recordings without labels; per-hold compensated R of the calibration episodes -> per-unit R(F)
            curves -> Ward linkage, elbow -> BP (unit + R and cluster + R -> F), hidden nodes 3..12.
   ours     a seed ensemble of TCNs (learn.models.ensemble, members trained with seeds seed..seed+n-1, estimates
-           averaged) over (conductance, decoded position, touch) history; mean = trivial baseline.
+           averaged) over (conductance, decoded position, touch) history; every member of every input set trained
+           as one batched network (learn.models.tcn.train_tcn_group); mean = trivial baseline.
   report   report.md, metrics.json, delta_clusters.png, units.png, creep.png, ae_error.png, checkpoints/.
 """
 
