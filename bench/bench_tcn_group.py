@@ -42,7 +42,10 @@ def main() -> None:
         # max_batches_per_epoch = steps, patience high: one epoch of `steps` batches, then the validation
         cfgs.append(TrainConfig(lr=2e-3, batch_size=16, max_epochs=1, patience=100, max_batches_per_epoch=a.steps,
                                 seed=k, device=a.device))
-    train_tcn_group(nets[:2], trains[:2], valids[:2], [TrainConfig(**{**cfgs[0].to_json(), "max_batches_per_epoch": 2})] * 2)
+    # warm-up on the same shapes (oneDNN / cuDNN pick and compile their kernels on the first calls of each shape)
+    warm = [TrainConfig(**{**c.to_json(), "max_batches_per_epoch": 3}) for c in cfgs]
+    train_tcn_group(nets, trains, [None] * len(nets), warm)
+    train_model(nets[0], trains[0], None, warm[0], progress=False)
     t0 = time.perf_counter()
     h = train_tcn_group(nets, trains, [None] * len(nets), cfgs)
     grp = time.perf_counter() - t0
