@@ -22,15 +22,35 @@
 # (9 TCN members of <= 200 epochs x ~470 batches; its 3 input sets side by side, ~1-2 s an epoch on the GPU)
 # ~5-8 min: seed 0 complete in ~16 min, seeds 1-2 in ~19-21 min. A seed still training when the machine goes
 # back leaves a metrics.json marked partial (the paper's chains are tested before ours trains); collect takes it.
+#
+# VF_ONLY=ours (session 11): ours only, merged into the recorded velostat-$VF_MODE[-seedS].json (whose chains stay as
+# recorded). start: per seed the same data again (each folder's shards in VF_GEN_WORKERS processes, default 5), the
+# creep tracker, the units and the two BP chains ours' inputs read (raw_bp, paper_unit; VF_WORKERS processes each,
+# default "5 5 5"), then ours: its 3 input sets x 3 members as ONE batched network on the GPU (one GPU process per
+# seed). collect: `device_full_velostat.py merge` checks each seed's data (content and config hashes per folder)
+# and split against the record and merges ours, or refuses that seed (the record untouched, exit 3), then packs
+# the records and logs into $OUT/velostat-$VF_MODE.tgz. Default run folder runs/velostat-$VF_MODE-ours.
+# Estimate for 16 cores + one H100 (local measurements scaled, see DEVICE_RUN.txt): data ~1-2 min, chains ~2 min,
+# ours ~2-5 min (<= 200 epochs of ~460 batches at ~2-3 ms a step); seeds 0-2 side by side ~8-10 min.
 set -u
 cd "$(dirname "$0")/.."
 export PYTHONPATH=${PYTHONPATH:-/root/site:.} PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 PY=${PY:-python3}
 MODE=${VF_MODE:-full}
 SEEDS=(${VF_SEEDS:-0 1 2})
-WORKERS=(${VF_WORKERS:-4 2 2})
+ONLY=${VF_ONLY:-}
+if [ "$ONLY" = ours ]; then
+    WORKERS=(${VF_WORKERS:-5 5 5})
+    EXTRA="--ours-only --gen-workers ${VF_GEN_WORKERS:-5}"
+    RUN=${VF_RUN:-runs/velostat-$MODE-ours}
+elif [ -n "$ONLY" ]; then
+    echo "VF_ONLY must be empty or 'ours' (got '$ONLY')" >&2; exit 2
+else
+    WORKERS=(${VF_WORKERS:-4 2 2})
+    EXTRA=""
+    RUN=${VF_RUN:-runs/velostat-$MODE}
+fi
 THREADS=${VF_THREADS:-1}
-RUN=${VF_RUN:-runs/velostat-$MODE}
 DEST=${VF_DEST:-bench/results/experiments}
 TCN=${VF_TCN:-auto}
 OUTDIR=${OUT:-$RUN/out}
@@ -52,7 +72,7 @@ start)
         # that Warp's kernel cache is filled by one process first
         setsid nohup bash -c "sleep $(( i * ${VF_STAGGER_S:-20} )); exec $PY bench/device_full_velostat.py run \
             --seed $s --mode $MODE --out $RUN/seed$s --workers $w --tcn-device $TCN \
-            --tcn-workers ${VF_TCN_WORKERS:-3} --set generation.threads=$THREADS" \
+            --tcn-workers ${VF_TCN_WORKERS:-3} --set generation.threads=$THREADS $EXTRA" \
             > "$RUN/seed$s.log" 2>&1 < /dev/null &
         echo $! > "$RUN/seed$s.pid"
         echo "seed $s: pid $!, $w BP workers, log $RUN/seed$s.log"
@@ -74,13 +94,21 @@ poll)
     done
     ;;
 collect)
-    $PY bench/device_full_velostat.py collect --run "$RUN" --dest "$DEST" --mode "$MODE" \
-        --commit "$(cat $RUN/commit 2>/dev/null || echo unknown)"
+    rc=0
+    if [ "$ONLY" = ours ]; then
+        $PY bench/device_full_velostat.py merge --run "$RUN" --dest "$DEST" --mode "$MODE" \
+            --commit "$(cat $RUN/commit 2>/dev/null || echo unknown)" || rc=$?
+    else
+        $PY bench/device_full_velostat.py collect --run "$RUN" --dest "$DEST" --mode "$MODE" \
+            --commit "$(cat $RUN/commit 2>/dev/null || echo unknown)"
+    fi
     mkdir -p "$OUTDIR"
     files=$(ls $DEST/velostat-$MODE.json $DEST/velostat-$MODE-seed*.json 2>/dev/null)
-    extra=$(cd "$RUN" && ls seed*.log seed*/run.json seed*/report.md 2>/dev/null | sed "s|^|$RUN/|")
+    extra=$(cd "$RUN" && ls seed*.log seed*/run.json seed*/report.md $([ "$ONLY" = ours ] && echo "seed*/metrics.json") \
+        2>/dev/null | sed "s|^|$RUN/|")
     tar czf "$OUTDIR/velostat-$MODE.tgz" $files $extra
     ls -la "$OUTDIR/velostat-$MODE.tgz"; tar tzf "$OUTDIR/velostat-$MODE.tgz"
+    exit $rc
     ;;
 *)
     echo "usage: $0 start|poll|collect" >&2; exit 2 ;;

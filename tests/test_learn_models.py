@@ -256,3 +256,70 @@ def test_tcn_play_bank_stream_checkpoint_and_errors(tmp_path):
         make_model("tcn", **{**hp, "log_inputs": None}).fit([s.x for s in tr], [s.y for s in tr])
     with pytest.raises(ValueError, match="play_widths"):
         make_model("tcn", **{**hp, "play_widths": [0.0, 0.3]}).fit([s.x for s in tr], [s.y for s in tr])
+
+
+def test_batched_tcn_members_equal_sequential_training():
+    """fit_ensembles trains every member of two ensembles (input sets of 1 and 2 channels) as one grouped network:
+    each member equals the same member trained alone by train_model (same seed) up to float summation order:
+    the same epochs and best epoch, validation losses within 1e-6 (z-scored MSE ~0.05-1), weights within 1e-5
+    and estimates within 1e-5 N of a ~3 N force (measured: ~1e-7, 3e-8, 1e-6)."""
+    from learn.models.ensemble import fit_ensembles
+    from learn.models.tcn import train_tcn_group
+
+    sp = stratified_split(synth(), "frequency_hz", 0, (0.6, 0.1, 0.3))
+    tr, va, te = sp["train"], sp["valid"], sp["test"]
+    hp = {"max_epochs": 10, "patience": 1, "channels": 8, "dilations": [1, 2, 4, 8], "lr": 2e-2}
+    two = lambda x: np.column_stack([x, np.log(x)])
+    sets = {"one": lambda x: x, "two": two}
+    data = {k: ([f(s.x) for s in tr], [s.y for s in tr], ([f(s.x) for s in va], [s.y for s in va])) for k, f in sets.items()}
+    seq = {k: make_model("ensemble", member="tcn", n_members=2, member_hparams=hp).fit(*d[:2], valid=d[2], seed=3)
+           for k, d in data.items()}
+    bat = {k: make_model("ensemble", member="tcn", n_members=2, member_hparams=hp, batched=True) for k in data}
+    fit_ensembles([(bat[k], {"xs": d[0], "ys": d[1], "valid": d[2], "seed": 3}) for k, d in data.items()])
+    stopped = 0
+    for k, f in sets.items():
+        for a, b in zip(seq[k].members, bat[k].members):
+            assert a.seed == b.seed and b.history["batched_members"] == 4
+            assert (a.history["epochs"], a.history["best_epoch"]) == (b.history["epochs"], b.history["best_epoch"])
+            stopped += a.history["stopped_early"]
+            np.testing.assert_allclose(a.history["valid_loss"], b.history["valid_loss"], rtol=0, atol=1e-6)
+            for name, t in a.net.state_dict().items():
+                np.testing.assert_allclose(t.numpy(), b.net.state_dict()[name].numpy(), rtol=0, atol=1e-5)
+            x = f(te[0].x)
+            np.testing.assert_allclose(a.predict(x), b.predict(x), rtol=0, atol=1e-5)
+        x = f(te[0].x)
+        np.testing.assert_allclose(seq[k].predict(x), bat[k].predict(x), rtol=0, atol=1e-5)
+    assert stopped >= 1  # a member left the group early (the compaction path ran)
+    # the one-ensemble path (Ensemble.fit with batched=True) is the same training
+    one = make_model("ensemble", member="tcn", n_members=2, member_hparams=hp, batched=True).fit(*data["one"][:2],
+                                                                                                 valid=data["one"][2], seed=3)
+    np.testing.assert_allclose(one.predict(te[0].x), bat["one"].predict(te[0].x), rtol=0, atol=1e-5)
+    with pytest.raises(ValueError, match="every training setting"):
+        a, b = (make_model("tcn", **h) for h in (hp, {**hp, "lr": 1e-2}))
+        for m in (a, b):
+            m.fit_setup(*data["one"][:2])
+            m.net = m._build()
+        train_tcn_group([a.net, b.net], [m._examples(*m.fit_setup(*data["one"][:2])[:2], True) for m in (a, b)],
+                        [None, None], [a.train_config(0), b.train_config(1)])
+
+
+@pytest.mark.gpu
+def test_batched_tcn_members_on_cuda_match_sequential():
+    """On a CUDA device the batched members (grouped convolutions) follow the members trained alone there (same
+    seeds): the same epoch count and estimates within 2e-3 N of a ~3 N force (TF32 convolutions sum differently)."""
+    if not torch.cuda.is_available():
+        pytest.skip("no CUDA device")
+    from learn.models.ensemble import fit_ensembles
+    from learn.train import training_device
+
+    sp = stratified_split(synth(), "frequency_hz", 0, (0.6, 0.1, 0.3))
+    tr, va, te = sp["train"], sp["valid"], sp["test"]
+    hp = {"max_epochs": 4, "patience": 10, "channels": 8, "dilations": [1, 2, 4, 8]}
+    d = ([s.x for s in tr], [s.y for s in tr], ([s.x for s in va], [s.y for s in va]))
+    with training_device("cuda"):
+        seq = make_model("ensemble", member="tcn", n_members=2, member_hparams=hp).fit(*d[:2], valid=d[2], seed=3)
+        bat = make_model("ensemble", member="tcn", n_members=2, member_hparams=hp, batched=True)
+        fit_ensembles([(bat, {"xs": d[0], "ys": d[1], "valid": d[2], "seed": 3})])
+    for a, b in zip(seq.members, bat.members):
+        assert a.history["epochs"] == b.history["epochs"] == 4 and b.history["device"].startswith("cuda")
+        np.testing.assert_allclose(a.predict(te[0].x), b.predict(te[0].x), rtol=0, atol=2e-3)

@@ -1,6 +1,7 @@
 """velostat paper compensators: K-means / G_J, silhouette, memberships, creep tracking, BP net, experiment."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -534,20 +535,31 @@ def test_search_hidden_workers_same_nets():
     assert sa[3] != sa[5]  # two different nets, not one scored twice
 
 
-@pytest.mark.slow  # two tiny runs (~25 s each on 2 cores) and three spawned processes
-def test_experiment_velostat_tcn_workers_same_numbers(tmp_path):
-    """Ours' input sets trained side by side in processes (tcn_workers, the device script's setting) give the same
-    nets on the CPU as one after another: every model's test RMSE and ours' validation RMSEs equal."""
-    from learn.experiments.velostat import run
+@pytest.mark.slow  # three tiny runs (~25 s each on 2 cores) and three spawned processes
+def test_experiment_velostat_tcn_workers_same_numbers(tmp_path, monkeypatch):
+    """Ours' members trained one after another (tcn_batched False), with the input sets side by side in processes
+    (tcn_workers) or not, give the same nets on the CPU; all of them as one batched network (the default) gives the
+    same nets up to float summation order: ours' validation RMSEs within 1e-4 N, the chains' numbers equal."""
+    import dataclasses
+
+    from learn.experiments import velostat as V
 
     kw = dict(mode="tiny", models=["raw_bp", "paper_unit", "tcn"], progress=False, log=lambda s: None,
               data_dir=tmp_path / "data")
-    a = run(tmp_path / "a", **kw)
-    b = run(tmp_path / "b", tcn_workers=3, **kw)
+    c = V.run(tmp_path / "c", **kw)
+    monkeypatch.setitem(V.MODES, "tiny", dataclasses.replace(V.MODES["tiny"], tcn_batched=False))
+    a = V.run(tmp_path / "a", **kw)
+    b = V.run(tmp_path / "b", tcn_workers=3, **kw)
     assert b["run"]["tcn_workers"] == 3 and a["run"]["tcn_workers"] == 1
+    assert c["run"]["tcn_batched"] and not a["run"]["tcn_batched"]
     assert a["models"]["tcn"]["valid_rmse_by_inputs"] == b["models"]["tcn"]["valid_rmse_by_inputs"]
     for k in a["models"]:
         assert a["models"][k]["test"]["rmse"] == b["models"][k]["test"]["rmse"], k
+        if k != "tcn":
+            assert a["models"][k]["test"]["rmse"] == c["models"][k]["test"]["rmse"], k
+    va, vc = a["models"]["tcn"]["valid_rmse_by_inputs"], c["models"]["tcn"]["valid_rmse_by_inputs"]
+    assert set(va) == set(vc) and all(abs(va[v] - vc[v]) < 1e-4 for v in va), (va, vc)
+    assert abs(a["models"]["tcn"]["test"]["rmse"] - c["models"]["tcn"]["test"]["rmse"]) < 1e-4
 
 
 def test_ae_errors_top_steps_by_loading_speed():
@@ -567,3 +579,79 @@ def test_ae_errors_top_steps_by_loading_speed():
     assert a["n"] == 30 and a["max_abs_n"] == pytest.approx(1.5)
     assert a["top_signed_by_speed_n"] == {"1": pytest.approx(-1.5), "6": pytest.approx(0.5)}
     assert a["worst_point"][0] == "A" and a["worst_point"][1] >= 13 and a["worst_point"][3] == 1.0
+
+
+@pytest.mark.slow  # two tiny runs (~25 s each on 2 cores), the second's shards in 2 spawned processes
+def test_ours_only_run_merges_into_the_record_of_the_same_data(tmp_path):
+    """bench/device_full_velostat.py's ours-only path: a run with ours_only (data shards in processes) makes the same
+    data and the same ours as the whole run, and merge_ours puts ours into the record (chains kept, findings
+    recomputed, partial dropped); a record of other data is refused."""
+    import importlib.util
+    import json as _json
+
+    from learn.experiments import velostat as V
+
+    spec = importlib.util.spec_from_file_location("dfv", Path(__file__).parents[1] / "bench" / "device_full_velostat.py")
+    dfv = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(dfv)
+    kw = dict(mode="tiny", progress=False, log=lambda s: None)
+    rec = V.run(tmp_path / "rec", **kw)
+    new = V.run(tmp_path / "ours", ours_only=True, gen_workers=2, **kw)
+    assert new["ours_only"] and set(new["models"]) == {"mean", "raw_bp", "paper_unit", "tcn"}
+    assert new["datasets"]["mix"]["content_sha256"] == rec["datasets"]["mix"]["content_sha256"]
+    old = _json.loads(_json.dumps(rec))
+    old["models"].pop("tcn")
+    old["partial"] = "the paper's chains only"
+    m = dfv.merge_ours(old, new, {"commit": "abc", "tcn_device": "cpu"}, "none", "abc")
+    assert "partial" not in m and m["machine"]["ours"]["replaced_partial"] == "the paper's chains only"
+    assert m["models"]["tcn"]["test"] == rec["models"]["tcn"]["test"]  # the same ours as the whole run
+    assert m["models"]["literal_unit"] == rec["models"]["literal_unit"]  # the record's chains untouched
+    assert all(c["equal"] for c in m["machine"]["ours"]["chains_refitted_vs_record"].values())
+    assert m["findings"]["ours_vs_every_paper_model"] == rec["findings"]["ours_vs_every_paper_model"]
+    old["datasets"]["cal"]["content_sha256"] = "0" * 64
+    with pytest.raises(ValueError, match="content_sha256"):
+        dfv.merge_ours(old, new, {}, "none", "abc")
+
+
+@pytest.mark.slow  # two tiny runs through the shell script (~1 min on 2 cores)
+def test_device_script_ours_only_start_poll_collect(tmp_path):
+    """bench/device_full_velostat.sh as the coordinator types it, at the tiny scale on the CPU: a recorded run
+    (start, poll, collect), then VF_ONLY=ours (start, poll, collect) merges ours into that record (exit 0); with the
+    record's data hash changed, collect refuses (exit 3) and leaves the record as it was."""
+    import os
+    import subprocess
+    import sys
+
+    root = Path(__file__).parents[1]
+    dest = tmp_path / "dest"
+    env = {**os.environ, "PY": sys.executable, "PYTHONPATH": str(root), "OUT": str(tmp_path / "out"), "VF_MODE": "tiny",
+           "VF_SEEDS": "0", "VF_WORKERS": "1", "VF_TCN": "cpu", "VF_DEST": str(dest), "VF_POLL_S": "240",
+           "VF_COMMIT": "test"}
+
+    def sh(cmd: str, **extra) -> subprocess.CompletedProcess:
+        return subprocess.run(["bash", str(root / "bench" / "device_full_velostat.sh"), cmd], cwd=root,
+                              env={**env, **extra}, capture_output=True, text=True, timeout=600)
+
+    rec = {"VF_RUN": str(tmp_path / "rec")}
+    for c in ("start", "poll", "collect"):
+        assert sh(c, **rec).returncode == 0, c
+    path = dest / "velostat-tiny.json"
+    m = json.loads(path.read_text())
+    tcn = m["models"].pop("tcn")
+    m["partial"] = "the paper's chains only"
+    path.write_text(json.dumps(m))
+    ours = {"VF_RUN": str(tmp_path / "ours"), "VF_ONLY": "ours", "VF_GEN_WORKERS": "2"}
+    for c in ("start", "poll"):
+        assert sh(c, **ours).returncode == 0, c
+    r = sh("collect", **ours)
+    assert r.returncode == 0, r.stdout + r.stderr
+    merged = json.loads(path.read_text())
+    assert merged["models"]["tcn"]["test"] == tcn["test"] and "partial" not in merged
+    # the checkout's commit (git here; VF_COMMIT where the copy has no .git)
+    assert merged["machine"]["ours"]["git_commit"] not in ("", "unknown") and merged["machine"]["ours"]["gen_workers"] == 2
+    merged["datasets"]["mix"]["content_sha256"] = "0" * 64
+    path.write_text(json.dumps(merged))
+    before = path.read_text()
+    r = sh("collect", **ours)
+    assert r.returncode == 3 and "REFUSED" in r.stdout
+    assert path.read_text() == before

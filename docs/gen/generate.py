@@ -1028,6 +1028,38 @@ def velostat_units_slow() -> str:
     return "\n".join(L) + "\n"
 
 
+def velostat_hold_drift() -> str:
+    """bench/results/velostat-hold-drift.json (bench/bench_velostat_hold_drift.py): why ours loses the unsigned hold
+    drift at quick, on the validation recordings: drift by the contact's age at the hold's start, and the receptive
+    field variants tried."""
+    d = load("velostat-hold-drift.json")
+    if not d:
+        return ""
+    labels = {"ours": f"ours ({d['ours_inputs']} inputs, {num(d['receptive_field_s'])} s receptive field)",
+              "ours_ideal_readout": "ours, the same recordings through an ideal readout (true R)",
+              "ours_member0": "ours' first member alone", "paper_unit": "Creep comp. + BP (unit one-hot + ln R)",
+              "literal_unit": "Creep comp. + BP, paper's literal inputs (unit index + R ohm)"}
+    ages = list(next(iter(d["models"].values()))["by_contact_age_s"])
+    cell = lambda v: f"{num(v['drift_mean'], 2)} ({v['drift_signed_mean']:+.2f})" if v.get("n_holds") else "–"
+    rows = [[labels.get(k, k), cell(v), *(cell(v["by_contact_age_s"][a]) for a in ages)] for k, v in d["models"].items()]
+    n = next(iter(d["models"].values()))["by_contact_age_s"]
+    L = [f"### Hold drift on the validation recordings ({d['mode']}, seed {d['seed']}; "
+         "`bench/results/velostat-hold-drift.json`)\n",
+         f"Mean |drift| (signed mean) in N per hold of >= 2 s of the {d['n_valid_recordings']} "
+         "validation recordings, all holds and by the contact's age at the hold's start (holds: "
+         + ", ".join(f"{a} s {n[a]['n_holds']}" for a in ages) + "):\n",
+         table(["estimate", "all holds", *(f"contact age {a} s" for a in ages)], rows), ""]
+    if d.get("variants"):
+        rows = [[name, num(v["receptive_field_s"]), v["picked"], num(v["by_inputs"][v["picked"]]["valid_rmse"]),
+                 num(v["by_inputs"][v["picked"]]["drift_mean"], 2),
+                 "; ".join(f"{k} {num(r['valid_rmse'])} / {num(r['drift_mean'], 2)}" for k, r in v["by_inputs"].items())]
+                for name, v in d["variants"].items()]
+        L += ["Ours retrained with a longer receptive field on the same features (validation RMSE, N / hold drift, N):\n",
+              table(["variant", "receptive field (s)", "inputs picked (lowest valid RMSE)", "valid RMSE", "hold drift",
+                     "every input set"], rows), ""]
+    return "\n".join(L) + "\n"
+
+
 def _ntype_linear() -> list[str]:
     """bench/results/ntype-linear-*.json (bench/bench_ntype_linear.py): the paper's inputs as we build them and
     affine maps on them, beside Table 1's and the windows' RBF (the experiment files)."""
@@ -1086,6 +1118,7 @@ def experiment(family: str) -> str:
             out.append("### Issue 14 targets by run\n\n"
                        + importlib.import_module("learn.experiments.velostat").targets_table(runs) + "\n")
         out.append(velostat_units_slow())
+        out.append(velostat_hold_drift())
     if family == "ntype":  # issue 14's targets on the paper's task, one column per recorded run and seed
         import importlib
 

@@ -15,7 +15,8 @@ and our TCN, on the same held-out recordings; the paper's numbers beside ours.
            recordings without labels; per-hold compensated R of the calibration episodes -> per-unit R(F)
            curves -> Ward linkage, elbow -> BP (unit + R and cluster + R -> F), hidden nodes 3..12.
   ours     a seed ensemble of TCNs (learn.models.ensemble, members trained with seeds seed..seed+n-1, estimates
-           averaged) over (conductance, decoded position, touch) history; mean = trivial baseline.
+           averaged) over (conductance, decoded position, touch) history; every member of every input set trained
+           as one batched network (learn.models.tcn.train_tcn_group); mean = trivial baseline.
   report   report.md, metrics.json, delta_clusters.png, units.png, creep.png, ae_error.png, checkpoints/.
 """
 
@@ -77,6 +78,10 @@ class Mode:
     # input sets of ours (TCN_INPUTS) trained side by side; the one with the lower validation RMSE is ours.
     # "calibrated" holds every input of "compensated" plus the static calibrations' force estimates
     tcn_inputs: tuple[str, ...] = ("raw", "calibrated", "aged")
+    # every member of every input set trained as ONE batched network (learn.models.ensemble.fit_ensembles: each
+    # member its own seed, batch order, Adam state and early stopping; equal to one after another up to float
+    # summation order); False: the members one after another (tcn_workers then spreads the input sets)
+    tcn_batched: bool = True
     # the paper's membership band (eqs. 8-9) drives the compensation; our K-means band is fitted and reported
     tracker: dict[str, Any] = field(default_factory=lambda: {"smooth": 5, "lag": 5, "domain": "conductance",
                                                              "bounds": tuple(PAPER["bounds"])})
@@ -567,20 +572,45 @@ def _fit_tcn(xs, ys, vx, vy, names, device: str | None, *, seed: int, n_members:
     t0 = time.perf_counter()
     with (training_device(device) if device is not None else _cl.nullcontext()):
         tcn.fit(xs, ys, valid=(vx, vy), seed=seed, progress=progress, inputs=names, targets=TARGETS,
-                units={**{n: ("mS" if n.startswith("conductance") else "mm" if n.endswith("_mm") else "N" if n.endswith("_n") else "1")
-                          for n in names}, "force": "N"})
+                units=tcn_units(names))
     return tcn, time.perf_counter() - t0
+
+
+def tcn_units(names: list[str]) -> dict[str, str]:
+    return {**{n: ("mS" if n.startswith("conductance") else "mm" if n.endswith("_mm") else "N" if n.endswith("_n") else "1")
+               for n in names}, "force": "N"}
+
+
+def _fit_tcn_batched(data: dict[str, tuple], *, seed: int, n_members: int, member_hparams: dict):
+    """Ours on every input set at once: data[variant] = (xs, ys, vx, vy); all members of all sets trained as one
+    batched network on the current training device -> ({variant: ensemble}, seconds of the whole group)."""
+    from learn.models import make_model
+    from learn.models.ensemble import fit_ensembles
+
+    ens = {v: make_model("ensemble", member="tcn", n_members=n_members, member_hparams=member_hparams, batched=True)
+           for v in data}
+    t0 = time.perf_counter()
+    fit_ensembles([(ens[v], {"xs": xs, "ys": ys, "valid": (vx, vy), "seed": seed, "inputs": TCN_INPUTS[v],
+                             "targets": TARGETS, "units": tcn_units(TCN_INPUTS[v])})
+                   for v, (xs, ys, vx, vy) in data.items()])
+    return ens, time.perf_counter() - t0
 
 
 @single_thread
 def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None = None,
         overrides: list[str] | None = None, models: list[str] | None = None, seed: int = 0,
         progress: bool = True, log: Callable[[str], None] = print, workers: int = 1,
-        tcn_device: str | None = None, tcn_workers: int = 1) -> dict[str, Any]:
+        tcn_device: str | None = None, tcn_workers: int = 1, gen_workers: int = 1,
+        ours_only: bool = False) -> dict[str, Any]:
     """workers > 1: each BP hidden-node search trains its nets in that many CPU processes (same nets);
     tcn_workers > 1: ours' input sets train side by side in that many processes (same nets on the CPU);
     tcn_device: where ours trains (default: the current training device, as the BP nets); both are recorded
-    in metrics["run"]. The numbers depend on neither but tcn_device (CUDA vs CPU float rounding)."""
+    in metrics["run"]. The numbers depend on neither but tcn_device (CUDA vs CPU float rounding).
+    gen_workers > 1: each data folder's shards made in that many processes (the same data, content hash).
+    ours_only: ours (TCN) and what its inputs need (the creep tracker, the units, the BP chains CALIBRATED_FROM),
+    tested with the trivial mean and those chains; none of the paper-side diagnostics (K-means readings, readout
+    sensitivity, Fig. 22a, the other chains, plots): the run that adds ours to a recorded run of the same data
+    (bench/device_full_velostat.py merge). metrics["ours_only"] says so."""
     import torch
 
     from learn.checkpoint import save_checkpoint
@@ -596,6 +626,8 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
     unknown = [k for k in (models or []) if k not in md_models(md)]
     if unknown:
         raise ValueError(f"unknown model(s) {unknown}; known: {sorted(md_models(md))}")
+    if ours_only:  # ours and the chains its "calibrated" / "aged" inputs read
+        models = ["tcn", CALIBRATED_FROM[0], CALIBRATED_FROM[1][0]]
     want = lambda k: models is None or k in models or k == "mean"
     bp_device = current_device() if workers <= 1 else "cpu"
     tcn_dev = resolve_device(tcn_device) if tcn_device is not None else current_device()
@@ -607,7 +639,12 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
     seqs, fps = {}, {}
     for name, cfg in cfgs.items():
         t0 = time.perf_counter()
-        generate(cfg, base / name)
+        if gen_workers > 1:  # the shards in processes: the same per-episode channels (content hash) as serially
+            from simulate.generation.executors import generate as generate_parallel
+
+            generate_parallel(cfg, base / name, workers=gen_workers, feed=False, threads=1)
+        else:
+            generate(cfg, base / name)
         seqs[name] = _load(base / name, cfg)
         fps[name] = dataset_fingerprint(base / name)
         log(f"data {name}: {base / name} ({len(seqs[name])} episodes, {time.perf_counter() - t0:.1f} s incl. reuse)")
@@ -633,14 +670,15 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
              "silhouette": tracker.silhouette_, "n_samples": tracker.n_samples_seen_, "r_open_ohm": tracker.r_open,
              "fit_recordings": len(fit_on), "fit_kinds": list(md.tracker_fit_kinds),
              "fit_seconds": time.perf_counter() - t0, **md.tracker}
-    one = CreepTracker(seed=seed, **{**md.tracker, "lag": ONE_CYCLE_LAG}).fit([s.x[:, 0] for s in fit_on])
-    creep["one_cycle"] = {"lag": ONE_CYCLE_LAG, "kmeans_bounds": list(one.kmeans_bounds_),
-                          "centres": one.kmeans.cluster_centers_[:, 0].tolist(), "silhouette": one.silhouette_}
-    lit = CreepTracker(seed=seed, **{**md.tracker, **PAPER_READING}).fit([s.x[:, 0] for s in fit_on])
-    creep["paper_reading"] = {**PAPER_READING, "kmeans_bounds": list(lit.kmeans_bounds_),
-                              "centres": lit.kmeans.cluster_centers_[:, 0].tolist(),
-                              "counts": lit.kmeans.counts_.tolist(), "silhouette": lit.silhouette_}
-    creep["by_speed"] = kmeans_by_speed(fit_on, md.tracker, seed)
+    if not ours_only:  # the K-means readings beside the compensation's (diagnostics: nothing downstream reads them)
+        one = CreepTracker(seed=seed, **{**md.tracker, "lag": ONE_CYCLE_LAG}).fit([s.x[:, 0] for s in fit_on])
+        creep["one_cycle"] = {"lag": ONE_CYCLE_LAG, "kmeans_bounds": list(one.kmeans_bounds_),
+                              "centres": one.kmeans.cluster_centers_[:, 0].tolist(), "silhouette": one.silhouette_}
+        lit = CreepTracker(seed=seed, **{**md.tracker, **PAPER_READING}).fit([s.x[:, 0] for s in fit_on])
+        creep["paper_reading"] = {**PAPER_READING, "kmeans_bounds": list(lit.kmeans_bounds_),
+                                  "centres": lit.kmeans.cluster_centers_[:, 0].tolist(),
+                                  "counts": lit.kmeans.counts_.tolist(), "silhouette": lit.silhouette_}
+        creep["by_speed"] = kmeans_by_speed(fit_on, md.tracker, seed)
     ckd.mkdir(parents=True, exist_ok=True)
     (ckd / "creep_tracker.json").write_text(dumps(tracker.state()))
     log(f"creep tracker: K-means band {tracker.kmeans_bounds_[0]:.4f}/{tracker.kmeans_bounds_[1]:.4f}, used "
@@ -649,7 +687,7 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
     dr_raw, dr_comp, diag = r_drift(tracker, te, [s.x[:, 0] for s in te], rate)
     creep["r_drift_raw_mean"], creep["r_drift_comp_mean"] = float(np.mean(dr_raw)), float(np.mean(dr_comp))
     creep["hold_diagnostics"] = hold_diagnostics(np.asarray(diag, float), cfg)
-    if all("resistance" in s.extra for s in fit_on + te):
+    if not ours_only and all("resistance" in s.extra for s in fit_on + te):
         t0 = time.perf_counter()
         creep["readout_sensitivity"] = readout_sensitivity(fit_on, te, cfg, md.tracker, seed, rate)
         log(f"readout sensitivity ({time.perf_counter() - t0:.0f} s): " + "; ".join(
@@ -721,7 +759,7 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
     # Fig. 22a / Figs. 9-10: one calibrated sensor, its output before and after the compensation. The same
     # compensated-calibration BP (paper_unit) read on the measured R and on the compensated R of every test hold
     same_of = next((k for k in ("paper_unit", "paper_cluster") if k in chains), None)
-    if same_of is not None:
+    if same_of is not None and not ours_only:
         pu = chains[same_of]
         same, stair = {}, {}
         for name, comp in (("raw", False), ("compensated", True)):
@@ -796,8 +834,12 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
             "creep": creep, "clustering": clustering, "bp_search": bp_search, "models": results, "paper": PAPER,
             "findings": findings(results, creep, clustering, bp_search),
             "run": {"workers": int(workers), "tcn_workers": int(tcn_workers), "bp_device": bp_device,
-                    "tcn_device": tcn_dev},
+                    "tcn_device": tcn_dev, "tcn_batched": bool(md.tcn_batched), "gen_workers": int(gen_workers)},
         }
+        if ours_only:
+            metrics["ours_only"] = ("ours (TCN) with the chains its inputs read (" + ", ".join(k for k in chains)
+                                    + ") and the trivial mean; no paper-side diagnostics: to be merged into a recorded "
+                                    "run of the same data")
         if partial:
             metrics["partial"] = partial
         (out / "metrics.json").write_text(dumps(metrics))
@@ -825,7 +867,14 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
                 jobs[variant] = (lambda t, c, a: (lambda s: tcn_features(s, t, c, a)))(trk, chs, rate if variant == "aged" else None)
             fit_kw = {"seed": seed, "n_members": md.tcn_members, "member_hparams": md.tcn, "progress": progress}
             pool = None
-            if tcn_workers > 1 and len(jobs) > 1:  # the input sets side by side, each in its own process
+            batched = None
+            if md.tcn_batched and jobs:
+                batched = _fit_tcn_batched({v: ([f(s) for s in tr], [s.y for s in tr], [f(s) for s in va], [s.y for s in va])
+                                            for v, f in jobs.items()}, seed=seed, n_members=md.tcn_members,
+                                           member_hparams=md.tcn)
+                log(f"TCN ensembles, {len(jobs)} input sets x {md.tcn_members} members as one batched network on "
+                    f"{current_device()}: {batched[1]:.0f} s")
+            elif tcn_workers > 1 and len(jobs) > 1:  # the input sets side by side, each in its own process
                 import multiprocessing as mp
                 from concurrent.futures import ProcessPoolExecutor
 
@@ -834,7 +883,9 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
                                        [s.y for s in va], TCN_INPUTS[v], current_device(), **fit_kw)
                         for v, f in jobs.items()}
             for variant, feats in jobs.items():
-                if pool is not None:
+                if batched is not None:
+                    tcn, fit_s = batched[0][variant], batched[1]
+                elif pool is not None:
                     tcn, fit_s = futs[variant].result()
                 else:
                     tcn, fit_s = _fit_tcn([feats(s) for s in tr], [s.y for s in tr], [feats(s) for s in va],
@@ -855,6 +906,9 @@ def run(out_dir: str | Path, *, mode: str = "quick", data_dir: str | Path | None
     if "tcn" in comps:
         evaluate("tcn")
     metrics = write_metrics()
+    if ours_only:
+        log(f"wrote {out / 'metrics.json'} (ours only)")
+        return metrics
     try:
         plots(out, tracker, tr, cl, units, curves, levels, te, preds, results, dpi=50 if mode == "tiny" else 110)
     except Exception as exc:  # noqa: BLE001
@@ -966,9 +1020,14 @@ def targets_table(runs: dict[str, dict[str, Any]]) -> str:
             if key == "time":
                 w, c = m["machine"]["wall_s"], m["machine"].get("cpu_s")
                 dev = m["machine"].get("train_device_tcn")
+                o = m["machine"].get("ours") or {}
                 return (f"{w / 60:.1f} min" + (f" ({yes(w < 600)})" if m.get("mode") == "quick" else "")
-                        + (f" (device machine, ours on {dev})" if dev and dev != "cpu" else "")
-                        + (f"; {c / 60:.1f} CPU-min" if c else ""))
+                        + (f" (device machine, ours on {dev})" if dev and dev != "cpu" and not o else "")
+                        + (" (device machine: the paper's chains)" if o else "")
+                        + (f"; {c / 60:.1f} CPU-min" if c else "")
+                        + (f"; ours in a later run of the same data: {o['wall_s'] / 60:.1f} min wall (data, the chains "
+                           f"ours reads and ours; its {o.get('fit_seconds', 0) / 60:.1f} min of training on "
+                           f"{o.get('train_device_tcn')}, one batched network)" if o.get("wall_s") else ""))
         except (KeyError, TypeError, IndexError):
             return "–"
         return "–"
@@ -1123,6 +1182,16 @@ def report(m: dict[str, Any]) -> str:
                             f"{r['kmeans_bounds'][0]:.4f} / {r['kmeans_bounds'][1]:.4f}", f"{r['silhouette']:.3f}",
                             f"{100 * r['r_drift_removed_frac']:.0f} %"] for r in C["readout_sensitivity"]]))
     L += ["", "## Models on the held-out recordings", ""]
+    o = (m.get("machine") or {}).get("ours") if isinstance(m.get("machine"), dict) else None
+    if o:
+        ch = {k: v for k, v in (o.get("chains_refitted_vs_record") or {}).items() if k != "mean"}
+        L += [f"Ours (TCN) comes from a later run on the same data (content hashes and split checked against this "
+              f"record; commit {o.get('git_commit')}, {o.get('gpu')}): its input sets x members trained as one batched "
+              f"network on {o.get('train_device_tcn')} in {fmt(o.get('fit_seconds'), 0)} s. The chains its inputs read ("
+              + ", ".join(ch) + ") were fitted again in that run: "
+              + ("equal to the recorded ones." if ch and all(c["equal"] for c in ch.values()) else
+                 "test RMSE " + "; ".join(f"{k} {fmt(c['rmse_refitted'])} against the recorded {fmt(c['rmse_recorded'])} N"
+                                          for k, c in ch.items()) + ".") + " The other rows are this record's.", ""]
     rows = []
     for k in MODEL_KEYS:
         if k not in R:

@@ -121,6 +121,15 @@ class Compensator(ABC):
     def fit(self, xs: Seq[np.ndarray], ys: Seq[np.ndarray], valid: tuple[Seq[np.ndarray], Seq[np.ndarray]] | None = None,
             *, seed: int = 0, progress: bool = False, inputs: Seq[str] = (), targets: Seq[str] = (),
             units: dict[str, str] | None = None) -> Compensator:
+        zx, zy, zv = self.fit_setup(xs, ys, valid, inputs=inputs, targets=targets, units=units)
+        self.history = self._fit(zx, zy, zv, seed=seed, progress=progress) or {}
+        self.seed = int(seed)
+        return self
+
+    def fit_setup(self, xs: Seq[np.ndarray], ys: Seq[np.ndarray], valid=None, *, inputs: Seq[str] = (),
+                  targets: Seq[str] = (), units: dict[str, str] | None = None):
+        """fit()'s first half: channel names, units and the z-score statistics of the training set; returns the
+        normalised (training inputs, training targets, validation pair or None) that _fit trains on."""
         xs = [np.asarray(x, np.float64).reshape(len(x), -1) for x in xs]
         ys = [np.asarray(y, np.float64).reshape(len(y), -1) for y in ys]
         self.n_in, self.n_out = xs[0].shape[1], ys[0].shape[1]
@@ -134,9 +143,7 @@ class Compensator(ABC):
         if valid is not None and len(valid[0]):
             zv = ([self.x_norm.apply(np.asarray(x, np.float64).reshape(len(x), -1)) for x in valid[0]],
                   [self.y_norm.apply(np.asarray(y, np.float64).reshape(len(y), -1)) for y in valid[1]])
-        self.history = self._fit(zx, zy, zv, seed=seed, progress=progress) or {}
-        self.seed = int(seed)
-        return self
+        return zx, zy, zv
 
     def predict(self, x):
         """One episode [T, n_in] -> [T, n_out] (or a list of episodes -> list)."""

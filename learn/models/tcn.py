@@ -29,14 +29,18 @@ stream(); the widths live in the checkpoint as the buffer ``play_r``.
 
 from __future__ import annotations
 
+import math
+import time
+
 import numpy as np
 import torch
 from torch import nn
 
 from learn.models.base import Streamer, register
 from learn.models.neural import TRAIN_DEFAULTS, TorchCompensator, _f32
+from learn.train import TrainConfig, TrainHistory
 
-__all__ = ["CausalTCN", "TCNCompensator", "play_gaps"]
+__all__ = ["CausalTCN", "TCNCompensator", "fit_tcn_group", "play_gaps", "train_tcn_group"]
 
 
 def play_gaps(u: np.ndarray, r: np.ndarray, p0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -110,14 +114,18 @@ class CausalTCN(nn.Module):
         self.out = nn.Conv1d(channels, n_out, 1)
         self.skip = nn.Conv1d(n_in, n_out, 1)
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
+    def features(self, x: torch.Tensor) -> torch.Tensor:
+        """[B, L, n_in (+ n_play)] -> the convolutions' inputs [B, L, n_conv_in] (ln channels appended; no weights)."""
         if self.feat is not None:
             if self.n_play:
                 g = x[..., x.shape[-1] - self.n_play :]
                 x = torch.cat([self.feat(x[..., : x.shape[-1] - self.n_play]), g], dim=-1)
             else:
                 x = self.feat(x)
-        x = x.transpose(1, 2)
+        return x
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        x = self.features(x).transpose(1, 2)
         h = self.inp(x)
         for conv, d in zip(self.convs, self.dilations):
             h = h[..., d * (self.kernel - 1) :] + nn.functional.silu(conv(h))
@@ -252,3 +260,239 @@ class TCNStreamer(Streamer):
         self.t += 1
         y = self.w_out @ h + self.b_out + self.w_skip @ z + self.b_skip
         return y * self.ys + self.ym
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# several TCNs trained as one batched (grouped-convolution) network
+
+
+def _layers(net: CausalTCN) -> list[tuple[nn.Parameter, int]]:
+    """(parameter, padded axis or -1) in the flat layout's order: the input-side weights pad their input channels."""
+    out = [(net.inp.weight, 1), (net.inp.bias, -1)]
+    for c in net.convs:
+        out += [(c.weight, -1), (c.bias, -1)]
+    return out + [(net.out.weight, -1), (net.out.bias, -1), (net.skip.weight, 1), (net.skip.bias, -1)]
+
+
+def train_tcn_group(nets: list[CausalTCN], trains: list[tuple[torch.Tensor, torch.Tensor]],
+                    valids: list[tuple[torch.Tensor, torch.Tensor] | None], cfgs: list[TrainConfig],
+                    device: str | None = None) -> list[TrainHistory]:
+    """Train G TCNs of one architecture (their input channels may differ) as ONE network: each layer a grouped
+    convolution over the members (groups = G), every member's weights in one flat buffer, so a step is one forward,
+    one backward and one Adam update for all. Member g keeps what `learn.train.train_model` gives it alone: its
+    initial weights (its net as built), its batch order (a generator seeded with cfgs[g].seed), its loss (the MSE of
+    its own batch; the members' losses are summed, so no gradient crosses members), its gradient-norm clip, its Adam
+    moments, and its early stopping on its own validation loss (best weights kept; a stopped member leaves the
+    group). The members must share the number of training examples and every TrainConfig field but the seed (an
+    ensemble's members on the same episodes). Equal to training them one after another up to float summation order
+    (tests/test_learn_models.py). Inputs narrower than the widest member are padded with zero channels whose
+    weights start and stay at zero (zero input: zero gradient, zero Adam step). Leaves each net on the CPU with its
+    best weights; returns each member's TrainHistory (seconds: the group's wall time)."""
+    from learn.train import current_device, resolve_device
+
+    G = len(nets)
+    c0 = cfgs[0]
+    same = lambda c: {**c.to_json(), "seed": 0}
+    if any(same(c) != same(c0) for c in cfgs):
+        raise ValueError("train_tcn_group: the members must share every training setting but the seed")
+    arch = lambda n: (n.kernel, tuple(n.dilations), n.inp.out_channels, n.out.out_channels)
+    if any(arch(n) != arch(nets[0]) for n in nets):
+        raise ValueError("train_tcn_group: the members must share kernel, dilations, channels and outputs")
+    N = len(trains[0][0])
+    if any(len(t[0]) != N for t in trains):
+        raise ValueError("train_tcn_group: the members must have as many training examples each")
+    has_valid = [v is not None for v in valids]
+    if any(h != has_valid[0] for h in has_valid) or (has_valid[0] and len({len(v[0]) for v in valids}) != 1):
+        raise ValueError("train_tcn_group: validation examples for every member or none, as many each")
+    dev = torch.device(resolve_device(c0.device) if c0.device is not None else current_device())
+    k, dil, n_out = nets[0].kernel, nets[0].dilations, nets[0].out.out_channels
+    rf = nets[0].rf
+    cin = [n.inp.in_channels for n in nets]
+    cmax = max(cin)
+
+    def unique(pairs):  # identical example tensors (members of one input set) stored once: [U, N, cmax, L]
+        ux, uy, uid = [], [], []
+        for net, (x, y) in pairs:
+            with torch.no_grad():
+                f = net.features(x.float())
+            for j, (a, b) in enumerate(zip(ux, uy)):
+                if a.shape[1] == f.shape[-1] and torch.equal(a[..., : f.shape[-1]], f) and torch.equal(b, y):
+                    uid.append(j)
+                    break
+            else:
+                uid.append(len(ux))
+                ux.append(f)
+                uy.append(y.float())
+        X = torch.zeros(len(ux), len(ux[0]), cmax, ux[0].shape[1])
+        for j, f in enumerate(ux):
+            X[j, :, : f.shape[-1]] = f.transpose(1, 2)
+        Y = torch.stack([y.transpose(1, 2) for y in uy])  # [U, N, n_out, L']
+        return X.to(dev), Y.to(dev), torch.tensor(uid, device=dev)
+
+    Xt, Yt, uid_t = unique(list(zip(nets, trains)))
+    if has_valid[0]:
+        Xv, Yv, uid_v = unique(list(zip(nets, valids)))
+    # the flat buffer: per layer a block [G, *shape] (padded input channels), blocks one after another
+    shapes, blocks = [], []
+    for li, (p0, ax) in enumerate(_layers(nets[0])):
+        shp = list(p0.shape)
+        if ax >= 0:
+            shp[ax] = cmax
+        shapes.append(shp)
+        rows = []
+        for net in nets:
+            w = torch.zeros(shp)
+            p, _ = _layers(net)[li]
+            w[tuple(slice(0, s) for s in p.shape)] = p.detach().float()
+            rows.append(w.reshape(-1))
+        blocks.append(torch.stack(rows))
+    sizes = [math.prod(s) for s in shapes]
+
+    def layout(rows: list[torch.Tensor]) -> torch.Tensor:
+        return torch.cat([r.reshape(-1) for r in rows])
+
+    flat = layout(blocks).to(dev)
+    m1, m2 = torch.zeros_like(flat), torch.zeros_like(flat)
+    live = list(range(G))  # member index of each row of the blocks
+
+    def member_ids(n: int) -> torch.Tensor:
+        return torch.cat([torch.arange(n, device=dev).repeat_interleave(sz) for sz in sizes])
+
+    def views(buf: torch.Tensor, n: int) -> list[torch.Tensor]:
+        out, o = [], 0
+        for shp, sz in zip(shapes, sizes):
+            out.append(buf[o : o + n * sz].view(n * shp[0], *shp[1:]))
+            o += n * sz
+        return out
+
+    def rows_of(buf: torch.Tensor, n: int, keep: list[int]) -> torch.Tensor:
+        out, o = [], 0
+        for sz in sizes:
+            out.append(buf[o : o + n * sz].view(n, sz)[keep].reshape(-1))
+            o += n * sz
+        return torch.cat(out)
+
+    def forward(buf: torch.Tensor, n: int, x: torch.Tensor) -> torch.Tensor:
+        """x [b, n * cmax, L] -> [b, n, n_out, L - rf + 1]."""
+        W = views(buf, n)
+        conv = torch.nn.functional.conv1d
+        h = conv(x, W[0], W[1], groups=n)
+        for li, d in enumerate(dil):
+            h = h[..., d * (k - 1) :] + nn.functional.silu(conv(h, W[2 + 2 * li], W[3 + 2 * li], dilation=d, groups=n))
+        y = conv(h, W[-4], W[-3], groups=n) + conv(x[..., rf - 1 :], W[-2], W[-1], groups=n)
+        return y.view(len(x), n, n_out, -1)
+
+    def gather(X, Y, uid, idx):  # idx [n, b] example indices of each live member
+        xb = X[uid[:, None], idx]  # [n, b, cmax, L]
+        n, b = idx.shape
+        return xb.transpose(0, 1).reshape(b, n * cmax, -1), Y[uid[:, None], idx].transpose(0, 1)
+
+    if dev.type == "cuda":  # the grouped dilated convolutions: let cuDNN time its algorithms once per shape
+        torch.backends.cudnn.benchmark = True
+    gens = [torch.Generator().manual_seed(int(c.seed)) for c in cfgs]
+    hist = [TrainHistory(device=str(dev)) for _ in range(G)]
+    best = [r.clone() for r in blocks]  # each member's best weights, [G, size] per layer (CPU)
+    bad = [0] * G
+    ids = member_ids(G)
+    beta1, beta2, eps = 0.9, 0.999, 1e-8  # torch.optim.Adam's defaults (train_model)
+    lr, wd, clip, bs = float(c0.lr), float(c0.weight_decay), c0.grad_clip, int(c0.batch_size)
+    step = 0
+    t0 = time.perf_counter()
+    for epoch in range(int(c0.max_epochs)):
+        n = len(live)
+        batches = [list(torch.randperm(N, generator=gens[g]).split(bs)) for g in live]
+        nb = len(batches[0]) if c0.max_batches_per_epoch is None else min(len(batches[0]), int(c0.max_batches_per_epoch))
+        uid = uid_t
+        tot = torch.zeros(n, device=dev)
+        for i in range(nb):
+            idx = torch.stack([b[i] for b in batches]).to(dev)
+            xb, yb = gather(Xt, Yt, uid, idx)
+            flat.requires_grad_(True)
+            lossg = ((forward(flat, n, xb) - yb) ** 2).mean((0, 2, 3))
+            (g,) = torch.autograd.grad(lossg.sum(), flat)
+            flat.requires_grad_(False)
+            with torch.no_grad():
+                if clip:
+                    norm = torch.zeros(n, device=dev).index_add_(0, ids, g * g).sqrt()
+                    g = g * torch.clamp(float(clip) / (norm + 1e-6), max=1.0)[ids]
+                if wd:
+                    g = g + wd * flat
+                step += 1
+                m1.lerp_(g, 1 - beta1)
+                m2.mul_(beta2).addcmul_(g, g, value=1 - beta2)
+                denom = (m2.sqrt() / math.sqrt(1 - beta2**step)).add_(eps)
+                flat.addcdiv_(m1, denom, value=-lr / (1 - beta1**step))
+                tot += lossg.detach() * idx.shape[1]
+        n_seen = sum(len(batches[0][i]) for i in range(nb))
+        tl = (tot / max(n_seen, 1)).double().cpu().tolist()
+        if has_valid[0]:
+            with torch.no_grad():
+                sq = torch.zeros(n, device=dev, dtype=torch.float64)
+                nv = len(Xv[0])
+                allv = torch.arange(nv, device=dev)
+                for a in range(0, nv, 1024):
+                    j = allv[a : a + 1024].expand(n, -1)
+                    xb, yb = gather(Xv, Yv, uid_v, j)
+                    sq += ((forward(flat, n, xb) - yb) ** 2).sum((0, 2, 3)).double()
+                vl = (sq / (nv * Yv.shape[2] * Yv.shape[3])).cpu().tolist()
+        else:
+            vl = tl
+        keep = []
+        for pos, gm in enumerate(live):
+            h = hist[gm]
+            h.train_loss.append(tl[pos])
+            h.valid_loss.append(vl[pos])
+            if vl[pos] < h.best_loss - c0.min_delta:
+                h.best_loss, h.best_epoch, bad[gm] = vl[pos], epoch, 0
+                o = 0
+                for li, sz in enumerate(sizes):
+                    best[li][gm] = flat[o : o + n * sz].view(n, sz)[pos].detach().cpu()
+                    o += n * sz
+            else:
+                bad[gm] += 1
+            if bad[gm] >= c0.patience:
+                h.stopped_early = True
+            else:
+                keep.append(pos)
+        if not keep:
+            break
+        if len(keep) < n:  # stopped members leave the group (their rows, Adam moments and data ids)
+            flat, m1, m2 = (rows_of(b, n, keep) for b in (flat, m1, m2))
+            live = [live[p] for p in keep]
+            kt = torch.tensor(keep, device=dev)
+            uid_t = uid_t[kt]
+            if has_valid[0]:
+                uid_v = uid_v[kt]
+            ids = member_ids(len(live))
+    if dev.type == "cuda":
+        torch.cuda.synchronize(dev)
+    secs = time.perf_counter() - t0
+    for gm, net in enumerate(nets):
+        net.to("cpu")
+        with torch.no_grad():
+            for li, (p, _) in enumerate(_layers(net)):
+                w = best[li][gm].view(shapes[li])
+                p.copy_(w[tuple(slice(0, s) for s in p.shape)])
+        net.eval()
+        hist[gm].seconds = secs
+    return hist
+
+
+def fit_tcn_group(members: list[TCNCompensator], zdata: list[tuple], seeds: list[int]) -> None:
+    """Fit TCNCompensators whose fit_setup has run (zdata[g] = its (zx, zy, zv)) as one batched network
+    (`train_tcn_group`): each built under its own seed as `TorchCompensator._fit` builds it, its own examples."""
+    from learn.train import seeded
+
+    trs, vas, cfgs = [], [], []
+    for m, (zx, zy, zv), s in zip(members, zdata, seeds):
+        with seeded(s):
+            m.net = m._build()
+        m._prepare(zx)
+        trs.append(m._examples(zx, zy, True))
+        vas.append(m._examples(*zv, False) if zv is not None else None)
+        cfgs.append(m.train_config(s))
+    hists = train_tcn_group([m.net for m in members], trs, vas, cfgs)
+    for m, h, tr, va, s in zip(members, hists, trs, vas, seeds):
+        m.history = {**h.to_json(), "n_train_examples": len(tr[0]), "n_valid_examples": 0 if va is None else len(va[0]),
+                     "n_parameters": sum(p.numel() for p in m.net.parameters()), "batched_members": len(members)}
+        m.seed = int(s)

@@ -1,0 +1,144 @@
+"""Why ours (the TCN ensemble) loses the unsigned hold drift to the paper's chains at quick: a decomposition on the
+VALIDATION recordings of a finished quick run (its data and checkpoints; nothing here reads the test split).
+
+Per hold of >= 2 s (learn.experiments.velostat.hold_errors' definition: |mean of the last second - mean of the first
+second| of the estimate), for ours as trained, ours fed the same recordings through an ideal readout (the true R:
+what following the readout noise costs), ours' first member alone (what the ensemble's averaging removes), and the
+chains paper_unit and literal_unit: the mean |drift| and signed drift by the contact's age at the hold's start
+(0-25 s: inside ours' 25.5 s receptive field; 25-60 s; > 60 s), by force, and the mean error trajectory in the hold.
+--variants: ours retrained with another receptive field (dilations to 128: 51 s; chunk 128 or 256) on the same
+features, every input set, its validation RMSE and hold drift (the experiment's choice: the lowest validation RMSE).
+
+    PYTHONPATH=. python bench/bench_velostat_hold_drift.py RUN_DIR [--seed 0] [--variants d128c128,d128c256]
+writes bench/results/velostat-hold-drift.json (docs/gen renders it on the velostat experiment page).
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import datetime as dt
+import json
+import platform
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+VARIANTS = {"d128c128": {"dilations": [1, 2, 4, 8, 16, 32, 64, 128], "chunk": 128},
+            "d128c256": {"dilations": [1, 2, 4, 8, 16, 32, 64, 128], "chunk": 256}}
+AGES_S = ((0.0, 25.0), (25.0, 60.0), (60.0, float("inf")))
+FORCES_N = ((0.0, 3.0), (3.0, 8.0), (8.0, 16.0))
+
+
+def main() -> None:
+    from learn import metrics as M
+    from learn.checkpoint import load_checkpoint
+    from learn.data import stratified_split
+    from learn.experiments import velostat as V
+    from learn.models.velostat import CreepTracker
+    from simulate.protocols.compression_tester import unit_centres_m
+
+    ap = argparse.ArgumentParser()
+    ap.add_argument("run")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--variants", default="")
+    ap.add_argument("--out", default="bench/results/velostat-hold-drift.json")
+    a = ap.parse_args()
+    torch.set_num_threads(1)
+    run = Path(a.run)
+    m = json.loads((run / "metrics.json").read_text())
+    md = V.MODES[m["mode"]]
+    cfgs = V.scenes_of(md, [], a.seed)
+    seqs = {n: V._load(run / "data" / n, cfgs[n]) for n in cfgs}
+    sp_mix, sp_cal = stratified_split(seqs["mix"], "inner_kind", a.seed), V.calibration_split(seqs["cal"])
+    tr, va = sp_mix["train"] + sp_cal["train"], sp_mix["valid"] + sp_cal["valid"]
+    if [s.key for s in tr] != m["split"]["train"] or [s.key for s in va] != m["split"]["valid"]:
+        raise SystemExit("the split made again differs from the run's")
+    cfg = cfgs["mix"]
+    rate = cfg.sampling.sample_rate_hz
+    ck = run / "checkpoints"
+    tracker = CreepTracker.from_state(json.loads((ck / "creep_tracker.json").read_text()))
+    near = V.nearest_with_data(np.array(m["clustering"]["units_with_data"]), unit_centres_m(cfg))
+    chains = {"raw_bp": V.PaperChain(tracker, load_checkpoint(ck / "raw_bp"), near, cfg, compensate=False),
+              "paper_unit": V.PaperChain(tracker, load_checkpoint(ck / "paper_unit"), near, cfg)}
+    lit = V.PaperChain(tracker, load_checkpoint(ck / "literal_unit"), None, cfg)
+    tcn = load_checkpoint(ck / "tcn")
+    inp = m["models"]["tcn"]["inputs"]
+
+    def feats(s):
+        return V.tcn_features(s, tracker if inp != "raw" else None, chains if inp in ("calibrated", "aged") else None,
+                              rate if inp == "aged" else None)
+
+    def ideal(s):  # the same recording through an ideal readout: the true R_film + R_ITO
+        c = copy.copy(s)
+        c.x = s.x.copy()
+        c.x[:, 0] = s.extra["resistance"]
+        return c
+
+    with torch.inference_mode():
+        P = {"ours": [tcn.predict(feats(s))[:, 0] for s in va],
+             "ours_ideal_readout": [tcn.predict(feats(ideal(s)))[:, 0] for s in va],
+             "ours_member0": [tcn.members[0].predict(feats(s))[:, 0] for s in va],
+             "paper_unit": [chains["paper_unit"].predict(s) for s in va],
+             "literal_unit": [lit.predict(s) for s in va]}
+    out: dict = {"run": str(run), "mode": m["mode"], "seed": a.seed, "split": "valid", "ours_inputs": inp,
+                 "receptive_field_s": tcn.context / rate, "n_valid_recordings": len(va), "models": {}}
+    for k, pr in P.items():
+        rows = []
+        traj = {f"{lo:g}-{hi:g}": [] for lo, hi in AGES_S}
+        for s, p in zip(va, pr):
+            age = V.contact_age_s(np.isfinite(s.x[:, 1:3]).all(1), rate)
+            for h in V.holds(s.extra["target"], int(2 * rate)):
+                n = int(rate)
+                rows.append((p[h][-n:].mean() - p[h][:n].mean(), age[h.start], s.extra["target"][h].mean()))
+                if h.stop - h.start >= 4 * n:
+                    for lo, hi in AGES_S:
+                        if lo <= age[h.start] < hi:
+                            traj[f"{lo:g}-{hi:g}"].append((p[h] - s.y[h, 0])[: 4 * n])
+        r = np.asarray(rows)
+        d = r[:, 0]
+
+        def part(mask):
+            return {"n_holds": int(mask.sum()), "drift_mean": float(np.abs(d[mask]).mean()),
+                    "drift_signed_mean": float(d[mask].mean())} if mask.any() else {"n_holds": 0}
+        out["models"][k] = {
+            "drift_mean": float(np.abs(d).mean()), "drift_signed_mean": float(d.mean()), "n_holds": len(d),
+            "by_contact_age_s": {f"{lo:g}-{hi:g}": part((r[:, 1] >= lo) & (r[:, 1] < hi)) for lo, hi in AGES_S},
+            "by_force_n": {f"{lo:g}-{hi:g}": part((r[:, 2] >= lo) & (r[:, 2] < hi)) for lo, hi in FORCES_N},
+            "error_trajectory_n": {key: np.mean(v, 0).reshape(8, -1).mean(1).tolist() for key, v in traj.items() if v}}
+    out["trajectory_step_s"] = 0.5
+    if a.variants:
+        jobs = {"raw": lambda s: V.tcn_features(s), "calibrated": lambda s: V.tcn_features(s, tracker, chains),
+                "aged": lambda s: V.tcn_features(s, tracker, chains, rate)}
+        F = {v: ([f(s) for s in tr], [s.y for s in tr], [f(s) for s in va], [s.y for s in va]) for v, f in jobs.items()}
+        yv = np.concatenate([s.y[:, 0] for s in va])
+        out["variants"] = {}
+        for name in a.variants.split(","):
+            hp = {**md.tcn, **VARIANTS[name]}
+            ens, secs = V._fit_tcn_batched(F, seed=a.seed, n_members=md.tcn_members, member_hparams=hp)
+            res = {}
+            for v, e in ens.items():
+                with torch.inference_mode():
+                    pv = [e.predict(x)[:, 0] for x in F[v][2]]
+                h = V.hold_errors(va, pv, rate)
+                res[v] = {"valid_rmse": M.rmse(yv, np.concatenate(pv)), "drift_mean": h["drift_mean"],
+                          "drift_signed_mean": h["drift_signed_mean"], "epochs": [mm.history["epochs"] for mm in e.members]}
+            pick = min(res, key=lambda v: res[v]["valid_rmse"])
+            out["variants"][name] = {"hparams": VARIANTS[name], "receptive_field_s": ens[pick].context / rate,
+                                     "fit_seconds": secs, "by_inputs": res, "picked": pick}
+            print(name, json.dumps(out["variants"][name]), flush=True)
+    out["machine"] = {"host_platform": platform.platform(), "date_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+                      "git_commit": subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
+                                                   text=True).stdout.strip()}
+    Path(a.out).write_text(json.dumps(out, indent=1))
+    print(json.dumps({k: {kk: vv for kk, vv in v.items() if kk in ("drift_mean", "drift_signed_mean", "by_contact_age_s")}
+                      for k, v in out["models"].items()}, indent=1))
+
+
+if __name__ == "__main__":
+    t0 = time.time()
+    main()
+    print(f"{time.time() - t0:.0f} s")
