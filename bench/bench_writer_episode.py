@@ -40,7 +40,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import pickle
 import platform
 import subprocess
 import sys
@@ -56,10 +55,17 @@ PARTS = ("objects, attributes", "data", "digest", "other", "close", "manifest")
 
 def episodes_of(fam: str, cache: Path) -> tuple[list[tuple[str, dict, dict]], int]:
     """((id, channels, attrs) of the cached episodes of a family's preset, its episodes_per_shard); simulated and
-    cached if absent."""
-    path = cache / f"{fam}.pkl"
+    cached if absent. The cache is a recording of the project's own format (uncompressed; the channels' order and
+    episodes_per_shard in its root attributes), read back through `Recording`."""
+    from sensors.data.recording import Recording, RecordingWriter
+
+    path = cache / f"{fam}.h5"
     if path.exists():
-        return pickle.loads(path.read_bytes())
+        with Recording(path) as rec:
+            order = rec.attrs["bench_channel_order"]
+            eps = [(ep, {name: rec.channel(ep, name) for name in order[ep]}, rec.episode_attrs(ep))
+                   for ep in rec.episode_ids]
+            return eps, int(rec.attrs["bench_episodes_per_shard"])
     from scenes import load_scene
     from sensors.data.manifest import episode_seed
     from sensors.registry import make_sensor
@@ -73,10 +79,14 @@ def episodes_of(fam: str, cache: Path) -> tuple[list[tuple[str, dict, dict]], in
         seed = episode_seed(0, k)
         r = simulate_episodes(c, [seed], [f"ep-{k:06d}"], make_sensor(c, "numpy", "cpu"), indices=[k])[0]
         eps.append((r.ep_id, r.channels, _episode_attrs(r, k)))
-    out = (eps, cfg.generation.episodes_per_shard)
     cache.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(pickle.dumps(out))
-    return out
+    extra = {"bench_channel_order": {ep: list(ch) for ep, ch, _ in eps},
+             "bench_episodes_per_shard": int(cfg.generation.episodes_per_shard)}
+    with RecordingWriter(path, source="sim", config_json="{}", root_seed=0, shard_index=0, sensor_attrs={},
+                         extra_attrs=extra, compression="none") as w:
+        for ep, ch, attrs in eps:
+            w.add_episode(ep, ch, attrs)
+    return eps, cfg.generation.episodes_per_shard
 
 
 def write_shard_timed(path: Path, eps: list, n: int, codec: str) -> dict[str, float]:
@@ -218,7 +228,7 @@ def main() -> None:
     ap.add_argument("--codecs", default=",".join(CODECS))
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--tag", default="cpu")
-    ap.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "piezotwin-writer-episodes-v2")
+    ap.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "piezotwin-writer-episodes-v3")
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results")
     ap.add_argument("--stacked-only", action="store_true", help="only the stacked estimate, into the existing results file")
     ap.add_argument("--one", nargs=2, metavar=("FAMILY", "CODEC"), help=argparse.SUPPRESS)
