@@ -387,6 +387,7 @@ def train_tcn_group(nets: list[CausalTCN], trains: list[tuple[torch.Tensor, torc
         n, b = idx.shape
         return xb.transpose(0, 1).reshape(b, n * cmax, -1), Y[uid[:, None], idx].transpose(0, 1)
 
+    benchmark = torch.backends.cudnn.benchmark  # restored below: the setting is process-wide
     if dev.type == "cuda":  # the grouped dilated convolutions: let cuDNN time its algorithms once per shape
         torch.backends.cudnn.benchmark = True
     gens = [torch.Generator().manual_seed(int(c.seed)) for c in cfgs]
@@ -466,6 +467,7 @@ def train_tcn_group(nets: list[CausalTCN], trains: list[tuple[torch.Tensor, torc
             ids = member_ids(len(live))
     if dev.type == "cuda":
         torch.cuda.synchronize(dev)
+    torch.backends.cudnn.benchmark = benchmark
     secs = time.perf_counter() - t0
     for gm, net in enumerate(nets):
         net.to("cpu")
