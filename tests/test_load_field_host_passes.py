@@ -1,5 +1,5 @@
 """load_batch's host passes over a large batch's sensordata, split over threads (simulate.contact.load_field:
-_columns_threaded): the same pose, position, force and contact count, bit for bit, as the one-thread expressions."""
+_columns): the same pose, position, force and contact count, bit for bit, split over threads as in one pass."""
 
 import numpy as np
 

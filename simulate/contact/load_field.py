@@ -345,21 +345,18 @@ HOST_PASS_MIN_BYTES = 1 << 28  # ... for batches of at least this much sensordat
 _HOST_PASSES = None
 
 
-def _columns_threaded(sens: np.ndarray, top: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _columns(sens: np.ndarray, top: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """load_batch's pose (contiguous), world position, force (tangential x, y, normal compressive z) and contact
-    count out of sensordata (E, T, ns), episodes split over HOST_PASS_THREADS threads: the same elementwise
-    operations as the one-thread expressions, so the same values bit for bit (tests/test_load_field_host_passes.py)."""
+    count out of sensordata (E, T, ns); a batch of at least HOST_PASS_MIN_BYTES has its episodes split over
+    HOST_PASS_THREADS threads (elementwise operations per slice: the same values bit for bit whatever the split,
+    tests/test_load_field_host_passes.py)."""
     global _HOST_PASSES
-    if _HOST_PASSES is None:
-        from concurrent.futures import ThreadPoolExecutor
-
-        _HOST_PASSES = ThreadPoolExecutor(HOST_PASS_THREADS, thread_name_prefix="load-batch")
     E, T, _ = sens.shape
-    q = np.empty((E, T, 3))
-    pos_world = np.empty((E, T, 3))
-    force = np.empty((E, T, 3))
-    found = np.empty((E, T), np.int64)
     off = np.array([0.0, 0.0, top])
+    q = np.empty((E, T, 3), sens.dtype)
+    pos_world = np.empty((E, T, 3), np.result_type(sens.dtype, off.dtype))
+    force = np.empty((E, T, 3), sens.dtype)
+    found = np.empty((E, T), np.int64)
 
     def part(e: slice) -> None:
         np.copyto(q[e], sens[e, :, _POS])
@@ -368,6 +365,13 @@ def _columns_threaded(sens: np.ndarray, top: float) -> tuple[np.ndarray, np.ndar
         np.negative(sens[e, :, _FORCE.start + 2], out=force[e, :, 2])
         np.copyto(found[e], sens[e, :, _FOUND], casting="unsafe")
 
+    if sens.nbytes < HOST_PASS_MIN_BYTES or HOST_PASS_THREADS <= 1:
+        part(slice(None))
+        return q, pos_world, force, found
+    if _HOST_PASSES is None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        _HOST_PASSES = ThreadPoolExecutor(HOST_PASS_THREADS, thread_name_prefix="load-batch")
     step = max(1, -(-E // (4 * HOST_PASS_THREADS)))
     list(_HOST_PASSES.map(part, [slice(a, min(E, a + step)) for a in range(0, E, step)]))
     return q, pos_world, force, found
@@ -380,14 +384,7 @@ def load_batch(cfg: SceneConfig, sens: np.ndarray, target: np.ndarray, device_fi
     kernels on the physics device (kept there as flat Warp arrays when device_fields names that device).
     fields: (deformation, pressure, shear) made already (the GPU feed's time chunks), not computed again."""
     top = cfg.pad.thickness_m
-    if sens.nbytes >= HOST_PASS_MIN_BYTES and HOST_PASS_THREADS > 1:
-        q, pos_world, force, found = _columns_threaded(sens, top)
-    else:
-        q = sens[..., _POS]
-        pos_world = q + np.array([0.0, 0.0, top])
-        f_pad = sens[..., _FORCE]  # force on the pad, global frame
-        force = np.concatenate([f_pad[..., :2], -f_pad[..., 2:3]], axis=-1)
-        found = sens[..., _FOUND].astype(np.int64)
+    q, pos_world, force, found = _columns(sens, top)  # force on the pad, global frame
     engine, device = physics_engine(cfg)
     if fields is not None:
         deform, pressure, shear = fields
