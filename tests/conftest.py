@@ -21,6 +21,15 @@ settings.register_profile("fuzz", derandomize=False, database=None, max_examples
                           print_blob=True)
 settings.load_profile(os.environ.get(HYPOTHESIS_PROFILE_ENV, "default"))
 
+# The commands' output as a user sees it piped to a file: pytest-xdist sets COLUMNS=80 in its worker processes, which
+# the CLI's console would rightly honour (a user's COLUMNS wins); the tests of what the CLI prints read the piped width
+os.environ.pop("COLUMNS", None)
+# One test process per core (`pytest -n auto`): each one's torch / BLAS on one thread, so that two processes on two
+# cores do not run four threads (set before torch is imported; a value the caller set wins)
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    for _var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ.setdefault(_var, "1")
+
 
 @pytest.fixture(scope="session")
 def gpu_device() -> str:

@@ -70,6 +70,40 @@ def test_local_pool_equals_serial_and_retries_a_killed_worker(cfg, serial, tmp_p
     _assert_same_dataset(serial, out, 4)
 
 
+def test_a_pool_that_breaks_between_two_results_loses_no_shard(cfg, serial, tmp_path, monkeypatch):
+    """A worker can die after one shard's result and before the next submit: the broken pool then refuses the
+    submit itself (BrokenProcessPool from `submit`, seen on a loaded 2-core machine). That shard never ran: it is
+    not charged an attempt (max_retries=0 still finishes) and runs in the next pool; every shard is written once."""
+    import concurrent.futures as cf
+    from concurrent.futures.process import BrokenProcessPool
+
+    pools = []
+
+    class InlinePool:  # runs each task at submit; the first pool breaks at its second submit
+        def __init__(self, max_workers, mp_context=None, **kw):
+            self.n = 0
+            pools.append(self)
+
+        def submit(self, fn, *args, **kwargs):
+            self.n += 1
+            if len(pools) == 1 and self.n == 2:
+                raise BrokenProcessPool("A child process terminated abruptly")
+            f = cf.Future()
+            f.set_result(fn(*args, **kwargs))
+            return f
+
+        def shutdown(self, wait=True, cancel_futures=False):
+            pass
+
+    monkeypatch.setattr(cf, "ProcessPoolExecutor", InlinePool)
+    seen = []
+    out = tmp_path / "pool"
+    executors.generate(cfg, out, executor="local", workers=2, max_retries=0,
+                       on_shard=lambda s, n, skip: seen.append((s, n, skip)))
+    assert len(pools) == 2 and sorted(seen) == [(s, 1, False) for s in range(4)]
+    _assert_same_dataset(serial, out, 4)
+
+
 @pytest.mark.slow  # two more pool start-ups (~11 s on 2 cores)
 def test_exhausted_retries_fail_clearly_then_resume(cfg, serial, tmp_path, monkeypatch):
     marker = _inject(monkeypatch, tmp_path, 1, "raise")

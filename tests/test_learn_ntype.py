@@ -203,13 +203,20 @@ def test_paper_ratio_fits_a_uniform_draw_not_a_skewed_one():
     assert implied_force_band("uniform", trials=200, seed=1) == implied_force_band("uniform", trials=200, seed=1)
 
 
-def test_experiment_ntype_tiny(tmp_path):
+@pytest.fixture(scope="module")
+def tiny_cli(tmp_path_factory):
+    """One tiny ntype experiment through the CLI, its two tasks in two processes (the CLI's default on a multi-core
+    machine); the tests below read it and reuse its data folder (`<out>/data`)."""
     from piezotwin.cli import app
 
-    out = tmp_path / "exp"
-    res = CliRunner().invoke(app, ["experiment", "ntype", "--mode", "tiny", "-o", str(out)])
+    out = tmp_path_factory.mktemp("ntype_tiny") / "exp"
+    res = CliRunner().invoke(app, ["experiment", "ntype", "--mode", "tiny", "--workers", "2", "-o", str(out)])
     assert res.exit_code == 0, res.output
-    m = json.loads((out / "metrics.json").read_text())
+    return out, json.loads((out / "metrics.json").read_text())
+
+
+def test_experiment_ntype_tiny(tiny_cli):
+    out, m = tiny_cli
     assert {"experiment", "mode", "dataset", "protocol", "models", "paper", "findings", "timing_s"} <= set(m)
     assert set(m["models"]) == {"mean", "rbf_col", "rbf_win", "elem_mlp", "map_cnn", "rbf_col_kernels"}
     # Table 1 also under MATLAB's reading of the spread, same spreads; the headline is eq. 9 as printed
@@ -258,15 +265,17 @@ def test_element_mlp_strain_inversion_and_mirror():
     np.testing.assert_array_equal(mirror_x(*mirror_x(E, E))[1], E)
 
 
-def test_experiment_ntype_models_subset(tmp_path):
-    """`--models` on ntype: a bad name exits 2 with nothing written; a subset runs only that model (+ mean)."""
+def test_experiment_ntype_models_subset(tmp_path, tiny_cli):
+    """`--models` on ntype: a bad name exits 2 with nothing written; a subset runs only that model (+ mean), here on
+    the tiny run's data folder (`--data`)."""
     from piezotwin.cli import app
 
     res = CliRunner().invoke(app, ["experiment", "ntype", "--mode", "tiny", "--models", "rbf_col,foo",
                                    "-o", str(tmp_path / "bad")])
     assert res.exit_code == 2 and "foo" in res.output and not (tmp_path / "bad").exists()
     out = tmp_path / "sub"
-    res = CliRunner().invoke(app, ["experiment", "ntype", "--mode", "tiny", "--models", "rbf_col", "-o", str(out)])
+    res = CliRunner().invoke(app, ["experiment", "ntype", "--mode", "tiny", "--models", "rbf_col", "-o", str(out),
+                                   "--data", str(tiny_cli[0] / "data")])
     assert res.exit_code == 0, res.output
     m = json.loads((out / "metrics.json").read_text())
     assert set(m["models"]) == {"mean", "rbf_col", "rbf_col_kernels"}  # Table 1 under the other spread readings too
@@ -518,17 +527,18 @@ def test_targets_table_met_and_not_met():
     assert "ours on cuda" in rows["cost"][0]
 
 
-def test_tasks_in_processes_give_the_serial_numbers(tmp_path):
-    """`run(workers=2)` (the CLI's default on a multi-core machine: the two tasks in spawned processes, one thread
-    each) gives the serial run's element-MLP numbers on both tasks (torch on one thread in both; same data)."""
+def test_tasks_in_processes_give_the_serial_numbers(tmp_path, tiny_cli):
+    """Workers 2 (the CLI's default on a multi-core machine: the two tasks in spawned processes, one thread each,
+    every model) gives the element-MLP numbers of a serial run of that model alone on both tasks (torch on one
+    thread in both; same data): neither the processes nor the other models change a model's numbers."""
     from learn.experiments import ntype as NT
 
-    kw = dict(mode="tiny", models=["elem_mlp"], progress=False, log=lambda s: None)
-    serial = NT.run(tmp_path / "serial", data_dir=tmp_path / "data", workers=1, **kw)
-    side = NT.run(tmp_path / "side", data_dir=tmp_path / "data", workers=2, **kw)
+    side_dir, side = tiny_cli
+    serial = NT.run(tmp_path / "serial", mode="tiny", data_dir=side_dir / "data", workers=1, models=["elem_mlp"],
+                    progress=False, log=lambda s: None)
     for a, b in ((serial, side), (serial["tasks"]["press_stroke"], side["tasks"]["press_stroke"])):
         assert a["task"] == b["task"]
         ea, eb = a["models"]["elem_mlp"], b["models"]["elem_mlp"]
         errs = [k for k in ea if k.startswith(("E_", "MAE_"))]
         assert errs and all(ea[k] == eb[k] for k in errs)
-    assert (tmp_path / "side" / "press_stroke").is_dir() and (tmp_path / "side" / "metrics.json").is_file()
+    assert (side_dir / "press_stroke").is_dir() and (side_dir / "metrics.json").is_file()

@@ -148,6 +148,8 @@ def compact_episode(rng: np.random.Generator, k: int, n: int = 620) -> tuple[dic
     return channels, attrs
 
 
+@pytest.mark.slow  # a wall-time ratio: measured in bench/bench_writer_episode.py; kept out of the default run, where
+# a neighbour (another test process, a loaded CI machine) can disturb it
 def test_templates_are_faster(tmp_path):
     rng = np.random.default_rng(0)
     eps = [compact_episode(rng, k) for k in range(200)]

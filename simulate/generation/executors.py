@@ -185,7 +185,8 @@ def _pin_gpu(counter, n_gpus: int) -> None:
 
 def _run_local(cfg, out: Path, todo: list[int], workers: int, max_retries: int, on_shard, kw: dict) -> None:
     """At most `workers` shards in flight; a dead worker breaks the pool: its in-flight shards are retried
-    in a new pool (each in-flight shard is charged one attempt, as it cannot be told which one died)."""
+    in a new pool (each in-flight shard is charged one attempt, as it cannot be told which one died). A pool that
+    broke before a submit refuses it: that shard never ran, is not charged, and goes to the next pool."""
     import multiprocessing as mp
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
@@ -216,9 +217,14 @@ def _run_local(cfg, out: Path, todo: list[int], workers: int, max_retries: int, 
             broken = False
             while True:
                 while not broken and queue and len(futs) < workers:
-                    s = queue.pop(0)
+                    s = queue[0]
+                    try:  # a worker may die between two results: the pool then refuses new work
+                        futs[pool.submit(shard_task, cfg, str(out), s, **kw)] = s
+                    except BrokenProcessPool:
+                        broken = True  # s never ran: it stays first in the queue for the next pool
+                        break
+                    queue.pop(0)
                     attempts[s] += 1
-                    futs[pool.submit(shard_task, cfg, str(out), s, **kw)] = s
                 if not futs:
                     break
                 done, _ = wait(futs, return_when=FIRST_COMPLETED)
