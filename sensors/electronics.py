@@ -13,7 +13,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import warp as wp
-from scipy.signal import lfilter
 
 from sensors.cnt_pdms.params import ElectronicsParams
 from sensors.warp_setup import to_host
@@ -121,6 +120,8 @@ def readout_noise_batch(seeds: list[int], n_steps: int, n_channels: int, white_v
     The numpy mirror of what `readout_warp` adds with `NoiseSeeds` (construction above): the pink filter starts
     in its stationary state (PINK_CHOL times 7 normals of the init stream) and is scaled by pink_v / PINK_STD.
     Runs in blocks of (episode, channel) rows small enough to stay in cache."""
+    from scipy.signal import lfilter  # here, not at the top: scipy.signal costs ~1 s of import that the GPU feed never needs
+
     seed = np.repeat(np.asarray(seeds, dtype=np.uint64), n_channels)[:, None]  # one row per (episode, channel)
     chan = np.tile(np.arange(n_channels, dtype=np.uint64), len(seeds))[:, None]
     steps = np.arange(n_steps, dtype=np.uint64)
