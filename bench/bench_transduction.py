@@ -181,6 +181,13 @@ def bench_cuda_chain(cfg, E, T, N, device="cuda:0", repeats=5, depths=(0, 1, 2, 
         t_plain_fresh = _best(lambda: chain.run_device(drive, T, 0), sync, repeats, rs)  # the plain kernel, fresh arrays
         t_fa = _best(lambda: (fused(depth), readout(True)), sync, repeats, rs)
         t_fa0 = _best(lambda: (fused(depth, False), readout(True)), sync, repeats, rs)
+        # GPU time of each kernel and copy of one fused chain + readout (what bounds it), then the host's gaps
+        rs(); sync()
+        wp.timing_begin(cuda_filter=wp.TIMING_ALL)
+        t0 = time.perf_counter()
+        fused(depth); readout(True); sync()
+        t_prof = time.perf_counter() - t0
+        activity = [{"name": r.name.split("::")[-1][:80], "ms": r.elapsed} for r in wp.timing_end()]
         # equivalence on these inputs: the fused sums against the tiled pass (float64 sums of float32 values)
         rs(); fused(depth); g_f, f_f = box["g"].numpy(), box["f"].numpy()
         rs(); kernels(); g_t, f_t = box["g"].numpy(), box["f"].numpy()
@@ -196,6 +203,7 @@ def bench_cuda_chain(cfg, E, T, N, device="cuda:0", repeats=5, depths=(0, 1, 2, 
         "g_max_rel_diff_vs_tiled_sum": float(np.max(np.abs(g_f - g_t) / np.abs(g_t))),
         "g_equal_fraction": float(np.mean(g_f == g_t)),
         "force_max_abs_diff_n": float(np.max(np.abs(f_f - f_t))), "force_max_n": float(np.max(np.abs(f_t))),
+        "activities_one_chain": {"wall_ms": t_prof * 1e3, "gpu_ms": sum(a["ms"] for a in activity), "list": activity},
     }
     res["before"] = {"taxel_steps_per_s_chain": n / t_b, "chain_seconds": t_b,
                      "stage_seconds": {"taxel kernel + channel sums": t_k, "serial readout + copies back": t_br}}
@@ -382,6 +390,9 @@ def main() -> None:
               + f"; fresh arrays per call: fused kernel {1e3 * fz['fused_kernel_fresh_arrays_seconds']:.2f} ms, "
               f"plain kernel {1e3 * fz['plain_kernel_fresh_arrays_seconds']:.2f} ms"
               + f"; g vs tiled sum: max rel diff {fz['g_max_rel_diff_vs_tiled_sum']:.2g}, equal {fz['g_equal_fraction']:.4f}")
+        act = fz["activities_one_chain"]
+        print(f"  one fused chain + readout: wall {act['wall_ms']:.2f} ms, GPU {act['gpu_ms']:.2f} ms: "
+              + ", ".join(f"{a['name']} {a['ms']:.3f}" for a in act["list"]))
         for k in ("before", "after"):
             print(f"  chain {k}: {c[k]['taxel_steps_per_s_chain']:.3g} taxel-steps/s ({1e3 * c[k]['chain_seconds']:.2f} ms); "
                   + ", ".join(f"{s} {1e3 * v:.2f} ms" for s, v in c[k]["stage_seconds"].items()))
