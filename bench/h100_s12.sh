@@ -12,9 +12,9 @@ W)  # a fresh machine: small runs compile MuJoCo Warp's and the sensors' kernels
     done
     pack W ;;
 A)  # start-up and exit, before (the base tree: the repository root) / after (this tree), small runs, interleaved
-    for i in 1 2; do
+    for i in $(seq ${2:-1}); do
         for f in ntype cnt_pdms; do
-            n=512; [ $f = cnt_pdms ] && n=256
+            n=64; [ $f = cnt_pdms ] && n=128
             (cd .. && PYTHONPATH=/root/site:. timeout 200 python3 bench/bench_user_cli.py --families $f --episodes $n \
                 --tag h100-s12-startup-base-$f-$i 2>&1 | grep -v "^Module" | tail -2 | cut -c1-300; \
                 cp bench/results/user-cli-h100-s12-startup-base-$f-$i.json $OUT/r/)

@@ -81,13 +81,16 @@ def test_parallel_shard_summaries_equal_the_serial_read(generated):
 def test_generate_path_leaves_out_torch_learn_and_scipy_signal():
     # what `piezotwin generate` imports before its first episode on the GPU feed: the CLI, the engine choice,
     # the executors, the feed and the sensor chains; none of them may pull in torch, learn or scipy.signal
-    # (~1 s of scipy.signal import that the GPU path never calls; the numpy noise path imports it where used)
+    # (~1 s of scipy.signal import that the GPU path never calls; the numpy noise path imports it where used), and
+    # the engine choice finds mujoco_warp without importing it (2.5-4 s; the physics processes import it)
     import subprocess
     import sys
 
     code = ("import sys, piezotwin.cli, simulate.generation.choice, simulate.generation.executors, "
             "simulate.generation.feed, simulate.generation.run, sensors.electronics, sensors.registry; "
-            "print(sorted(m for m in ('torch', 'learn', 'scipy.signal', 'pyvista', 'matplotlib') if m in sys.modules))")
+            "from simulate.contact.mujoco_warp import available; available(); "
+            "print(sorted(m for m in ('torch', 'learn', 'scipy.signal', 'pyvista', 'matplotlib', 'mujoco_warp') "
+            "if m in sys.modules))")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
                          env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
     assert res.returncode == 0, res.stderr[-2000:]
