@@ -152,7 +152,8 @@ def bench_cuda_chain(cfg, E, T, N, device="cuda:0", repeats=5, depths=(0, 1, 2, 
         box["g"], _ = el.sum_channels_warp(outs3[2], outs3[1], tc, 1, tp.taxel_area_m2, (E, T, N), device)
 
     def readout(parallel, keep=keep):
-        el.readout_warp(box["g"], (E, T, 1), noise, ep, None, device, keep=keep, adc_dtype=np.int16, parallel=parallel)
+        el.readout_warp(box["g"], (E, T, 1), noise, ep, None, device, keep=keep, adc_dtype=np.int16, parallel=parallel,
+                        return_state=False)  # as CntPdmsSensor.run: its episodes end in the call
 
     res = {"episodes": E, "taxels": N, "steps": T, "device_name": wp.get_device(device).name}
     with host_staging():
