@@ -29,6 +29,21 @@ X)  # the transduction chain on CUDA, with the GPU time of each kernel and copy 
         | tee $OUT/r/logs/transduction-h100-s12.log | tail -6 | cut -c1-3000
     cp bench/results/transduction-h100-s12.json $OUT/r/
     pack X ;;
+B)  # second machine: start-up and exit before / after on velostat (its physics in their own processes), warmed first
+    timeout 200 python3 bench/bench_user_cli.py --families velostat --episodes 128 --tag warm-velostat 2>&1 | grep -v "^Module" | tail -1 | cut -c1-300
+    for i in $(seq ${2:-1}); do
+        (cd .. && PYTHONPATH=/root/site:. timeout 200 python3 bench/bench_user_cli.py --families velostat --episodes 128 \
+            --tag h100-s12-startup-base-velostat-$i 2>&1 | grep -v "^Module" | tail -2 | cut -c1-300; \
+            cp bench/results/user-cli-h100-s12-startup-base-velostat-$i.json $OUT/r/)
+        timeout 200 python3 bench/bench_user_cli.py --families velostat --episodes 128 --tag h100-s12-startup-velostat-$i 2>&1 \
+            | grep -v "^Module" | tail -3 | cut -c1-600
+        cp bench/results/user-cli-h100-s12-startup-velostat-$i.json $OUT/r/
+    done
+    pack B ;;
+G)  # the GPU tests of the fused kernel and the readout (four-step sums against one-step sums, bit for bit)
+    timeout ${2:-300} python3 -m pytest tests/test_gpu.py -q -m gpu -p no:cacheprovider -k "quad or fused or readout or full_chain" 2>&1 \
+        | grep -v "^Module" | tee $OUT/r/logs/pytest-gpu-h100-s12.log | tail -6
+    pack G ;;
 C)  cli cnt_pdms ${2:-4096} h100-s12-cnt; pack C ;;
 V)  cli velostat ${2:-8192} h100-s12-velostat; pack V ;;
 N)  cli ntype ${2:-8192} h100-s12-ntype noalone; pack N ;;
