@@ -316,7 +316,11 @@ _quad_sum_snippet = """
 def quad_sum_f64(x0: wp.float32, x1: wp.float32, x2: wp.float32, x3: wp.float32) -> wp.float64: ...
 
 
-QUAD_SUMS = True  # CUDA's fused kernel sums four steps per exchange (`taxel_sum_quad_kernel`); False: one step at a time
+# Off: measured slower on the H100 (256 x 4096 x 1000, same run, bench/results/transduction-h100-s12.json): the
+# four-step kernel 12.19 ms against 10.62 ms (prefetch 2) and 11.30 ms (prefetch 0) for the one-step one (session
+# 11's 10.2 ms at prefetch 1 on another machine): a third of the shuffles, but four copies of the step in the loop
+# body; the same bits (tests/test_gpu.py). Kept for the record and the bench (`run_pad_device(quad=True)`).
+QUAD_SUMS = False
 
 
 @functools.cache
