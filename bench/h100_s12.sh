@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The device calls of session 12 (issue 16: the plain CLI measured for every family with session 11's writers; the
 # CLI's start-up and exit timed and cut; the transduction chain's GPU activities), run from the worktree copy on the
-# H100 machine with the packages unpacked in /root/site: `bash bench/h100_s12.sh W|A|X|C|V|N|F [episodes]`.
+# H100 machine with the packages unpacked in /root/site: `bash bench/h100_s12.sh W|A|B|X|G|P|C|V|N|F [episodes]`.
 # Mode A also runs the base commit's tree (the repository root, one level up) for the before / after of start-up.
 # Logs and result files go to $OUT as one tar per mode (at most 8 files come back).
 source "$(dirname "$0")/h100_lib.sh"  # environment, cli (plain CLI + MuJoCo Warp alone), pack
@@ -44,6 +44,10 @@ G)  # the GPU tests of the fused kernel and the readout (four-step sums against 
     timeout ${2:-300} python3 -m pytest tests/test_gpu.py -q -m gpu -p no:cacheprovider -k "quad or fused or readout or full_chain" 2>&1 \
         | grep -v "^Module" | tee $OUT/r/logs/pytest-gpu-h100-s12.log | tail -6
     pack G ;;
+P)  # cProfile of a 16-episode ntype run (main thread), top 45 by cumulative time (first machine, before the mujoco_warp cut)
+    rm -rf /tmp/pds; timeout 120 python3 -m cProfile -o $OUT/r/cli.prof -m piezotwin.cli generate ntype -o /tmp/pds --episodes 16 > /dev/null 2>&1
+    python3 -c "import pstats; pstats.Stats('$OUT/r/cli.prof').sort_stats('cumulative').print_stats(45)" 2>&1 | grep -v "^$" | cut -c1-200 | tail -48
+    pack P ;;
 C)  cli cnt_pdms ${2:-4096} h100-s12-cnt; pack C ;;
 V)  cli velostat ${2:-8192} h100-s12-velostat; pack V ;;
 N)  cli ntype ${2:-8192} h100-s12-ntype noalone; pack N ;;
