@@ -64,7 +64,7 @@ def main() -> None:
             out = Path(tmp) / "ds"
             cmd = [sys.executable, "-m", "piezotwin.cli", "generate", fam, "-o", str(out), "--episodes", str(n)] + a.extra.split()
             timings = Path(tmp) / "timings.json"
-            env = {**os.environ, "PIEZOTWIN_TIMINGS_JSON": str(timings)}
+            env = {**os.environ, "PIEZOTWIN_TIMINGS_JSON": str(timings), "PIEZOTWIN_T0_WALL": repr(time.time())}
             t0 = time.perf_counter()
             try:
                 p = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=a.timeout)
@@ -101,6 +101,10 @@ def main() -> None:
                 r.update(samples=samples, samples_per_s=samples / wall)
             if timings.exists():  # seconds per stage, from the CLI process (start-up, first batch, drain, manifest)
                 r["timings"] = json.loads(timings.read_text())
+                cli = r["timings"].get("cli", {})
+                if "dumped at (from process start)" in cli:  # the process's exit (teardown) = wall - its last write
+                    cli["exit (after the last write)"] = wall - cli["dumped at (from process start)"]
+                    print("  cli: " + ", ".join(f"{k} {v:.2f} s" for k, v in cli.items()))
             res["runs"][fam] = r
             print(f"{fam}: {n} episodes in {wall:.1f} s, {r.get('samples_per_s', 0):.3g} samples/s, {r['MB_per_s']:.0f} MB/s "
                   f"({r['of_raw']:.0%} of raw {raw:.0f} MB/s)\n  {line}")

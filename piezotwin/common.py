@@ -86,6 +86,48 @@ def _summary(path: Path) -> dict:
     raise AssertionError  # unreachable: unreadable() exits
 
 
+# Measured serial summary of the first 8 shards on the H100 host (user-cli-h100-s12-*.json, "dataset summary"):
+# ntype 400 episodes 5.5 s, velostat 96 episodes 2.8 s, cnt_pdms 128 episodes 1.8 s, fabric_1 64 episodes 1.0 s:
+# 14-30 ms per episode (per-dataset HDF5 overhead and decompression), while a spawned reader process starts in ~0.7 s
+PARALLEL_SUMMARY_EPISODES = 64  # estimate: from about 1 s of serial reading, the readers win
+PARALLEL_SUMMARY_MIN_CPUS = 8  # estimate: a machine of fewer cores (the 2-core CI box) keeps the serial read and its timing
+
+
+def _summaries(files: list[Path], parallel: bool | None = None, episodes: int = 0) -> list[dict]:
+    """`_summary` of each file, in order. parallel=None: one spawned reader process per file (at most 8) where
+    the files hold >= PARALLEL_SUMMARY_EPISODES episodes (`episodes`, from the manifest) and the machine has >=
+    PARALLEL_SUMMARY_MIN_CPUS cores (h5py's lock serialises threads); else one after another. Same dicts either way
+    (the same function reads each file)."""
+    for p in files:
+        if not p.is_file():
+            fail(f"'{p}' does not exist")
+    if parallel is None:
+        cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        parallel = len(files) > 1 and cpus >= PARALLEL_SUMMARY_MIN_CPUS and episodes >= PARALLEL_SUMMARY_EPISODES
+    if not parallel:
+        return [_summary(p) for p in files]
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
+
+    from sensors.data.recording import RecordingError, read_recording_summary
+
+    try:
+        with ProcessPoolExecutor(min(len(files), 8), mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = [pool.submit(read_recording_summary, p) for p in files]
+            out = []
+            for p, f in zip(files, futures):
+                try:
+                    out.append(f.result())
+                except BrokenProcessPool:
+                    raise
+                except (RecordingError, OSError, RuntimeError) as exc:
+                    unreadable(p, exc)
+            return out
+    except BrokenProcessPool:  # a reader died (memory): read them here, as the serial path does
+        return [_summary(p) for p in files]
+
+
 def _channel_table(channels: dict, title: str | None = None) -> Table:
     t = Table(show_header=True, header_style="bold", title=title)
     for col in ("channel", "units", "dims", "frame", "min", "max"):
@@ -127,7 +169,7 @@ def _print_dataset_summary(directory: Path, max_shards: int = 8) -> None:
         fail(str(exc))
     _print_dataset_header(m)
     files = [directory / s["file"] for s in m["shards"]]
-    sums = [_summary(p) for p in files[:max_shards]]
+    sums = _summaries(files[:max_shards], episodes=sum(len(s.get("episodes", ())) for s in m["shards"][:max_shards]))
     chans: dict[str, dict] = {}
     for s in sums:
         for name, c in s["channels"].items():

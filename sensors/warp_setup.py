@@ -125,6 +125,27 @@ def to_host(arr: wp.array, site: str) -> np.ndarray:
     return buf.numpy()
 
 
+def to_host_many(arrs: list[wp.array], sites: list[str]) -> list[np.ndarray]:
+    """`to_host` of each array, with one synchronisation for all the copies into page-locked buffers (inside
+    `host_staging`, CUDA) instead of one per copy; elsewhere as `to_host` one by one."""
+    if not _STAGING.get() or not arrs or not all(a.device.is_cuda for a in arrs):
+        return [to_host(a, s) for a, s in zip(arrs, sites)]
+    bufs = []
+    for arr, site in zip(arrs, sites):
+        key = (site, arr.shape, arr.dtype, str(arr.device))
+        buf = _PINNED.get(key)
+        if buf is None:
+            same_site = [k for k in _PINNED if k[0] == site]
+            for k in same_site[: max(0, len(same_site) - MAX_PINNED_PER_SITE + 1)]:
+                del _PINNED[k]
+            buf = _PINNED[key] = wp.empty(arr.shape, dtype=arr.dtype, device="cpu", pinned=True)
+        wp.copy(buf, arr)
+        bufs.append(buf)
+    for dev in {str(a.device) for a in arrs}:
+        wp.synchronize_device(dev)  # copies into page-locked memory are asynchronous
+    return [b.numpy() for b in bufs]
+
+
 # Device buffers reused across calls: the sensor chain's per-taxel outputs on CUDA. The taxel kernel's strided
 # stores into arrays freshly allocated per call ran ~3x slower on the H100 than into buffers kept from an
 # earlier call (fused kernel 27.7 vs 10.1 ms, plain kernel 34.0 vs 8.7 ms, bench/results/transduction-h100-s7.json),

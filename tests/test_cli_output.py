@@ -64,3 +64,34 @@ def test_show_default_name_and_export_layout(offscreen, generated, tmp_path, mon
     assert (tmp_path / "vtk" / "ep-000001.pvd").is_file()
     assert (tmp_path / "vtk" / "ep-000001" / "body_000000.vtu").is_file()
     assert (tmp_path / "vtk" / "ep-000001" / "indenter_000000.vtu").is_file()
+
+
+def test_parallel_shard_summaries_equal_the_serial_read(generated):
+    # the summary's reader processes (large datasets on many cores) give the same dicts as reading here
+    from piezotwin.common import _summaries
+
+    out, _ = generated
+    files = sorted(out.glob("shard-*.h5"))
+    assert len(files) == 2
+    serial = _summaries(files, parallel=False)
+    assert _summaries(files, parallel=True) == serial
+    assert [s["n_episodes"] for s in serial] == [2, 1]
+
+
+def test_generate_path_leaves_out_torch_learn_and_scipy_signal():
+    # what `piezotwin generate` imports before its first episode on the GPU feed: the CLI, the engine choice,
+    # the executors, the feed and the sensor chains; none of them may pull in torch, learn or scipy.signal
+    # (~1 s of scipy.signal import that the GPU path never calls; the numpy noise path imports it where used), and
+    # the engine choice finds mujoco_warp without importing it (2.5-4 s; the physics processes import it)
+    import subprocess
+    import sys
+
+    code = ("import sys, piezotwin.cli, simulate.generation.choice, simulate.generation.executors, "
+            "simulate.generation.feed, simulate.generation.run, sensors.electronics, sensors.registry; "
+            "from simulate.contact.mujoco_warp import available; available(); "
+            "print(sorted(m for m in ('torch', 'learn', 'scipy.signal', 'pyvista', 'matplotlib', 'mujoco_warp') "
+            "if m in sys.modules))")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                         env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert res.stdout.strip().splitlines()[-1] == "[]"

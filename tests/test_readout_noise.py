@@ -129,7 +129,7 @@ def test_time_parallel_readout_equals_serial(mode):
     gd = wp.array(g.reshape(-1), dtype=wp.float64, device="cpu")
     ref, st = el.readout_warp(gd, (E, T, C), noise, ep_m, None, "cpu", parallel=False)
     assert np.ptp(ref["adc"]) > 20
-    for chunks in (True, 1, 13, T):
+    for chunks in (True, 1, 10, 13, T):  # 10: a last chunk shorter than the others (34 of 41 samples)
         got, st_g = el.readout_warp(gd, (E, T, C), noise, ep_m, None, "cpu", parallel=chunks)
         d = got["adc"].astype(int) - ref["adc"].astype(int)
         assert np.abs(d).max() <= 1 and (d == 0).mean() > 0.999, chunks
@@ -153,3 +153,33 @@ def test_time_parallel_readout_equals_serial(mode):
     assert np.abs(d).max() <= 1 and (d == 0).mean() > 0.999
     np.testing.assert_allclose(np.concatenate([a["filtered_v"], b["filtered_v"]], 1), ref["filtered_v"], rtol=0,
                                atol=2 * ep_m.lsb_v)
+
+
+def test_fresh_state_on_the_device_and_no_state_back(ep):
+    """state=None makes the zero state on the device (no upload): the same outputs and carried state as the zero
+    state passed in; return_state=False gives the same outputs and no state."""
+    E, T, C = 3, 257, 2
+    g = near_balance(ep, E, T, C) * (1.0 + 0.01 * np.sin(np.arange(T) / 20.0))[None, :, None]
+    noise = el.NoiseSeeds(seeds(E, root=9), 3e-3, 5e-3)
+    gd = wp.array(g.reshape(-1), dtype=wp.float64, device="cpu")
+    for par in (False, True):
+        a, st_a = el.readout_warp(gd, (E, T, C), noise, ep, None, "cpu", parallel=par)
+        b, st_b = el.readout_warp(gd, (E, T, C), noise, ep, el.ElectronicsState.zeros(E * C), "cpu", parallel=par)
+        c, st_c = el.readout_warp(gd, (E, T, C), noise, ep, None, "cpu", parallel=par, return_state=False)
+        assert st_c is None and np.ptp(a["adc"]) > 20
+        for k in a:
+            np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+            np.testing.assert_array_equal(a[k], c[k], err_msg=k)
+        for f in ("filt", "primed", "pink"):
+            np.testing.assert_array_equal(getattr(st_a, f), getattr(st_b, f), err_msg=f)
+
+
+def test_chunk_decay_is_the_repeated_product():
+    full, last = el._chunk_decay(41, 403, 10)
+    for a, f, la in zip(el.PINK_A, full, last):
+        x = 1.0
+        for i in range(41):
+            x *= float(a)
+            if i == 33:
+                assert la == x  # the last chunk: 403 - 9 * 41 = 34 samples
+        assert f == x

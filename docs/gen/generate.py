@@ -56,9 +56,14 @@ USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w
             "user-cli-h100-s9-ntype.json", "user-cli-h100-s9-cnt.json", "user-cli-h100-s9-velostat-f32.json",
             "user-cli-h100-s9-cnt-f32.json", "user-cli-h100-s10-ntype.json", "user-cli-h100-s10-cnt.json",
             "user-cli-h100-s10-velostat.json", "user-cli-h100-s10-fabric.json", "user-cli-h100-s10-fabric-nostream.json",
-            "user-cli-h100-s11-fabric.json"]
+            "user-cli-h100-s11-fabric.json", "user-cli-h100-s12-cnt.json", "user-cli-h100-s12-velostat.json",
+            "user-cli-h100-s12-ntype.json", "user-cli-h100-s12-fabric.json"]
+USER_CLI_STARTUP = [  # session 12: start-up and exit of small runs, the base tree (b833838) against the branch, one machine per pair
+    ("user-cli-h100-s12-startup-base-ntype-1.json", "user-cli-h100-s12-startup-ntype-1.json"),
+    ("user-cli-h100-s12-startup-base-cnt_pdms-1.json", "user-cli-h100-s12-startup-cnt_pdms-1.json"),
+    ("user-cli-h100-s12-startup-base-velostat-1.json", "user-cli-h100-s12-startup-velostat-1.json")]
 PHYSICS_STEP_FAMILIES = ["cnt_pdms", "fabric_1", "velostat", "ntype"]  # physics-step-<family>.json (bench_physics_step.py)
-TRANSDUCTION_GPU = "transduction-h100-s11.json"  # chain with the fused pad sum, re-measured on session 11's machine (kernels as in s7; s9: 9.23e10; s7: first measured; s6: the parallel readout)
+TRANSDUCTION_GPU = "transduction-h100-s12.json"  # session 12: the readout's state made on the device, one sync for its copies, the carry kernel's decays precomputed; the four-step sums measured (off); s11: 9.37e10 (kernels as in s7; s9: 9.23e10; s7: first measured; s6: the parallel readout)
 FUSED_VARIANTS = "fused-variants-h100-s7.json"  # where the fused kernel's time goes (variants with parts left out)
 GPU_PHYSICS = "gpu-pipeline-h100-physics.json"
 PHYSICS_PROFILE = "physics-profile-h100-s4.json"
@@ -226,6 +231,41 @@ def bench_user_cli() -> str:
                 "then for the last writes (`-handon`: the writers start during the 0.1 Hz group's slices):\n",
                 table(["file", "episodes", "wall s", "first physics batch s", "waiting for writers s", "manifest s",
                        "writer-seconds for episodes (all writers)"], fixed)]
+    cli_rows = []
+    for name in USER_CLI:
+        for fam, r in (load(name) or {}).get("runs", {}).items():
+            c = r.get("timings", {}).get("cli")
+            if not c or "error" in r:
+                continue
+            g = r["timings"].get("generate", {})
+            outside = r["seconds"] - g.get("shards", 0.0) - g.get("manifest", 0.0)
+            cli_rows.append([f"`{name}`", r["episodes"], num(r["seconds"]), num(outside),
+                             num(c.get("process start -> generate (interpreter, imports)")),
+                             num(c.get("before the shards (engine choice, Warp init, checks)")),
+                             num(c.get("dataset summary")), num(c.get("exit (after the last write)"))])
+    if cli_rows:
+        out += ["Outside `generate` (session 12's CLI timers, `piezotwin/cli.py`: process start to the command, the "
+                "engine choice / Warp init / checks before the first shard, the dataset summary the command prints, "
+                "the process's exit after its last write; outside = wall - shards - manifest):\n",
+                table(["file", "episodes", "wall s", "outside generate s", "process start s", "before the shards s",
+                       "summary s", "exit s"], cli_rows)]
+    ab = []
+    for base, head in USER_CLI_STARTUP:
+        b, h = load(base), load(head)
+        if not (b and h):
+            continue
+        for fam, rb in b["runs"].items():
+            rh = h["runs"].get(fam)
+            if not rh or "error" in rb or "error" in rh:
+                continue
+            ob = rb["seconds"] - rb["timings"]["generate"]["shards"] - rb["timings"]["generate"]["manifest"]
+            oh = rh["seconds"] - rh["timings"]["generate"]["shards"] - rh["timings"]["generate"]["manifest"]
+            ab.append([fam, rb["episodes"], f"`{base}`", num(rb["seconds"]), num(ob), f"`{head}`", num(rh["seconds"]), num(oh)])
+    if ab:
+        out += ["Start-up and exit before / after session 12 (small runs, the base commit's tree and the branch one after "
+                "the other on one warm machine; outside = wall - shards - manifest):\n",
+                table(["family", "episodes", "base file", "base wall s", "base outside s", "branch file", "branch wall s",
+                       "branch outside s"], ab)]
     alone = []
     for name in USER_CLI:
         for fam, r in (load(name) or {}).get("runs", {}).items():
@@ -307,6 +347,23 @@ def bench_gpu() -> str:
             rows.append(["fused pad conductance vs the tiled sum, same inputs", f"{pct(fz['g_equal_fraction'])} of rows bit-equal "
                          f"(max relative difference {num(fz['g_max_rel_diff_vs_tiled_sum'])}); force within "
                          f"{num(fz['force_max_abs_diff_n'])} N of {num(fz['force_max_n'])} N"])
+            act = fz.get("activities_one_chain")
+            if act:
+                agg: dict[str, float] = {}
+                for a in act["list"]:
+                    key = re.sub(r"_[0-9a-f]{8}$", "", a["name"].removeprefix("forward kernel ").removeprefix("builtin kernel "))
+                    agg[key] = agg.get(key, 0.0) + a["ms"]
+                rows.append(["GPU time of one fused chain + readout by kernel / copy (ms, summed over launches; "
+                             "Warp's activity timing)", ", ".join(f"{k} {num(v)}" for k, v in agg.items())
+                             + f"; GPU {num(act['gpu_ms'])} ms of {num(act['wall_ms'])} ms wall"])
+            q = fz.get("sums_by_steps")
+            if q and fz["prefetch_depth"] != 1:
+                # measured while QUAD_SUMS was on: prefetch 1 ran the four-step kernel, the other depths the one-step one
+                by = fz["seconds_by_prefetch_depth"]
+                rows.append(["group sums four steps per exchange (`QUAD_SUMS`, on while measured, now off): the fused kernel "
+                             "at prefetch 1 (four-step) against the one-step kernel at the other depths (ms)",
+                             f"four-step {num(1e3 * by['1'])}; one-step " + ", ".join(
+                                 f"prefetch {d}: {num(1e3 * v)}" for d, v in by.items() if d != "1")])
         src = TRANSDUCTION_GPU if load(TRANSDUCTION_GPU) else "transduction-gpu.json"
         out += [f"Sensor kernels on one {c['device_name']} (`{src}`: {c['episodes']} episodes x "
                 f"{tr['taxels']} taxels x {tr['steps']} steps):\n", table(["what", "taxel-steps/s"], rows)]

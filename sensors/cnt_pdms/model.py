@@ -132,7 +132,7 @@ class CntPdmsSensor:
             e = self.cfg.sensor.electronics
             noise = el.NoiseSeeds(seeds, e.white_noise_v, e.pink_noise_v)  # drawn in the readout kernel
             ro, _ = el.readout_warp(g_d, (E, T, self.n_channels), noise, self.ep, None, self.device, keep=keep_ro,
-                                    adc_dtype=adc_dtype)
+                                    adc_dtype=adc_dtype, return_state=False)
             ro = el.zero_phase(ro, self.ep)
             force = to_host(f_d, "cnt_pdms force").reshape(E, T) if "force" in want else None
             strain = to_host(s_d, "cnt_pdms strain").reshape(E, T, N) if "strain" in want else None

@@ -43,12 +43,15 @@ def _advance(counter: wp.array(dtype=wp.int32), which: int):
 
 
 def available() -> bool:
-    """True when mujoco_warp can be imported (it is an optional dependency: extra `gpu`)."""
+    """True when mujoco_warp is installed (an optional dependency: extra `gpu`): found on the path, not imported.
+    Its import defines hundreds of Warp kernels (2.5-4 s of CPU, H100 host, bench/results/user-cli-h100-s12-*): it
+    belongs to the processes that step worlds, not to the engine choice that the CLI makes before its first shard."""
+    import importlib.util
+
     try:
-        import mujoco_warp  # noqa: F401
-    except ImportError:
+        return importlib.util.find_spec("mujoco_warp") is not None
+    except (ImportError, ValueError):
         return False
-    return True
 
 
 class WarpWorlds:
