@@ -264,7 +264,9 @@ S2R_BUDGET = {  # the default budget of `piezotwin sim2real` (2 CPU cores, <= 15
 # the last quarter of its samples, which gave a 1 N run a tail of one 0.2 N press)
 # static_blend: the fine-tuned net as a residual on the static calibration curve, F = S(x) + w (N - S(x)) (S fitted on
 # the budget's heads, w in [0, 1] by least squares on its validation tails; StaticBlend); round 11's candidate, adopted
-# only by the rule written before scoring (CHANGELOG). Off: the net alone, as before
+# only by the rule written before scoring (CHANGELOG): held-out second halves of the tails, blend - net over pipeline
+# seeds 0-2, -0.207 +- 0.066 N (pike1 -> pike2) and +0.009 +- 0.006 N (pike2 -> pike1): not adopted
+# (bench/results/s2r-blend-*.json). Off: the net alone, as before; its diagnostics are recorded per fit either way
 # fit_contact: the chain's contact-area term (the tip's contact share s = (F / (F + F_a))^(2/3), R_film / s;
 # sensors.chain_fit.contact_fraction) with F_a fitted; ninth round, scored by the rule written before scoring
 # (CHANGELOG): validation-tail paired difference over pipeline seeds 0-2 -0.003 +- 0.041 N (pike1 -> pike2) and
