@@ -31,7 +31,7 @@ then every layer of the policy from there (Kumar et al. 2022, ICLR, "Fine-tuning
 and underperform out-of-distribution": linear probing, then fine-tuning). Eighth round of issue 15 (CHANGELOG).
 
 Early stopping uses held-out real data: whole runs (`split_runs`), or, in `piezotwin sim2real`, the last
-presses of each training run (`split_tail`: the same sensor, cut between presses). The pre-trained weights
+loaded presses of each training run (`split_tail`: the same sensor, cut between presses). The pre-trained weights
 are the first candidate (fine-tuning that never improves on them returns them).
 """
 
@@ -59,6 +59,8 @@ __all__ = [
     "FREEZE_POLICIES",
     "L2SP_ALPHA",
     "L2SP_BETA",
+    "LOADED_PRESS_FRACTION",
+    "TAIL_BY",
     "VALID_TAIL_FRACTION",
     "InputMap",
     "RealSplit",
@@ -197,33 +199,77 @@ def split_runs(seqs: Seq[Sequence], *, train_fraction: float | None, test_glob: 
                      sorted(test, key=lambda s: s.key), order=[s.key for s in train])
 
 
-VALID_TAIL_FRACTION = 0.25  # estimate: a quarter of each run's presses stops early; the rest (3/4) trains
+VALID_TAIL_FRACTION = 0.25  # estimate: a quarter of each run's loaded presses stops early; the rest (3/4) trains
+# a press is "loaded" when its peak reaches this share of the sensor's full scale: the same 10 % that
+# sensors.chain_fit.presses_of's callers use to find a press in a run (there of the run's own peak), here of the
+# sensor's range, so a run's 0.2 N touches on a 0-45 N sensor are not its validation presses (round 11, CHANGELOG)
+LOADED_PRESS_FRACTION = 0.1
+TAIL_BY = ("presses", "samples")
 
 
-def split_tail(seqs: Seq[Sequence], frac: float = VALID_TAIL_FRACTION) -> tuple[list[Sequence], list[Sequence]]:
-    """Each run cut in time into (head, tail): the tail (about ``frac`` of the samples, its last presses) is the
-    validation data for early stopping, the head trains. The cut lies in the middle of the release between two
-    presses nearest to (1 - frac) of the run, so no press is split (a run of fewer than two presses: at that
-    sample). Validation then measures the sensor being calibrated, never another series or cover (with a whole
-    run of another cover as validation, early stopping chose the weights that suited that cover)."""
+def split_tail(seqs: Seq[Sequence], frac: float = VALID_TAIL_FRACTION, *, full_scale_n: float | None = None,
+               by: str = "presses") -> tuple[list[Sequence], list[Sequence]]:
+    """Each run cut in time into (head, tail): the tail (its last presses) is the validation data for early
+    stopping, the head trains. Validation then measures the sensor being calibrated, never another series or cover
+    (with a whole run of another cover as validation, early stopping chose the weights that suited that cover).
+
+    ``by="presses"`` (round 11): the tail holds the last k = ceil(frac x n) of the run's n loaded presses (peak >=
+    LOADED_PRESS_FRACTION x ``full_scale_n``; None: the largest force in ``seqs``), k <= n - 1, cut in the middle of
+    the release before the first of them; the head keeps everything before (smaller presses included). A run with
+    fewer than two loaded presses gives no tail (all of it trains; its tail is left out of the returned list). If
+    no run gives a tail, every press detected in a run counts as loaded. ``by="samples"`` (rounds 4-10): the cut in
+    the release nearest to (1 - frac) of the run's samples (a run of fewer than two presses: at that sample), which
+    can leave a run whose presses lie early a long tail of one small press. Presses: sensors.chain_fit.presses_of
+    at 10 % of the run's peak force."""
     from sensors.chain_fit import presses_of
 
     if not 0.0 < frac < 1.0:
         raise ValueError(f"validation tail fraction must lie in (0, 1); got {frac}")
-    heads, tails = [], []
-    for s in seqs:
+    if by not in TAIL_BY:
+        raise ValueError(f"tail by must be one of {', '.join(TAIL_BY)}; got {by!r}")
+
+    def part(s, a, b, tag):
         n = len(s)
-        f = s.y[:, 0]
-        want = (1.0 - frac) * n
-        pr = presses_of(f, max(0.1 * float(f.max()), 1e-9))
-        gaps = [(a.stop + b.start) // 2 for a, b in zip(pr[:-1], pr[1:])]
-        cut = min(gaps, key=lambda g: abs(g - want)) if gaps else int(round(want))
-        cut = int(min(max(cut, 1), n - 1))
-        part = lambda a, b, tag: Sequence(s.x[a:b], s.y[a:b], s.inputs, s.targets, s.units,
-                                          {**s.meta, "key": f"{s.key}[{tag}]"},
-                                          {k: v[a:b] for k, v in s.extra.items() if len(v) == n})
-        heads.append(part(0, cut, "head"))
-        tails.append(part(cut, n, "tail"))
+        return Sequence(s.x[a:b], s.y[a:b], s.inputs, s.targets, s.units, {**s.meta, "key": f"{s.key}[{tag}]"},
+                        {k: v[a:b] for k, v in s.extra.items() if len(v) == n})
+
+    found = [presses_of(s.y[:, 0], max(0.1 * float(s.y[:, 0].max()), 1e-9)) for s in seqs]
+    if by == "samples":
+        cuts = []
+        for s, pr in zip(seqs, found):
+            n = len(s)
+            want = (1.0 - frac) * n
+            gaps = [(a.stop + b.start) // 2 for a, b in zip(pr[:-1], pr[1:])]
+            cut = min(gaps, key=lambda g: abs(g - want)) if gaps else int(round(want))
+            cuts.append(int(min(max(cut, 1), n - 1)))
+    else:
+        fs = float(full_scale_n) if full_scale_n is not None else max(float(s.y[:, 0].max()) for s in seqs)
+        if not np.isfinite(fs) or fs <= 0.0:
+            raise ValueError(f"full scale must be a positive finite force in N; got {full_scale_n}")
+
+        def cuts_at(thr: float) -> list[int | None]:
+            out = []
+            for s, pr in zip(seqs, found):
+                f = s.y[:, 0]
+                loaded = [i for i, sl in enumerate(pr) if float(f[sl].max()) >= thr]
+                if len(loaded) < 2:
+                    out.append(None)
+                    continue
+                k = min(int(np.ceil(frac * len(loaded) - 1e-9)), len(loaded) - 1)
+                first = loaded[-k]
+                out.append(int((pr[first - 1].stop + pr[first].start) // 2))  # first >= 1: a loaded press precedes it
+            return out
+
+        cuts = cuts_at(LOADED_PRESS_FRACTION * fs)
+        if all(c is None for c in cuts):
+            cuts = cuts_at(0.0)
+    heads, tails = [], []
+    for s, cut in zip(seqs, cuts):
+        if cut is None:
+            heads.append(part(s, 0, len(s), "head"))
+            continue
+        heads.append(part(s, 0, cut, "head"))
+        tails.append(part(s, cut, len(s), "tail"))
     return heads, tails
 
 

@@ -257,8 +257,16 @@ S2R_BUDGET = {  # the default budget of `piezotwin sim2real` (2 CPU cores, <= 15
     "finetune_norm": "checkpoint", "rehearsal": 0.0, "n_train_seeds": 3, "time_budget_s": 900.0, "valid_tail": 0.25,
     "press_slope": False, "rated_force_n": None, "run_level": False, "fit_threshold": False,
     "creep_linear": False, "finetune_method": "plain", "l2sp_alpha": 0.1, "l2sp_beta": 0.01, "pipeline_seed": 0,
-    "fit_contact": False,
+    "fit_contact": False, "tail_by": "presses", "static_blend": False,
 }
+# tail_by: how learn.finetune.split_tail cuts each training run's validation tail: "presses" (round 11, adopted on its
+# definition: the last quarter of the run's loaded presses, peak >= 10 % of the full scale) or "samples" (rounds 4-10:
+# the last quarter of its samples, which gave a 1 N run a tail of one 0.2 N press)
+# static_blend: the fine-tuned net as a residual on the static calibration curve, F = S(x) + w (N - S(x)) (S fitted on
+# the budget's heads, w in [0, 1] by least squares on its validation tails; StaticBlend); round 11's candidate, adopted
+# only by the rule written before scoring (CHANGELOG): held-out second halves of the tails, blend - net over pipeline
+# seeds 0-2, -0.207 +- 0.066 N (pike1 -> pike2) and +0.009 +- 0.006 N (pike2 -> pike1): not adopted
+# (bench/results/s2r-blend-*.json). Off: the net alone, as before; its diagnostics are recorded per fit either way
 # fit_contact: the chain's contact-area term (the tip's contact share s = (F / (F + F_a))^(2/3), R_film / s;
 # sensors.chain_fit.contact_fraction) with F_a fitted; ninth round, scored by the rule written before scoring
 # (CHANGELOG): validation-tail paired difference over pipeline seeds 0-2 -0.003 +- 0.041 N (pike1 -> pike2) and
@@ -290,7 +298,7 @@ S2R_BUDGET = {  # the default budget of `piezotwin sim2real` (2 CPU cores, <= 15
 # stopping; at 3e-4 the fine-tuning stopped on the valid runs (best epochs ~20) with the pre-trained net's 2x
 # over-prediction (bench/results/s2r-diagnosis-*.json) only partly unlearned.
 FINETUNE_KEYS = ("finetune_epochs", "finetune_patience", "lr", "policy", "finetune_norm", "rehearsal", "n_train_seeds",
-                 "time_budget_s", "valid_tail", "finetune_method", "l2sp_alpha", "l2sp_beta")
+                 "time_budget_s", "valid_tail", "finetune_method", "l2sp_alpha", "l2sp_beta", "tail_by", "static_blend")
 
 
 def pipeline_seed(seed: int, B: dict) -> int:
@@ -369,6 +377,35 @@ class StaticCurve:
 
     def predict(self, x: np.ndarray) -> np.ndarray:
         return np.interp(x[:, 0], self.kx, self.ky)[:, None]
+
+
+def blend_weight(comp, static, seqs: Seq[Sequence]) -> float | None:
+    """The least-squares weight w in [0, 1] of ``comp``'s correction to ``static`` on ``seqs`` (labelled): minimises
+    sum (S + w (N - S) - F)^2, w = <N - S, F - S> / <N - S, N - S>, clipped (Breiman 1996, "Stacked regressions",
+    Machine Learning 24: a non-negative combination of predictors weighted on held-out data). None without data."""
+    if not seqs:
+        return None
+    n = np.concatenate([comp.predict(s.x)[:, 0] for s in seqs])
+    st = np.concatenate([static.predict(s.x)[:, 0] for s in seqs])
+    f = np.concatenate([s.y[:, 0] for s in seqs])
+    d = n - st
+    den = float(np.dot(d, d))
+    return float(np.clip(np.dot(d, f - st) / den, 0.0, 1.0)) if den > 0.0 else 1.0
+
+
+class StaticBlend:
+    """A net as a residual on the static calibration curve: F = S(x) + w (N(x) - S(x)), S the monotone curve of
+    force on ln reading fitted on the same sensor's training data (StaticCurve), N the fine-tuned net (its dynamics:
+    creep, loading history), w its weight (blend_weight). w = 1: the net alone; w = 0: the curve alone."""
+
+    kind = "static_blend"
+
+    def __init__(self, comp, static, w: float):
+        self.comp, self.static, self.w = comp, static, float(w)
+
+    def predict(self, x: np.ndarray) -> np.ndarray:
+        s = self.static.predict(x)
+        return s + self.w * (self.comp.predict(x) - s)
 
 
 class _Calibrated:
@@ -664,10 +701,17 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
                                           "scored_on": "test runs after the calibration press"}
     tick(1, n_steps)
     full = max(float(max(s.y.max() for s in sp.test)), 1e-9)
+    # the sensor's full scale for the tails' loaded presses: the user's rated force, else the training runs' range
+    tail_fs = float(B.get("rated_force_n") or max(float(s.y.max()) for s in sp.train))
+    tail_kw = dict(full_scale_n=tail_fs, by=B.get("tail_by", "presses"))
     lc = []
     for i, k in enumerate(sizes):
         tr = [s for s in sp.train if s.key in sp.order[:k]]
-        heads, tails = FT.split_tail(tr, float(B["valid_tail"]))
+        heads, tails = FT.split_tail(tr, float(B["valid_tail"]), **tail_kw)
+        # round 11's candidate, recorded at every budget whether on or not: the static curve of the heads, the blend
+        # weight fitted on the tails' first halves and both scored on their second halves (held out from the weight)
+        st_h = StaticCurve(heads)
+        t1, t2 = FT.split_tail(tails, 0.5, **tail_kw)
         fts, scs, infos = [], [], []
         for sd in seeds:
             # the share of simulated episodes mixed in: chosen per budget on the real valid runs (never the test runs)
@@ -679,6 +723,10 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
                     ft, fi, reh_ratio = c, ci, r
             sc = FT.train_from_scratch(base.kind, base.hparams, heads, tails, seed=sd, max_epochs=int(B["finetune_epochs"]),
                                        patience=int(B["finetune_patience"])) if scratch else None
+            w_tail = blend_weight(ft, st_h, tails)
+            blend_rec = _blend_record(ft, st_h, t1, t2, w_tail, score, sc)
+            if B.get("static_blend"):
+                ft = StaticBlend(ft, st_h, w_tail)
             fts.append(score(ft))
             if sc is not None:
                 scs.append(score(sc))
@@ -689,7 +737,8 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
                           "finetune_valid_rmse_n": fv, "scratch_valid_rmse_n": sv,
                           "finetune_valid_error_split_n": error_split(ft, tails),
                           **({"linear_probe": fi["linear_probe"]} if "linear_probe" in fi else {}),
-                          "rehearsal": reh_ratio, "scratch_epochs": (getattr(sc, "history", {}) or {}).get("epochs")})
+                          "rehearsal": reh_ratio, "scratch_epochs": (getattr(sc, "history", {}) or {}).get("epochs"),
+                          "static_blend": blend_rec})
         st = StaticCurve(tr)  # the curve sees every labelled real sample the others see (heads and tails)
         row = {"n_runs": k, "runs": [s.key for s in tr], "finetuned": _mean_metrics(fts),
                "scratch": _mean_metrics(scs) if scs else None, "static_curve": score(st), "seeds": infos,
@@ -726,9 +775,32 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
     }
     return {"recording": str(recording), "split": sp.keys(), "full_scale_n": full, "results": res, "learning_curve": curve,
             "targets": tg, "train_seeds": seeds,
-            "validation": f"early stopping on the last presses of each training run of the budget (about {100 * float(B['valid_tail']):.0f} % "
-                          "of its samples, cut between presses; learn.finetune.split_tail); the pre-trained weights are the first candidate",
+            "validation": (f"early stopping on the last {100 * float(B['valid_tail']):.0f} % of each training run's loaded presses (peak >= "
+                           f"{100 * FT.LOADED_PRESS_FRACTION:.0f} % of {tail_fs:.3g} N; runs with fewer than two give no tail), cut between presses"
+                           if tail_kw["by"] == "presses" else
+                           f"early stopping on the last presses of each training run of the budget (about {100 * float(B['valid_tail']):.0f} % "
+                           "of its samples, cut between presses)") + "; learn.finetune.split_tail; the pre-trained weights are the first candidate",
+            "tail_full_scale_n": tail_fs, "static_blend": bool(B.get("static_blend")),
             "input_map": "x = ln(reading) at %g Hz; the simulated reading is in the real board's units" % rate}
+
+
+def _blend_record(net, static, t1, t2, w_tail, score, scratch=None) -> dict[str, Any]:
+    """Round 11's candidate on one fit (StaticBlend): w fitted on the tails' first halves, the net and the blend
+    scored on the second halves (N); w on the whole tails and the blend's test RMSE beside (never used to choose);
+    the same for scratch where it ran (the blend is not scratch's: recorded for the comparison only)."""
+    w1 = blend_weight(net, static, t1)
+    rec = {"w_first_half": w1, "w_tail": w_tail,
+           "second_half_rmse_net_n": FT.rmse_on(net, t2) if t2 else None,
+           "second_half_rmse_blend_n": FT.rmse_on(StaticBlend(net, static, w1), t2) if t2 and w1 is not None else None,
+           "second_half_rmse_static_n": FT.rmse_on(static, t2) if t2 else None,
+           "test_rmse_blend_n": score(StaticBlend(net, static, w_tail))["rmse"] if w_tail is not None else None}
+    if scratch is not None:
+        ws = blend_weight(scratch, static, t1)
+        wt = blend_weight(scratch, static, [*t1, *t2])
+        rec.update(scratch_w_first_half=ws, scratch_second_half_rmse_n=FT.rmse_on(scratch, t2) if t2 else None,
+                   scratch_second_half_rmse_blend_n=FT.rmse_on(StaticBlend(scratch, static, ws), t2) if t2 and ws is not None else None,
+                   scratch_test_rmse_blend_n=score(StaticBlend(scratch, static, wt))["rmse"] if wt is not None else None)
+    return rec
 
 
 def paired_improvement(ref: Seq[float], cand: Seq[float]) -> dict[str, Any]:

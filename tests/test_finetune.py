@@ -14,6 +14,7 @@ from learn.data import Sequence
 from learn.models.base import make_model
 from learn.sim2real import run_finetune
 from piezotwin.cli import app
+from sensors import chain_fit as CF
 from sensors.data.recording import Channel, write_recording
 from sensors.velostat.fit import FitParams, Model, forward_reading
 
@@ -201,7 +202,7 @@ def test_split_tail_cuts_each_run_between_presses():
     f = presses(3, T=800)
     s = Sequence(np.log(1.0 + f)[:, None], f[:, None], ["x"], ["force"], {"force": "N"}, {"key": "run"},
                  {"time": np.arange(len(f)) / RATE})
-    (h,), (t,) = FT.split_tail([s], 0.25)
+    (h,), (t,) = FT.split_tail([s], 0.25, by="samples")
     assert len(h) + len(t) == len(s)
     np.testing.assert_array_equal(np.concatenate([h.y, t.y]), s.y)
     np.testing.assert_array_equal(t.extra["time"], s.extra["time"][len(h):])
@@ -210,6 +211,53 @@ def test_split_tail_cuts_each_run_between_presses():
     assert h.key == "run[head]" and t.key == "run[tail]"
     with pytest.raises(ValueError):
         FT.split_tail([s], 1.0)
+    with pytest.raises(ValueError, match="tail by"):
+        FT.split_tail([s], 0.25, by="time")
+
+
+def _run(peaks, key, gap=30, hold=25, lead=20):
+    f = [np.zeros(lead)]
+    for pk in peaks:
+        f += [np.linspace(0, pk, 6), np.full(hold, pk), np.linspace(pk, 0, 6), np.zeros(gap)]
+    f = np.concatenate(f)
+    return Sequence(np.log(1.0 + f)[:, None], f[:, None], ["x"], ["force"], {"force": "N"}, {"key": key},
+                    {"time": np.arange(len(f)) / RATE})
+
+
+def test_split_tail_by_presses_holds_the_last_loaded_presses():
+    """Round 11: a run whose presses lie early and whose last samples hold one tiny press (the 1 N Lupasic run) gets a
+    tail of the last ceil(frac n) of its n loaded presses (peak >= 10 % of the full scale), not a long stretch of
+    one touch; a run with fewer than two loaded presses gives no tail; the sample cut (rounds 4-10) gave it one."""
+    early = _run([10.0, 12.0, 11.0, 9.0, 13.0, 2.0], "early")
+    early = Sequence(np.concatenate([early.x, np.zeros((600, 1))]), np.concatenate([early.y, np.zeros((600, 1))]),
+                     early.inputs, early.targets, early.units, early.meta, {})  # a long unloaded end
+    even = _run([20.0, 22.0, 21.0, 19.0, 20.0, 21.0, 22.0, 20.0], "even")
+    touches = _run([1.0, 0.9, 1.2, 0.8], "touches")  # below 10 % of the 22 N full scale
+    heads, tails = FT.split_tail([early, even, touches], 0.25)
+    assert [t.key for t in tails] == ["early[tail]", "even[tail]"] and len(heads) == 3
+    assert heads[2].key == "touches[head]" and len(heads[2]) == len(touches)  # no tail: all of it trains
+
+    def tail_peaks(t, fs=22.0):
+        f = t.y[:, 0]
+        return [round(float(f[sl].max()), 2) for sl in CF.presses_of(f, 0.1 * fs)]
+
+    assert tail_peaks(tails[0]) == [9.0, 13.0]  # ceil(0.25 x 5) = 2 loaded presses (the 2 N touch follows them)
+    assert tail_peaks(tails[1]) == [22.0, 20.0]  # ceil(0.25 x 8) = 2
+    for s, h, t in ((early, heads[0], tails[0]), (even, heads[1], tails[1])):
+        np.testing.assert_array_equal(np.concatenate([h.y, t.y]), s.y)
+        assert s.y[len(h), 0] == 0.0 and s.y[len(h) - 1, 0] == 0.0  # cut in a release
+    # the sample cut of rounds 4-10 cuts the early run after its loaded presses: a tail of the 2 N touch (a press at
+    # 10 % of the run's own peak) and the unloaded rest, more than a quarter of the run
+    _, (t_old,) = FT.split_tail([early], 0.25, by="samples")
+    assert tail_peaks(t_old, 22.0) == [] and tail_peaks(t_old, 13.0) == [2.0] and len(t_old) > 0.25 * len(early)
+    # a full scale given by the user (a rated force) sets the threshold: at 150 N (15 N) the early run has no loaded
+    # press and gives no tail; at 300 N no run has two, so every detected press counts (validation never vanishes)
+    assert [t.key for t in FT.split_tail([early, even], 0.25, full_scale_n=150.0)[1]] == ["even[tail]"]
+    _, tails300 = FT.split_tail([early, even], 0.25, full_scale_n=300.0)
+    assert [t.key for t in tails300] == ["early[tail]", "even[tail]"]
+    assert tail_peaks(tails300[0], 1.0) == [13.0, 2.0]  # ceil(0.25 x 6) = 2 of its 6 presses
+    with pytest.raises(ValueError, match="full scale"):
+        FT.split_tail([early], 0.25, full_scale_n=float("nan"))
 
 
 def test_l2sp_penalty_pulls_toward_the_pretrained_weights(ckpt):

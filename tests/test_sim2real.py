@@ -106,3 +106,35 @@ def test_paired_improvement_rule_and_pipeline_seed():
     k0 = {"family": "velostat", "budget": {"n_boot": 16, "pipeline_seed": 0}, "seed": 0}
     assert _fit_key(k0) == _fit_key({**k0, "budget": {"n_boot": 16, "pipeline_seed": 3}})
     assert _fit_key(k0) != _fit_key({**k0, "budget": {"n_boot": 8, "pipeline_seed": 0}}) and _fit_key(None) is None
+
+
+def test_static_blend_weight_recovers_the_mix_and_its_ends():
+    """Round 11's candidate (learn.sim2real.StaticBlend): F = S + w (N - S). On data whose force is exactly
+    0.3 N + 0.7 S the least-squares weight is 0.7; it is clipped to [0, 1]; w = 1 gives the net, w = 0 the curve; no
+    data gives None."""
+    from learn.sim2real import StaticBlend, StaticCurve, blend_weight
+
+    rng = np.random.default_rng(3)
+    x = np.sort(rng.uniform(0.0, 3.0, 400))[::-1][:, None]  # ln reading falls as the force rises
+    f = 10.0 * (3.0 - x[:, 0])
+    curve_data = Sequence(x, f[:, None], ["x"], ["force"], {}, {"key": "cal"}, {})
+    S = StaticCurve([curve_data])
+
+    class Net:
+        def __init__(self, bias):
+            self.bias = bias
+
+        def predict(self, xx):
+            return S.predict(xx) + self.bias * np.sin(7.0 * xx)
+
+    net = Net(2.0)
+    truth = S.predict(x)[:, 0] + 0.7 * 2.0 * np.sin(7.0 * x[:, 0])
+    seq = Sequence(x, truth[:, None], ["x"], ["force"], {}, {"key": "tail"}, {})
+    assert blend_weight(net, S, [seq]) == pytest.approx(0.7, abs=1e-9)
+    over = Sequence(x, (S.predict(x)[:, 0] + 3.0 * np.sin(7.0 * x[:, 0]))[:, None], ["x"], ["force"], {}, {"key": "o"}, {})
+    assert blend_weight(net, S, [over]) == 1.0  # 1.5 clipped: never extrapolates past the net
+    assert blend_weight(Net(-2.0), S, [seq]) == 0.0  # a correction pointing the wrong way: the curve alone
+    assert blend_weight(net, S, []) is None
+    np.testing.assert_allclose(StaticBlend(net, S, 1.0).predict(x), net.predict(x))
+    np.testing.assert_allclose(StaticBlend(net, S, 0.0).predict(x), S.predict(x))
+    np.testing.assert_allclose(StaticBlend(net, S, 0.7).predict(x)[:, 0], truth, atol=1e-12)

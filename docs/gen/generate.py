@@ -973,6 +973,60 @@ def sim2real_results() -> str:
                 "the epochs the whole-cap run restores (pipeline seed 0 for fine-tuning):\n\n"
                 + table(["split", "real runs", "fine-tuned, tail", "scratch, tail", "fine-tuned, held-out half",
                          "scratch, held-out half", "fine-tuned best epochs (cap)", "scratch best epochs (cap)"], lrow))
+    tba = RESULTS / "s2r-tail-before-after.json"
+    if tba.is_file():
+        d = json.loads(tba.read_text())
+        trow = []
+        for split, v in d["splits"].items():
+            b, a = v["before"], v["after"]
+            arrow = lambda x, y, nd=None: f"{num(x, nd) if nd else num(x)} → {num(y, nd) if nd else num(y)}"
+            trow.append([split, num(a.get("tail_full_scale_n")),
+                         f"{b['pooled_pct_fs']:.1f} → {a['pooled_pct_fs']:.1f} %", f"{b['two_point_pct_fs']:.1f} → {a['two_point_pct_fs']:.1f} %",
+                         "; ".join(f"{cb['n_runs']}: {arrow(cb['finetuned_rmse'], ca['finetuned_rmse'])}" for cb, ca in zip(b["curve"], a["curve"])),
+                         "; ".join(f"{cb['n_runs']}: {arrow(cb['scratch_rmse'], ca['scratch_rmse'])}" for cb, ca in zip(b["curve"], a["curve"])),
+                         "; ".join(f"{cb['n_runs']}: {arrow(cb['finetuned_valid_rmse'], ca['finetuned_valid_rmse'])}"
+                                   for cb, ca in zip(b["curve"], a["curve"])),
+                         f"{sum(c['ft_beats_both'] for c in b['curve'])} → {sum(c['ft_beats_both'] for c in a['curve'])} of {len(a['curve'])}"])
+        out += ("\n\nThe validation tail before and after round 11 (`bench/bench_s2r_tail_compare.py`, "
+                "`bench/results/s2r-tail-before-after.json`; adopted on its definition, every split re-scored, win or lose): "
+                f"before, the last quarter of each run's samples cut between presses (revision {d['before_revision']}); after, "
+                "the last quarter of each run's loaded presses (peak >= 10 % of the full scale, the column; runs with fewer "
+                "than two give no tail). Test RMSE (N) by real runs, fine-tuned and scratch; the fine-tuned RMSE on the "
+                "validation tails (N; each side on its own tails); budgets where fine-tuned beats scratch and the static curve:\n\n"
+                + table(["split", "tail full scale (N)", "fine-tuned, all runs", "two-point", "fine-tuned by budget",
+                         "scratch by budget", "fine-tuned on the validation tails", "fine-tuned best"], trow))
+    bl = sorted(RESULTS.glob("s2r-blend-*.json"))
+    if bl:
+        brow, crow = [], []
+        for f in bl:
+            d = json.loads(f.read_text())
+            split = f.stem.removeprefix("s2r-blend-")
+            ps = sorted(d["runs"], key=lambda k: int(k[1:]))
+            ru = d.get("rule") or {}
+            brow.append([split, ", ".join(f"{p}: {num(d['runs'][p]['net_second_half_mean'], 3)}" for p in ps),
+                         ", ".join(f"{p}: {num(d['runs'][p]['blend_second_half_mean'], 3)}" for p in ps),
+                         ", ".join(f"{p}: {num(d['runs'][p]['static_second_half_mean'], 3)}" for p in ps),
+                         f"{num(ru['diff_mean'], 2)} ± {num(ru['diff_se'], 2)}" if ru else "–",
+                         ("yes" if ru["improves"] else "no") if ru else "–"])
+            for p in ps:
+                for c in d["runs"][p]["by_budget"]:
+                    ws = [w for w in c["w_first_half"] if w is not None]
+                    crow.append([split, p, c["n_runs"], " / ".join(num(w, 2) for w in ws),
+                                 f"{num(c['test_finetuned_rmse'])} / {num(c['test_blend_rmse'])}", num(c["test_static_curve_rmse"]),
+                                 num(c.get("test_scratch_rmse"))])
+        out += ("\n\nThe fine-tuned net as a residual on the static curve (round 11's candidate, `learn.sim2real.StaticBlend`: "
+                "F = S + w (N - S), S the static curve of the budget's heads, w in [0, 1] by least squares; "
+                "`bench/bench_s2r_blend.py`, `bench/results/s2r-blend-*.json`; rule written before scoring). Held-out "
+                "statistic: w fitted on the first half of each validation tail's loaded presses, net and blend scored on the "
+                "second halves (N, mean over budgets and fine-tuning seeds) per pipeline seed; blend - net, mean ± se over p; "
+                "adopted only if it improves (below minus its se) in both Lupasic directions:\n\n"
+                + table(["split", "net, second halves", "blend, second halves", "static curve, second halves",
+                         "paired difference", "improves"], brow)
+                + "\n\nBeside, never used to choose: the weights w (first halves, per fine-tuning seed) and the test RMSE "
+                "(N) by budget, net / blend (w on the whole tails), the static curve and scratch (p0 only; scratch does "
+                "not depend on p):\n\n"
+                + table(["split", "pipeline seed", "real runs", "w per seed", "test net / blend", "test static curve",
+                         "test scratch"], crow))
     abl = sorted(RESULTS.glob("s2r-ablation-*.json"))
     if abl:
         arows = []
