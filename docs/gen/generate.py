@@ -57,7 +57,7 @@ USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w
             "user-cli-h100-s9-cnt-f32.json", "user-cli-h100-s10-ntype.json", "user-cli-h100-s10-cnt.json",
             "user-cli-h100-s10-velostat.json", "user-cli-h100-s10-fabric.json", "user-cli-h100-s10-fabric-nostream.json",
             "user-cli-h100-s11-fabric.json", "user-cli-h100-s12-cnt.json", "user-cli-h100-s12-velostat.json",
-            "user-cli-h100-s12-ntype.json", "user-cli-h100-s12-fabric.json"]
+            "user-cli-h100-s12-ntype.json", "user-cli-h100-s12-fabric.json", "user-cli-h100-s12-fabric-b.json"]
 USER_CLI_STARTUP = [  # session 12: start-up and exit of small runs, the base tree (b833838) against the branch, one machine per pair
     ("user-cli-h100-s12-startup-base-ntype-1.json", "user-cli-h100-s12-startup-ntype-1.json"),
     ("user-cli-h100-s12-startup-base-cnt_pdms-1.json", "user-cli-h100-s12-startup-cnt_pdms-1.json"),
@@ -221,7 +221,9 @@ def bench_user_cli() -> str:
            "while it steps; `-s9-*-f32`: the final code, the recorded taxel fields rounded to float32 on the device and copied "
            "back through page-locked buffers, on a second machine; `-s10-*`: session 10's code after `pytest -m gpu` on the "
            "same machine, one run per family: ntype's taxel fields and element loads on the device, `-s10-fabric` with the "
-           "first batch streamed, `-s10-fabric-nostream` without (the stream then dropped)); "
+           "first batch streamed, `-s10-fabric-nostream` without (the stream then dropped); `-s12-*`: session 12's code, "
+           "one run per family after a small warm-up run; `-s12-fabric-b`: the final session-12 code (the engine choice no "
+           "longer imports mujoco_warp), another machine, after a 256-episode warm-up run); "
            "raw = a plain file of the same bytes "
            "on the same disk right after (issue 16's target: >= 50 % of it, or >= 1e6 samples/s):\n",
            table(["family", "episodes", "file", "engine (the CLI's line)", "s", "samples/s", "MB/s", "of raw MB/s"], rows)]
