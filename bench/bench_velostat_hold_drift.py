@@ -28,7 +28,10 @@ import numpy as np
 import torch
 
 VARIANTS = {"d128c128": {"dilations": [1, 2, 4, 8, 16, 32, 64, 128], "chunk": 128},
-            "d128c256": {"dilations": [1, 2, 4, 8, 16, 32, 64, 128], "chunk": 256}}
+            "d128c256": {"dilations": [1, 2, 4, 8, 16, 32, 64, 128], "chunk": 256},
+            # session 12's candidate: the input sets holding the compensated chain's force learn a correction to it
+            # (only those are trained; the others are the run's own, their recorded validation RMSE enters the pick)
+            "residual": {"residual": "bp_comp_force_n"}}
 AGES_S = ((0.0, 25.0), (25.0, 60.0), (60.0, float("inf")))
 FORCES_N = ((0.0, 3.0), (3.0, 8.0), (8.0, 16.0))
 
@@ -110,6 +113,10 @@ def main() -> None:
             "by_force_n": {f"{lo:g}-{hi:g}": part((r[:, 2] >= lo) & (r[:, 2] < hi)) for lo, hi in FORCES_N},
             "error_trajectory_n": {key: np.mean(v, 0).reshape(8, -1).mean(1).tolist() for key, v in traj.items() if v}}
     out["trajectory_step_s"] = 0.5
+    # today's default as the run picked it: what a variant is compared with (the adoption rule, CHANGELOG)
+    out["default"] = {"inputs": inp, "valid_rmse": m["models"]["tcn"]["valid_rmse_by_inputs"][inp],
+                      "drift_mean": out["models"]["ours"]["drift_mean"],
+                      "drift_signed_mean": out["models"]["ours"]["drift_signed_mean"]}
     if a.variants:
         jobs = {"raw": lambda s: V.tcn_features(s), "calibrated": lambda s: V.tcn_features(s, tracker, chains),
                 "aged": lambda s: V.tcn_features(s, tracker, chains, rate)}
@@ -118,8 +125,12 @@ def main() -> None:
         out["variants"] = {}
         for name in a.variants.split(","):
             hp = {**md.tcn, **VARIANTS[name]}
-            ens, secs = V._fit_tcn_batched(F, seed=a.seed, n_members=md.tcn_members, member_hparams=hp)
-            res = {}
+            residual = hp.pop("residual", None)
+            Fv = {v: f for v, f in F.items() if residual is None or residual in V.TCN_INPUTS[v]}
+            ens, secs = V._fit_tcn_batched(Fv, seed=a.seed, n_members=md.tcn_members, member_hparams=hp,
+                                           residual=residual)
+            res = {v: {"valid_rmse": r, "recorded": True} for v, r in m["models"]["tcn"]["valid_rmse_by_inputs"].items()
+                   if v not in Fv}
             for v, e in ens.items():
                 with torch.inference_mode():
                     pv = [e.predict(x)[:, 0] for x in F[v][2]]
@@ -127,7 +138,12 @@ def main() -> None:
                 res[v] = {"valid_rmse": M.rmse(yv, np.concatenate(pv)), "drift_mean": h["drift_mean"],
                           "drift_signed_mean": h["drift_signed_mean"], "epochs": [mm.history["epochs"] for mm in e.members]}
             pick = min(res, key=lambda v: res[v]["valid_rmse"])
-            out["variants"][name] = {"hparams": VARIANTS[name], "receptive_field_s": ens[pick].context / rate,
+            if pick not in ens:  # a set this variant leaves as it is: the run's own ensemble (its checkpoint)
+                if pick != inp:
+                    raise SystemExit(f"{name}: the pick {pick} is neither trained here nor the run's checkpoint")
+                res[pick].update({"drift_mean": out["models"]["ours"]["drift_mean"],
+                                  "drift_signed_mean": out["models"]["ours"]["drift_signed_mean"]})
+            out["variants"][name] = {"hparams": VARIANTS[name], "receptive_field_s": (ens[pick] if pick in ens else tcn).context / rate,
                                      "fit_seconds": secs, "by_inputs": res, "picked": pick}
             print(name, json.dumps(out["variants"][name]), flush=True)
     out["machine"] = {"host_platform": platform.platform(), "date_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
