@@ -11,6 +11,12 @@ features, every input set, its validation RMSE and hold drift (the experiment's 
 
     PYTHONPATH=. python bench/bench_velostat_hold_drift.py RUN_DIR [--seed 0] [--variants d128c128,d128c256]
 writes bench/results/velostat-hold-drift.json (docs/gen renders it on the velostat experiment page).
+
+Session 12's adoption rule (CHANGELOG "velostat, session 12"), from one file per quick seed written with
+--variants residual --out bench/results/velostat-residual-seedS.json:
+    PYTHONPATH=. python bench/bench_velostat_hold_drift.py --rule residual bench/results/velostat-residual-seed{0,1,2}.json
+writes bench/results/velostat-residual-rule.json: per seed today's default and the candidate (validation RMSE, hold
+drift), the paired differences' means and standard errors, and whether the rule adopts.
 """
 
 from __future__ import annotations
@@ -30,10 +36,36 @@ import torch
 VARIANTS = {"d128c128": {"dilations": [1, 2, 4, 8, 16, 32, 64, 128], "chunk": 128},
             "d128c256": {"dilations": [1, 2, 4, 8, 16, 32, 64, 128], "chunk": 256},
             # session 12's candidate: the input sets holding the compensated chain's force learn a correction to it
-            # (only those are trained; the others are the run's own, their recorded validation RMSE enters the pick)
             "residual": {"residual": "bp_comp_force_n"}}
+# (every input set is trained: those without the residual channel as the run trained them, same seeds)
 AGES_S = ((0.0, 25.0), (25.0, 60.0), (60.0, float("inf")))
 FORCES_N = ((0.0, 3.0), (3.0, 8.0), (8.0, 16.0))
+
+
+def rule(variant: str, files: list[str], out: str) -> dict:
+    """The adoption rule on the paired differences d = candidate - default over the seeds' validation recordings:
+    adopt if mean(d_drift) < -SE(d_drift) and mean(d_rmse) <= SE(d_rmse), SE = std(d, ddof=1) / sqrt(n)."""
+    per = {}
+    for f in files:
+        d = json.loads(Path(f).read_text())
+        v = d["variants"][variant]
+        c = v["by_inputs"][v["picked"]]
+        per[int(d["seed"])] = {"default": d["default"],
+                               "candidate": {"inputs": v["picked"], "valid_rmse": c["valid_rmse"],
+                                             "drift_mean": c["drift_mean"], "drift_signed_mean": c["drift_signed_mean"]},
+                               "file": f}
+    res: dict = {"variant": variant, "split": "valid", "mode": "quick", "seeds": per, "differences": {}}
+    ok = {}
+    for key in ("drift_mean", "valid_rmse"):
+        dd = np.array([p["candidate"][key] - p["default"][key] for p in per.values()])
+        se = float(dd.std(ddof=1) / np.sqrt(len(dd))) if len(dd) > 1 else float("nan")
+        res["differences"][key] = {"per_seed": dd.tolist(), "mean": float(dd.mean()), "se": se}
+        ok[key] = bool(dd.mean() < -se) if key == "drift_mean" else bool(dd.mean() <= se)
+    res["conditions"] = {"drift_falls_by_more_than_se": ok["drift_mean"], "rmse_rises_by_at_most_se": ok["valid_rmse"]}
+    res["adopted"] = ok["drift_mean"] and ok["valid_rmse"]
+    Path(out).write_text(json.dumps(res, indent=1))
+    print(json.dumps(res, indent=1))
+    return res
 
 
 def main() -> None:
@@ -45,13 +77,17 @@ def main() -> None:
     from simulate.protocols.compression_tester import unit_centres_m
 
     ap = argparse.ArgumentParser()
-    ap.add_argument("run")
+    ap.add_argument("run", nargs="+")
+    ap.add_argument("--rule", default="", help="a variant: apply the adoption rule to the per-seed files given")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--variants", default="")
     ap.add_argument("--out", default="bench/results/velostat-hold-drift.json")
     a = ap.parse_args()
+    if a.rule:
+        rule(a.rule, a.run, a.out if a.out != ap.get_default("out") else f"bench/results/velostat-{a.rule}-rule.json")
+        return
     torch.set_num_threads(1)
-    run = Path(a.run)
+    run = Path(a.run[0])
     m = json.loads((run / "metrics.json").read_text())
     md = V.MODES[m["mode"]]
     cfgs = V.scenes_of(md, [], a.seed)
@@ -126,11 +162,10 @@ def main() -> None:
         for name in a.variants.split(","):
             hp = {**md.tcn, **VARIANTS[name]}
             residual = hp.pop("residual", None)
-            Fv = {v: f for v, f in F.items() if residual is None or residual in V.TCN_INPUTS[v]}
-            ens, secs = V._fit_tcn_batched(Fv, seed=a.seed, n_members=md.tcn_members, member_hparams=hp,
+            # every input set, as the experiment trains them (those without the residual channel as they are)
+            ens, secs = V._fit_tcn_batched(F, seed=a.seed, n_members=md.tcn_members, member_hparams=hp,
                                            residual=residual)
-            res = {v: {"valid_rmse": r, "recorded": True} for v, r in m["models"]["tcn"]["valid_rmse_by_inputs"].items()
-                   if v not in Fv}
+            res = {}
             for v, e in ens.items():
                 with torch.inference_mode():
                     pv = [e.predict(x)[:, 0] for x in F[v][2]]
@@ -138,12 +173,7 @@ def main() -> None:
                 res[v] = {"valid_rmse": M.rmse(yv, np.concatenate(pv)), "drift_mean": h["drift_mean"],
                           "drift_signed_mean": h["drift_signed_mean"], "epochs": [mm.history["epochs"] for mm in e.members]}
             pick = min(res, key=lambda v: res[v]["valid_rmse"])
-            if pick not in ens:  # a set this variant leaves as it is: the run's own ensemble (its checkpoint)
-                if pick != inp:
-                    raise SystemExit(f"{name}: the pick {pick} is neither trained here nor the run's checkpoint")
-                res[pick].update({"drift_mean": out["models"]["ours"]["drift_mean"],
-                                  "drift_signed_mean": out["models"]["ours"]["drift_signed_mean"]})
-            out["variants"][name] = {"hparams": VARIANTS[name], "receptive_field_s": (ens[pick] if pick in ens else tcn).context / rate,
+            out["variants"][name] = {"hparams": VARIANTS[name], "receptive_field_s": ens[pick].context / rate,
                                      "fit_seconds": secs, "by_inputs": res, "picked": pick}
             print(name, json.dumps(out["variants"][name]), flush=True)
     out["machine"] = {"host_platform": platform.platform(), "date_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),

@@ -641,12 +641,18 @@ def test_device_script_ours_only_start_poll_collect(tmp_path):
     m["partial"] = "the paper's chains only"
     path.write_text(json.dumps(m))
     ours = {"VF_RUN": str(tmp_path / "ours"), "VF_ONLY": "ours", "VF_GEN_WORKERS": "2"}
-    for c in ("start", "poll"):
-        assert sh(c, **ours).returncode == 0, c
-    r = sh("collect", **ours)
+    assert sh("start", **ours).returncode == 0
+    r = sh("collect", **ours)  # at once, no poll: collect waits for the seed's "done" before it merges
     assert r.returncode == 0, r.stdout + r.stderr
+    assert "waiting for seeds 0" in r.stdout and "every seed done: 0" in r.stdout
     merged = json.loads(path.read_text())
     assert merged["models"]["tcn"]["test"] == tcn["test"] and "partial" not in merged
+    # the model the experiment trains today (residual on the compensated chain where the picked inputs hold it)
+    from learn.experiments import velostat as V
+
+    res = V.MODES["tiny"].tcn_residual
+    want = res if res in V.TCN_INPUTS[merged["models"]["tcn"]["inputs"]] else None
+    assert merged["models"]["tcn"]["hparams"]["member_hparams"].get("residual_input") == want
     # the checkout's commit (git here; VF_COMMIT where the copy has no .git)
     assert merged["machine"]["ours"]["git_commit"] not in ("", "unknown") and merged["machine"]["ours"]["gen_workers"] == 2
     merged["datasets"]["mix"]["content_sha256"] = "0" * 64

@@ -1060,6 +1060,35 @@ def velostat_hold_drift() -> str:
     return "\n".join(L) + "\n"
 
 
+def velostat_design_rule(variant: str = "residual") -> str:
+    """bench/results/velostat-<variant>-rule.json (bench_velostat_hold_drift.py --rule): a model-design candidate for
+    ours against today's default on the validation recordings of quick seeds 0-2, and the adoption rule's outcome
+    (CHANGELOG "velostat, session 12")."""
+    d = load(f"velostat-{variant}-rule.json")
+    if not d:
+        return ""
+    cell = lambda r: (f"{r['inputs']}: {num(r['valid_rmse'])} / {num(r['drift_mean'], 2)} "
+                      f"({r['drift_signed_mean']:+.2f})")
+    diff = d["differences"]
+    rows = [[f"seed {sd}", cell(p["default"]), cell(p["candidate"]),
+             f"{diff['valid_rmse']['per_seed'][i]:+.3f}", f"{diff['drift_mean']['per_seed'][i]:+.3f}"]
+            for i, (sd, p) in enumerate(d["seeds"].items())]
+    rows.append(["mean ± SE", "", "", f"{diff['valid_rmse']['mean']:+.3f} ± {num(diff['valid_rmse']['se'], 2)}",
+                 f"{diff['drift_mean']['mean']:+.3f} ± {num(diff['drift_mean']['se'], 2)}"])
+    c = d["conditions"]
+    return "\n".join([
+        f"### Model design on the validation recordings: ours as a {variant} on the compensated chain "
+        f"(`bench/results/velostat-{variant}-rule.json`)\n",
+        "Input sets holding the compensated chain's force (calibrated, aged) learn a correction to it (estimate = "
+        "bp_comp_force_n + the TCN's output); ours is the input set of the lowest validation RMSE, as always. "
+        "Per quick seed, ours as picked: inputs: validation RMSE (N) / mean |hold drift| (N) (signed), and the paired "
+        "differences candidate - default. Rule (set before scoring): adopt if the drift falls by more than its "
+        "seed-to-seed standard error and the RMSE rises by at most its own.\n",
+        table(["seed", "default", "candidate", "Δ valid RMSE (N)", "Δ hold drift (N)"], rows),
+        f"Drift falls by more than its SE: {num(c['drift_falls_by_more_than_se'])}; RMSE rises by at most its SE: "
+        f"{num(c['rmse_rises_by_at_most_se'])}: **{'adopted' if d['adopted'] else 'not adopted'}**.\n"]) + "\n"
+
+
 def _ntype_linear() -> list[str]:
     """bench/results/ntype-linear-*.json (bench/bench_ntype_linear.py): the paper's inputs as we build them and
     affine maps on them, beside Table 1's and the windows' RBF (the experiment files)."""
@@ -1119,6 +1148,7 @@ def experiment(family: str) -> str:
                        + importlib.import_module("learn.experiments.velostat").targets_table(runs) + "\n")
         out.append(velostat_units_slow())
         out.append(velostat_hold_drift())
+        out.append(velostat_design_rule())
     if family == "ntype":  # issue 14's targets on the paper's task, one column per recorded run and seed
         import importlib
 
