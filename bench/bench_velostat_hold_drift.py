@@ -54,7 +54,11 @@ def rule(variant: str, files: list[str], out: str) -> dict:
                                "candidate": {"inputs": v["picked"], "valid_rmse": c["valid_rmse"],
                                              "drift_mean": c["drift_mean"], "drift_signed_mean": c["drift_signed_mean"]},
                                "file": f}
-    res: dict = {"variant": variant, "split": "valid", "mode": "quick", "seeds": per, "differences": {}}
+    from learn.experiments.velostat import TCN_INPUTS
+
+    ch = VARIANTS[variant].get("residual")
+    res: dict = {"variant": variant, "split": "valid", "mode": "quick", "seeds": per, "differences": {},
+                 "residual_input_sets": [v for v, names in TCN_INPUTS.items() if ch in names]}
     ok = {}
     for key in ("drift_mean", "valid_rmse"):
         dd = np.array([p["candidate"][key] - p["default"][key] for p in per.values()])

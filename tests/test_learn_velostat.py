@@ -661,3 +661,38 @@ def test_device_script_ours_only_start_poll_collect(tmp_path):
     r = sh("collect", **ours)
     assert r.returncode == 3 and "REFUSED" in r.stdout
     assert path.read_text() == before
+
+
+def test_design_rule_adopts_on_paired_differences(tmp_path):
+    """bench_velostat_hold_drift.rule: paired differences candidate - default per seed; adopt only if the drift falls
+    by more than its standard error and the RMSE rises by at most its own (hand-computed cases)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("hd", Path(__file__).parents[1] / "bench" / "bench_velostat_hold_drift.py")
+    hd = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hd)
+
+    def files(drifts, rmses):
+        out = []
+        for s, ((d0, d1), (r0, r1)) in enumerate(zip(drifts, rmses)):
+            p = tmp_path / f"s{s}.json"
+            p.write_text(json.dumps({"seed": s, "default": {"inputs": "aged", "valid_rmse": r0, "drift_mean": d0,
+                                                            "drift_signed_mean": 0.0},
+                                     "variants": {"residual": {"picked": "aged", "by_inputs": {"aged": {
+                                         "valid_rmse": r1, "drift_mean": d1, "drift_signed_mean": 0.0}}}}}))
+            out.append(str(p))
+        return out
+
+    # drift differences -0.02, -0.03, -0.04: mean -0.03, SE 0.01/sqrt(3); RMSE differences +0.01, 0, -0.01: mean 0
+    r = hd.rule("residual", files([(0.2, 0.18), (0.2, 0.17), (0.2, 0.16)], [(1.0, 1.01), (1.0, 1.0), (1.0, 0.99)]),
+                str(tmp_path / "rule.json"))
+    assert r["differences"]["drift_mean"]["mean"] == pytest.approx(-0.03)
+    assert r["differences"]["drift_mean"]["se"] == pytest.approx(0.01 / np.sqrt(3))
+    assert r["adopted"] and r["residual_input_sets"] == ["calibrated", "aged"]
+    # the same drift gain but the RMSE up by 0.02-0.04 (mean 0.03 > SE 0.0058): kept
+    r = hd.rule("residual", files([(0.2, 0.18), (0.2, 0.17), (0.2, 0.16)], [(1.0, 1.02), (1.0, 1.03), (1.0, 1.04)]),
+                str(tmp_path / "rule.json"))
+    assert not r["adopted"] and r["conditions"]["drift_falls_by_more_than_se"]
+    # a drift change within its SE (-0.05, +0.04, 0.0): kept
+    r = hd.rule("residual", files([(0.2, 0.15), (0.2, 0.24), (0.2, 0.2)], [(1.0, 1.0)] * 3), str(tmp_path / "rule.json"))
+    assert not r["conditions"]["drift_falls_by_more_than_se"] and not r["adopted"]

@@ -1067,10 +1067,11 @@ def velostat_design_rule(variant: str = "residual") -> str:
     d = load(f"velostat-{variant}-rule.json")
     if not d:
         return ""
-    cell = lambda r: (f"{r['inputs']}: {num(r['valid_rmse'])} / {num(r['drift_mean'], 2)} "
-                      f"({r['drift_signed_mean']:+.2f})")
+    rs = set(d.get("residual_input_sets", []))
+    cell = lambda r, cand=False: (f"{r['inputs']}{' (residual)' if cand and r['inputs'] in rs else ''}: "
+                                  f"{num(r['valid_rmse'])} / {num(r['drift_mean'], 2)} ({r['drift_signed_mean']:+.2f})")
     diff = d["differences"]
-    rows = [[f"seed {sd}", cell(p["default"]), cell(p["candidate"]),
+    rows = [[f"seed {sd}", cell(p["default"]), cell(p["candidate"], True),
              f"{diff['valid_rmse']['per_seed'][i]:+.3f}", f"{diff['drift_mean']['per_seed'][i]:+.3f}"]
             for i, (sd, p) in enumerate(d["seeds"].items())]
     rows.append(["mean ± SE", "", "", f"{diff['valid_rmse']['mean']:+.3f} ± {num(diff['valid_rmse']['se'], 2)}",
