@@ -128,7 +128,8 @@ def main() -> None:
              "paper_unit": [chains["paper_unit"].predict(s) for s in va],
              "literal_unit": [lit.predict(s) for s in va]}
     out: dict = {"run": str(run), "mode": m["mode"], "seed": a.seed, "split": "valid", "ours_inputs": inp,
-                 "receptive_field_s": tcn.context / rate, "n_valid_recordings": len(va), "models": {}}
+                 "receptive_field_s": tcn.context / rate, "n_valid_recordings": len(va), "models": {},
+                 "ours_residual_input": tcn.members[0].hparams.get("residual_input")}
     for k, pr in P.items():
         rows = []
         traj = {f"{lo:g}-{hi:g}": [] for lo, hi in AGES_S}
@@ -180,6 +181,13 @@ def main() -> None:
             out["variants"][name] = {"hparams": VARIANTS[name], "receptive_field_s": ens[pick].context / rate,
                                      "fit_seconds": secs, "by_inputs": res, "picked": pick}
             print(name, json.dumps(out["variants"][name]), flush=True)
+    prev = Path(a.out)
+    if not a.variants and prev.is_file():  # the variants tried before (another model's run) stay on record, marked
+        old = json.loads(prev.read_text())
+        if old.get("variants"):
+            out["variants"] = old["variants"]
+            out["variants_from"] = {"run": old.get("run"), "git_commit": old.get("machine", {}).get("git_commit"),
+                                    "ours_inputs": old.get("ours_inputs")}
     out["machine"] = {"host_platform": platform.platform(), "date_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
                       "git_commit": subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
                                                    text=True).stdout.strip()}

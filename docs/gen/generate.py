@@ -1035,7 +1035,9 @@ def velostat_hold_drift() -> str:
     d = load("velostat-hold-drift.json")
     if not d:
         return ""
-    labels = {"ours": f"ours ({d['ours_inputs']} inputs, {num(d['receptive_field_s'])} s receptive field)",
+    res = d.get("ours_residual_input")
+    labels = {"ours": f"ours ({d['ours_inputs']} inputs{f', a correction to {res}' if res else ''}, "
+                      f"{num(d['receptive_field_s'])} s receptive field)",
               "ours_ideal_readout": "ours, the same recordings through an ideal readout (true R)",
               "ours_member0": "ours' first member alone", "paper_unit": "Creep comp. + BP (unit one-hot + ln R)",
               "literal_unit": "Creep comp. + BP, paper's literal inputs (unit index + R ohm)"}
@@ -1054,7 +1056,10 @@ def velostat_hold_drift() -> str:
                  num(v["by_inputs"][v["picked"]]["drift_mean"], 2),
                  "; ".join(f"{k} {num(r['valid_rmse'])} / {num(r['drift_mean'], 2)}" for k, r in v["by_inputs"].items())]
                 for name, v in d["variants"].items()]
-        L += ["Ours retrained with a longer receptive field on the same features (validation RMSE, N / hold drift, N):\n",
+        vf = d.get("variants_from")
+        L += ["Ours retrained with a longer receptive field on the same features (validation RMSE, N / hold drift, N)"
+              + (f"; tried on an earlier run (commit {vf['git_commit']}, ours then on its {vf['ours_inputs']} inputs, "
+                 "before the residual)" if vf else "") + ":\n",
               table(["variant", "receptive field (s)", "inputs picked (lowest valid RMSE)", "valid RMSE", "hold drift",
                      "every input set"], rows), ""]
     return "\n".join(L) + "\n"
