@@ -264,17 +264,17 @@ def test_experiment_velostat_quick(quick_run):
     rs = {(r["reading"], r["noise_scale"]): r for r in m["creep"]["readout_sensitivity"]}
     assert rs["paper", 0.0]["silhouette"] > 0.85 > rs["paper", 1.0]["silhouette"] + 0.2
     assert rs["paper", 0.0]["r_drift_removed_frac"] > 0.9 > rs["paper", 0.5]["r_drift_removed_frac"] > rs["paper", 1.0]["r_drift_removed_frac"]
-    # ours (a 3-seed TCN ensemble) beats the paper's literal chains on every column but the hold drift, and every
-    # chain (the uncompensated BP included) on the held-out RMSE, the hold error and the worst A-E point
+    # ours (a 3-seed TCN ensemble) beats the paper's literal chains on the held-out RMSE, MAE, R^2, both hold errors
+    # and the A-E share < 1 N, and every chain on the worst hold error. Since session 12's residual default
+    # (adopted on validation, quick seeds 0-2) ours picks the raw inputs at seed 0 (validation RMSE 1.141 N against
+    # the residual sets' 1.245 / 1.275), which no longer beats raw_bp / paper_unit on RMSE nor every chain on the
+    # worst A-E point (velostat-quick.json; seed 0's calibrated ours did, 0.807 N)
     assert R["tcn"]["hparams"]["n_members"] == 3 and len(R["tcn"]["members"]) == 3
     V = m["findings"]["ours_vs_every_paper_model"]
-    for met, d in V.items():
-        if met != "hold_drift":
-            assert d["literal_unit"] and d["literal_cluster"], met
-    for met in ("rmse", "hold_max_err_mean", "ae_max"):
-        assert all(V[met].values()), (met, V[met])
-    F = m["findings"]["tcn_beats_best_paper"]
-    assert F["rmse"] and F["hold_max_err"] and F["ae_max"]
+    for met in ("mae", "rmse", "r2", "hold_max_err_mean", "hold_max_err_worst", "ae_below_1n"):
+        assert V[met]["literal_unit"] and V[met]["literal_cluster"], met
+    assert all(V["hold_max_err_worst"].values()), V["hold_max_err_worst"]
+    assert R["tcn"]["test"]["rmse"] < 0.65 * R["literal_unit"]["test"]["rmse"]  # 1.17 against 1.99 N
     # the literal cluster chain trained through sect. 4.2's 500 epochs meets the paper's test-RMSE bound (< 2 N)
     assert m["bp_search"]["literal_cluster"]["test_holds_rmse"] < 2.0
     assert m["findings"]["literal_input_crowding"]["share_10_15n"] < 0.05
@@ -300,7 +300,9 @@ def test_experiment_velostat_quick(quick_run):
                    "low at 13-15 N): R in ohm min-max scaled gives 10-15 N 1.6 % of the input, and a scalar unit index "
                    "cannot follow 36 curves whose levels jump along the index (roughness 0.67, std ln R 0.41 over the "
                    "units; the paper bounds neither); ours loses the unsigned hold drift to two compensated chains "
-                   "(noise-following; its signed drift is the smallest)")
+                   "(noise-following; its signed drift is the smallest) and, with session 12's residual default "
+                   "(ours picks the raw inputs at seed 0 on validation), RMSE / mean hold error / A-E to raw_bp and "
+                   "paper_unit")
 def test_experiment_velostat_quick_open_targets(quick_run):
     m = quick_run
     F = m["findings"]
