@@ -11,6 +11,12 @@ features, every input set, its validation RMSE and hold drift (the experiment's 
 
     PYTHONPATH=. python bench/bench_velostat_hold_drift.py RUN_DIR [--seed 0] [--variants d128c128,d128c256]
 writes bench/results/velostat-hold-drift.json (docs/gen renders it on the velostat experiment page).
+
+Session 12's adoption rule (CHANGELOG "velostat, session 12"), from one file per quick seed written with
+--variants residual --out bench/results/velostat-residual-seedS.json:
+    PYTHONPATH=. python bench/bench_velostat_hold_drift.py --rule residual bench/results/velostat-residual-seed{0,1,2}.json
+writes bench/results/velostat-residual-rule.json: per seed today's default and the candidate (validation RMSE, hold
+drift), the paired differences' means and standard errors, and whether the rule adopts.
 """
 
 from __future__ import annotations
@@ -28,9 +34,42 @@ import numpy as np
 import torch
 
 VARIANTS = {"d128c128": {"dilations": [1, 2, 4, 8, 16, 32, 64, 128], "chunk": 128},
-            "d128c256": {"dilations": [1, 2, 4, 8, 16, 32, 64, 128], "chunk": 256}}
+            "d128c256": {"dilations": [1, 2, 4, 8, 16, 32, 64, 128], "chunk": 256},
+            # session 12's candidate: the input sets holding the compensated chain's force learn a correction to it
+            "residual": {"residual": "bp_comp_force_n"}}
+# (every input set is trained: those without the residual channel as the run trained them, same seeds)
 AGES_S = ((0.0, 25.0), (25.0, 60.0), (60.0, float("inf")))
 FORCES_N = ((0.0, 3.0), (3.0, 8.0), (8.0, 16.0))
+
+
+def rule(variant: str, files: list[str], out: str) -> dict:
+    """The adoption rule on the paired differences d = candidate - default over the seeds' validation recordings:
+    adopt if mean(d_drift) < -SE(d_drift) and mean(d_rmse) <= SE(d_rmse), SE = std(d, ddof=1) / sqrt(n)."""
+    per = {}
+    for f in files:
+        d = json.loads(Path(f).read_text())
+        v = d["variants"][variant]
+        c = v["by_inputs"][v["picked"]]
+        per[int(d["seed"])] = {"default": d["default"],
+                               "candidate": {"inputs": v["picked"], "valid_rmse": c["valid_rmse"],
+                                             "drift_mean": c["drift_mean"], "drift_signed_mean": c["drift_signed_mean"]},
+                               "file": f}
+    from learn.experiments.velostat import TCN_INPUTS
+
+    ch = VARIANTS[variant].get("residual")
+    res: dict = {"variant": variant, "split": "valid", "mode": "quick", "seeds": per, "differences": {},
+                 "residual_input_sets": [v for v, names in TCN_INPUTS.items() if ch in names]}
+    ok = {}
+    for key in ("drift_mean", "valid_rmse"):
+        dd = np.array([p["candidate"][key] - p["default"][key] for p in per.values()])
+        se = float(dd.std(ddof=1) / np.sqrt(len(dd))) if len(dd) > 1 else float("nan")
+        res["differences"][key] = {"per_seed": dd.tolist(), "mean": float(dd.mean()), "se": se}
+        ok[key] = bool(dd.mean() < -se) if key == "drift_mean" else bool(dd.mean() <= se)
+    res["conditions"] = {"drift_falls_by_more_than_se": ok["drift_mean"], "rmse_rises_by_at_most_se": ok["valid_rmse"]}
+    res["adopted"] = ok["drift_mean"] and ok["valid_rmse"]
+    Path(out).write_text(json.dumps(res, indent=1))
+    print(json.dumps(res, indent=1))
+    return res
 
 
 def main() -> None:
@@ -42,13 +81,17 @@ def main() -> None:
     from simulate.protocols.compression_tester import unit_centres_m
 
     ap = argparse.ArgumentParser()
-    ap.add_argument("run")
+    ap.add_argument("run", nargs="+")
+    ap.add_argument("--rule", default="", help="a variant: apply the adoption rule to the per-seed files given")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--variants", default="")
     ap.add_argument("--out", default="bench/results/velostat-hold-drift.json")
     a = ap.parse_args()
+    if a.rule:
+        rule(a.rule, a.run, a.out if a.out != ap.get_default("out") else f"bench/results/velostat-{a.rule}-rule.json")
+        return
     torch.set_num_threads(1)
-    run = Path(a.run)
+    run = Path(a.run[0])
     m = json.loads((run / "metrics.json").read_text())
     md = V.MODES[m["mode"]]
     cfgs = V.scenes_of(md, [], a.seed)
@@ -85,7 +128,8 @@ def main() -> None:
              "paper_unit": [chains["paper_unit"].predict(s) for s in va],
              "literal_unit": [lit.predict(s) for s in va]}
     out: dict = {"run": str(run), "mode": m["mode"], "seed": a.seed, "split": "valid", "ours_inputs": inp,
-                 "receptive_field_s": tcn.context / rate, "n_valid_recordings": len(va), "models": {}}
+                 "receptive_field_s": tcn.context / rate, "n_valid_recordings": len(va), "models": {},
+                 "ours_residual_input": tcn.members[0].hparams.get("residual_input")}
     for k, pr in P.items():
         rows = []
         traj = {f"{lo:g}-{hi:g}": [] for lo, hi in AGES_S}
@@ -110,6 +154,10 @@ def main() -> None:
             "by_force_n": {f"{lo:g}-{hi:g}": part((r[:, 2] >= lo) & (r[:, 2] < hi)) for lo, hi in FORCES_N},
             "error_trajectory_n": {key: np.mean(v, 0).reshape(8, -1).mean(1).tolist() for key, v in traj.items() if v}}
     out["trajectory_step_s"] = 0.5
+    # today's default as the run picked it: what a variant is compared with (the adoption rule, CHANGELOG)
+    out["default"] = {"inputs": inp, "valid_rmse": m["models"]["tcn"]["valid_rmse_by_inputs"][inp],
+                      "drift_mean": out["models"]["ours"]["drift_mean"],
+                      "drift_signed_mean": out["models"]["ours"]["drift_signed_mean"]}
     if a.variants:
         jobs = {"raw": lambda s: V.tcn_features(s), "calibrated": lambda s: V.tcn_features(s, tracker, chains),
                 "aged": lambda s: V.tcn_features(s, tracker, chains, rate)}
@@ -118,7 +166,10 @@ def main() -> None:
         out["variants"] = {}
         for name in a.variants.split(","):
             hp = {**md.tcn, **VARIANTS[name]}
-            ens, secs = V._fit_tcn_batched(F, seed=a.seed, n_members=md.tcn_members, member_hparams=hp)
+            residual = hp.pop("residual", None)
+            # every input set, as the experiment trains them (those without the residual channel as they are)
+            ens, secs = V._fit_tcn_batched(F, seed=a.seed, n_members=md.tcn_members, member_hparams=hp,
+                                           residual=residual)
             res = {}
             for v, e in ens.items():
                 with torch.inference_mode():
@@ -130,6 +181,13 @@ def main() -> None:
             out["variants"][name] = {"hparams": VARIANTS[name], "receptive_field_s": ens[pick].context / rate,
                                      "fit_seconds": secs, "by_inputs": res, "picked": pick}
             print(name, json.dumps(out["variants"][name]), flush=True)
+    prev = Path(a.out)
+    if not a.variants and prev.is_file():  # the variants tried before (another model's run) stay on record, marked
+        old = json.loads(prev.read_text())
+        if old.get("variants"):
+            out["variants"] = old["variants"]
+            out["variants_from"] = {"run": old.get("run"), "git_commit": old.get("machine", {}).get("git_commit"),
+                                    "ours_inputs": old.get("ours_inputs")}
     out["machine"] = {"host_platform": platform.platform(), "date_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
                       "git_commit": subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
                                                    text=True).stdout.strip()}

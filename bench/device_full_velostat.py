@@ -208,6 +208,10 @@ def cmd_merge(a: argparse.Namespace) -> int:
             continue
         new = json.loads(mp.read_text())
         info = json.loads((sd / "run.json").read_text()) if (sd / "run.json").is_file() else {}
+        if not info.get("finished"):  # run.json is marked finished just before the log's "done"
+            print(f"{sd}: not finished (run.json has no finished mark): refused; the record is untouched")
+            bad += 1
+            continue
         s = int(new.get("seed", 0))
         name = f"velostat-{new.get('mode', a.mode)}" + ("" if s == 0 else f"-seed{s}") + ".json"
         if not (dest / name).is_file():

@@ -95,6 +95,21 @@ poll)
     ;;
 collect)
     rc=0
+    # wait (up to VF_COLLECT_WAIT_S, default 240 s) until every seed's process has ended and its log says "done"
+    # (session 11's first collect ran seconds before the last seed's "done"); a seed without "done" is reported here
+    # and its run.json is not marked finished, so merge refuses it (exit 3)
+    end=$(( $(date -u +%s) + ${VF_COLLECT_WAIT_S:-240} ))
+    while :; do
+        left=""
+        for s in "${SEEDS[@]}"; do
+            if alive "$s" || ! grep -q '\] done:' "$RUN/seed$s.log" 2>/dev/null; then left="$left $s"; fi
+        done
+        [ -z "$left" ] && { echo "every seed done: ${SEEDS[*]}"; break; }
+        [ "$(date -u +%s)" -ge "$end" ] && { echo "NOT DONE after ${VF_COLLECT_WAIT_S:-240} s: seeds$left"; break; }
+        alive_any=0; for s in $left; do alive "$s" && alive_any=1; done
+        [ "$alive_any" -eq 0 ] && { echo "ENDED WITHOUT \"done\": seeds$left (see their logs)"; break; }
+        echo "waiting for seeds$left to finish"; sleep 10
+    done
     if [ "$ONLY" = ours ]; then
         $PY bench/device_full_velostat.py merge --run "$RUN" --dest "$DEST" --mode "$MODE" \
             --commit "$(cat $RUN/commit 2>/dev/null || echo unknown)" || rc=$?

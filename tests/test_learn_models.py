@@ -323,3 +323,42 @@ def test_batched_tcn_members_on_cuda_match_sequential():
     for a, b in zip(seq.members, bat.members):
         assert a.history["epochs"] == b.history["epochs"] == 4 and b.history["device"].startswith("cuda")
         np.testing.assert_allclose(a.predict(te[0].x), b.predict(te[0].x), rtol=0, atol=2e-3)
+
+
+def test_tcn_residual_input_corrects_a_static_calibration(tmp_path):
+    """residual_input: the net trains on y - x[channel] and its estimate is x[channel] + its output. On the lagged
+    exponential reading, the channel is the static inverse ln(40 ohm / R) / 0.08 (blind to the 60 ms lag): the
+    residual net beats it on held-out episodes, predict = channel + the net's own output, streams = batch, the
+    hyper-parameter round-trips through a checkpoint, the batched ensemble equals its members trained alone, and a
+    channel that is not an input or two targets are refused."""
+    from learn.models.ensemble import fit_ensembles
+
+    sp = stratified_split(synth(), "frequency_hz", 0, (0.6, 0.1, 0.3))
+    tr, va, te = sp["train"], sp["valid"], sp["test"]
+    feats = lambda s: np.column_stack([s.x[:, 0], np.log(40.0 / s.x[:, 0]) / 0.08])
+    xs, ys, vx, vy = [feats(s) for s in tr], [s.y for s in tr], [feats(s) for s in va], [s.y for s in va]
+    hp = {**TINY["tcn"], "residual_input": "f_static_n"}
+    names = ["r", "f_static_n"]
+    m = make_model("tcn", **hp).fit(xs, ys, valid=(vx, vy), seed=3, inputs=names, targets=["f"])
+    err = lambda p: float(np.sqrt(np.mean(np.concatenate([(pp - s.y) ** 2 for pp, s in zip(p, te)]))))
+    static = err([feats(s)[:, 1:] for s in te])
+    assert err([m.predict(feats(s)) for s in te]) < 0.7 * static
+    y_res = np.concatenate([y - x[:, 1:] for x, y in zip(xs, ys)])
+    assert m.y_norm.mean[0] == pytest.approx(y_res.mean(), rel=1e-9)  # the z-score is the residual's
+    x = feats(te[0])
+    own = m.y_norm.invert(m._predict_z(m.x_norm.apply(x)))
+    np.testing.assert_allclose(m.predict(x), own + x[:, 1:], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(m.stream().run(x), m.predict(x), rtol=1e-4, atol=1e-4)
+    save_checkpoint(m, tmp_path / "ck")
+    m2 = load_checkpoint(tmp_path / "ck")
+    assert m2.hparams["residual_input"] == "f_static_n"
+    np.testing.assert_array_equal(m2.predict(x), m.predict(x))
+    seq = make_model("ensemble", member="tcn", n_members=2, member_hparams=hp).fit(xs, ys, valid=(vx, vy), seed=3,
+                                                                                   inputs=names)
+    bat = make_model("ensemble", member="tcn", n_members=2, member_hparams=hp, batched=True)
+    fit_ensembles([(bat, {"xs": xs, "ys": ys, "valid": (vx, vy), "seed": 3, "inputs": names})])
+    np.testing.assert_allclose(seq.predict(x), bat.predict(x), rtol=0, atol=1e-5)
+    with pytest.raises(ValueError, match="not an input"):
+        make_model("tcn", **hp).fit(xs, ys, inputs=["r", "f_other_n"])
+    with pytest.raises(ValueError, match="one target"):
+        make_model("tcn", **hp).fit(xs, [np.column_stack([y, y]) for y in ys], inputs=names)

@@ -264,17 +264,17 @@ def test_experiment_velostat_quick(quick_run):
     rs = {(r["reading"], r["noise_scale"]): r for r in m["creep"]["readout_sensitivity"]}
     assert rs["paper", 0.0]["silhouette"] > 0.85 > rs["paper", 1.0]["silhouette"] + 0.2
     assert rs["paper", 0.0]["r_drift_removed_frac"] > 0.9 > rs["paper", 0.5]["r_drift_removed_frac"] > rs["paper", 1.0]["r_drift_removed_frac"]
-    # ours (a 3-seed TCN ensemble) beats the paper's literal chains on every column but the hold drift, and every
-    # chain (the uncompensated BP included) on the held-out RMSE, the hold error and the worst A-E point
+    # ours (a 3-seed TCN ensemble) beats the paper's literal chains on the held-out RMSE, MAE, R^2, both hold errors
+    # and the A-E share < 1 N, and every chain on the worst hold error. Since session 12's residual default
+    # (adopted on validation, quick seeds 0-2) ours picks the raw inputs at seed 0 (validation RMSE 1.141 N against
+    # the residual sets' 1.245 / 1.275), which no longer beats raw_bp / paper_unit on RMSE nor every chain on the
+    # worst A-E point (velostat-quick.json; seed 0's calibrated ours did, 0.807 N)
     assert R["tcn"]["hparams"]["n_members"] == 3 and len(R["tcn"]["members"]) == 3
     V = m["findings"]["ours_vs_every_paper_model"]
-    for met, d in V.items():
-        if met != "hold_drift":
-            assert d["literal_unit"] and d["literal_cluster"], met
-    for met in ("rmse", "hold_max_err_mean", "ae_max"):
-        assert all(V[met].values()), (met, V[met])
-    F = m["findings"]["tcn_beats_best_paper"]
-    assert F["rmse"] and F["hold_max_err"] and F["ae_max"]
+    for met in ("mae", "rmse", "r2", "hold_max_err_mean", "hold_max_err_worst", "ae_below_1n"):
+        assert V[met]["literal_unit"] and V[met]["literal_cluster"], met
+    assert all(V["hold_max_err_worst"].values()), V["hold_max_err_worst"]
+    assert R["tcn"]["test"]["rmse"] < 0.65 * R["literal_unit"]["test"]["rmse"]  # 1.17 against 1.99 N
     # the literal cluster chain trained through sect. 4.2's 500 epochs meets the paper's test-RMSE bound (< 2 N)
     assert m["bp_search"]["literal_cluster"]["test_holds_rmse"] < 2.0
     assert m["findings"]["literal_input_crowding"]["share_10_15n"] < 0.05
@@ -300,7 +300,9 @@ def test_experiment_velostat_quick(quick_run):
                    "low at 13-15 N): R in ohm min-max scaled gives 10-15 N 1.6 % of the input, and a scalar unit index "
                    "cannot follow 36 curves whose levels jump along the index (roughness 0.67, std ln R 0.41 over the "
                    "units; the paper bounds neither); ours loses the unsigned hold drift to two compensated chains "
-                   "(noise-following; its signed drift is the smallest)")
+                   "(noise-following; its signed drift is the smallest) and, with session 12's residual default "
+                   "(ours picks the raw inputs at seed 0 on validation), RMSE / mean hold error / A-E to raw_bp and "
+                   "paper_unit")
 def test_experiment_velostat_quick_open_targets(quick_run):
     m = quick_run
     F = m["findings"]
@@ -641,12 +643,18 @@ def test_device_script_ours_only_start_poll_collect(tmp_path):
     m["partial"] = "the paper's chains only"
     path.write_text(json.dumps(m))
     ours = {"VF_RUN": str(tmp_path / "ours"), "VF_ONLY": "ours", "VF_GEN_WORKERS": "2"}
-    for c in ("start", "poll"):
-        assert sh(c, **ours).returncode == 0, c
-    r = sh("collect", **ours)
+    assert sh("start", **ours).returncode == 0
+    r = sh("collect", **ours)  # at once, no poll: collect waits for the seed's "done" before it merges
     assert r.returncode == 0, r.stdout + r.stderr
+    assert "waiting for seeds 0" in r.stdout and "every seed done: 0" in r.stdout
     merged = json.loads(path.read_text())
     assert merged["models"]["tcn"]["test"] == tcn["test"] and "partial" not in merged
+    # the model the experiment trains today (residual on the compensated chain where the picked inputs hold it)
+    from learn.experiments import velostat as V
+
+    res = V.MODES["tiny"].tcn_residual
+    want = res if res in V.TCN_INPUTS[merged["models"]["tcn"]["inputs"]] else None
+    assert merged["models"]["tcn"]["hparams"]["member_hparams"].get("residual_input") == want
     # the checkout's commit (git here; VF_COMMIT where the copy has no .git)
     assert merged["machine"]["ours"]["git_commit"] not in ("", "unknown") and merged["machine"]["ours"]["gen_workers"] == 2
     merged["datasets"]["mix"]["content_sha256"] = "0" * 64
@@ -655,3 +663,38 @@ def test_device_script_ours_only_start_poll_collect(tmp_path):
     r = sh("collect", **ours)
     assert r.returncode == 3 and "REFUSED" in r.stdout
     assert path.read_text() == before
+
+
+def test_design_rule_adopts_on_paired_differences(tmp_path):
+    """bench_velostat_hold_drift.rule: paired differences candidate - default per seed; adopt only if the drift falls
+    by more than its standard error and the RMSE rises by at most its own (hand-computed cases)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("hd", Path(__file__).parents[1] / "bench" / "bench_velostat_hold_drift.py")
+    hd = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hd)
+
+    def files(drifts, rmses):
+        out = []
+        for s, ((d0, d1), (r0, r1)) in enumerate(zip(drifts, rmses)):
+            p = tmp_path / f"s{s}.json"
+            p.write_text(json.dumps({"seed": s, "default": {"inputs": "aged", "valid_rmse": r0, "drift_mean": d0,
+                                                            "drift_signed_mean": 0.0},
+                                     "variants": {"residual": {"picked": "aged", "by_inputs": {"aged": {
+                                         "valid_rmse": r1, "drift_mean": d1, "drift_signed_mean": 0.0}}}}}))
+            out.append(str(p))
+        return out
+
+    # drift differences -0.02, -0.03, -0.04: mean -0.03, SE 0.01/sqrt(3); RMSE differences +0.01, 0, -0.01: mean 0
+    r = hd.rule("residual", files([(0.2, 0.18), (0.2, 0.17), (0.2, 0.16)], [(1.0, 1.01), (1.0, 1.0), (1.0, 0.99)]),
+                str(tmp_path / "rule.json"))
+    assert r["differences"]["drift_mean"]["mean"] == pytest.approx(-0.03)
+    assert r["differences"]["drift_mean"]["se"] == pytest.approx(0.01 / np.sqrt(3))
+    assert r["adopted"] and r["residual_input_sets"] == ["calibrated", "aged"]
+    # the same drift gain but the RMSE up by 0.02-0.04 (mean 0.03 > SE 0.0058): kept
+    r = hd.rule("residual", files([(0.2, 0.18), (0.2, 0.17), (0.2, 0.16)], [(1.0, 1.02), (1.0, 1.03), (1.0, 1.04)]),
+                str(tmp_path / "rule.json"))
+    assert not r["adopted"] and r["conditions"]["drift_falls_by_more_than_se"]
+    # a drift change within its SE (-0.05, +0.04, 0.0): kept
+    r = hd.rule("residual", files([(0.2, 0.15), (0.2, 0.24), (0.2, 0.2)], [(1.0, 1.0)] * 3), str(tmp_path / "rule.json"))
+    assert not r["conditions"]["drift_falls_by_more_than_se"] and not r["adopted"]

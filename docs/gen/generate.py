@@ -1148,7 +1148,9 @@ def velostat_hold_drift() -> str:
     d = load("velostat-hold-drift.json")
     if not d:
         return ""
-    labels = {"ours": f"ours ({d['ours_inputs']} inputs, {num(d['receptive_field_s'])} s receptive field)",
+    res = d.get("ours_residual_input")
+    labels = {"ours": f"ours ({d['ours_inputs']} inputs{f', a correction to {res}' if res else ''}, "
+                      f"{num(d['receptive_field_s'])} s receptive field)",
               "ours_ideal_readout": "ours, the same recordings through an ideal readout (true R)",
               "ours_member0": "ours' first member alone", "paper_unit": "Creep comp. + BP (unit one-hot + ln R)",
               "literal_unit": "Creep comp. + BP, paper's literal inputs (unit index + R ohm)"}
@@ -1167,10 +1169,43 @@ def velostat_hold_drift() -> str:
                  num(v["by_inputs"][v["picked"]]["drift_mean"], 2),
                  "; ".join(f"{k} {num(r['valid_rmse'])} / {num(r['drift_mean'], 2)}" for k, r in v["by_inputs"].items())]
                 for name, v in d["variants"].items()]
-        L += ["Ours retrained with a longer receptive field on the same features (validation RMSE, N / hold drift, N):\n",
+        vf = d.get("variants_from")
+        L += ["Ours retrained with a longer receptive field on the same features (validation RMSE, N / hold drift, N)"
+              + (f"; tried on an earlier run (commit {vf['git_commit']}, ours then on its {vf['ours_inputs']} inputs, "
+                 "before the residual)" if vf else "") + ":\n",
               table(["variant", "receptive field (s)", "inputs picked (lowest valid RMSE)", "valid RMSE", "hold drift",
                      "every input set"], rows), ""]
     return "\n".join(L) + "\n"
+
+
+def velostat_design_rule(variant: str = "residual") -> str:
+    """bench/results/velostat-<variant>-rule.json (bench_velostat_hold_drift.py --rule): a model-design candidate for
+    ours against today's default on the validation recordings of quick seeds 0-2, and the adoption rule's outcome
+    (CHANGELOG "velostat, session 12")."""
+    d = load(f"velostat-{variant}-rule.json")
+    if not d:
+        return ""
+    rs = set(d.get("residual_input_sets", []))
+    cell = lambda r, cand=False: (f"{r['inputs']}{' (residual)' if cand and r['inputs'] in rs else ''}: "
+                                  f"{num(r['valid_rmse'])} / {num(r['drift_mean'], 2)} ({r['drift_signed_mean']:+.2f})")
+    diff = d["differences"]
+    rows = [[f"seed {sd}", cell(p["default"]), cell(p["candidate"], True),
+             f"{diff['valid_rmse']['per_seed'][i]:+.3f}", f"{diff['drift_mean']['per_seed'][i]:+.3f}"]
+            for i, (sd, p) in enumerate(d["seeds"].items())]
+    rows.append(["mean ± SE", "", "", f"{diff['valid_rmse']['mean']:+.3f} ± {num(diff['valid_rmse']['se'], 2)}",
+                 f"{diff['drift_mean']['mean']:+.3f} ± {num(diff['drift_mean']['se'], 2)}"])
+    c = d["conditions"]
+    return "\n".join([
+        f"### Model design on the validation recordings: ours as a {variant} on the compensated chain "
+        f"(`bench/results/velostat-{variant}-rule.json`)\n",
+        "Input sets holding the compensated chain's force (calibrated, aged) learn a correction to it (estimate = "
+        "bp_comp_force_n + the TCN's output); ours is the input set of the lowest validation RMSE, as always. "
+        "Per quick seed, ours as picked: inputs: validation RMSE (N) / mean |hold drift| (N) (signed), and the paired "
+        "differences candidate - default. Rule (set before scoring): adopt if the drift falls by more than its "
+        "seed-to-seed standard error and the RMSE rises by at most its own.\n",
+        table(["seed", "default", "candidate", "Δ valid RMSE (N)", "Δ hold drift (N)"], rows),
+        f"Drift falls by more than its SE: {num(c['drift_falls_by_more_than_se'])}; RMSE rises by at most its SE: "
+        f"{num(c['rmse_rises_by_at_most_se'])}: **{'adopted' if d['adopted'] else 'not adopted'}**.\n"]) + "\n"
 
 
 def _ntype_linear() -> list[str]:
@@ -1232,6 +1267,7 @@ def experiment(family: str) -> str:
                        + importlib.import_module("learn.experiments.velostat").targets_table(runs) + "\n")
         out.append(velostat_units_slow())
         out.append(velostat_hold_drift())
+        out.append(velostat_design_rule())
     if family == "ntype":  # issue 14's targets on the paper's task, one column per recorded run and seed
         import importlib
 

@@ -139,8 +139,47 @@ class TCNCompensator(TorchCompensator):
     early-stopping loop as the paper's models."""
 
     DEFAULTS = {**TRAIN_DEFAULTS, "channels": 32, "kernel": 3, "dilations": [1, 2, 4, 8, 16, 32],
-                "chunk": 64, "batch_size": 16, "lr": 2e-3, "log_inputs": None, "play_widths": None}
+                "chunk": 64, "batch_size": 16, "lr": 2e-3, "log_inputs": None, "play_widths": None,
+                "residual_input": None}
     temporal = True
+
+    # ``residual_input`` (an input channel's name, default none): the net learns a correction to that input
+    # (a static calibration's estimate in the targets' unit, e.g. the compensated paper chain's force): it trains
+    # on y - x[residual_input] and its estimate is x[residual_input] + the net's output (predict and stream()).
+    # One target only; the channel stays an input as well.
+
+    def _residual_idx(self, inputs) -> int | None:
+        name = self.hparams["residual_input"]
+        if name is None:
+            return None
+        names = list(inputs) or [f"x{i}" for i in range(self.n_in)]
+        if name not in names:
+            raise ValueError(f"tcn: residual_input {name!r} is not an input channel ({names})")
+        return names.index(name)
+
+    def fit_setup(self, xs, ys, valid=None, *, inputs=(), targets=(), units=None):
+        if self.hparams["residual_input"] is not None:
+            xs = [np.asarray(x, np.float64).reshape(len(x), -1) for x in xs]
+            self.n_in = xs[0].shape[1]
+            j = self._residual_idx(inputs)
+            ys = [np.asarray(y, np.float64).reshape(len(y), -1) for y in ys]
+            if ys[0].shape[1] != 1:
+                raise ValueError("tcn: residual_input needs one target")
+            ys = [y - x[:, j : j + 1] for x, y in zip(xs, ys)]
+            if valid is not None and len(valid[0]):
+                vx = [np.asarray(x, np.float64).reshape(len(x), -1) for x in valid[0]]
+                valid = (vx, [np.asarray(y, np.float64).reshape(len(y), -1) - x[:, j : j + 1]
+                              for x, y in zip(vx, valid[1])])
+        return super().fit_setup(xs, ys, valid, inputs=inputs, targets=targets, units=units)
+
+    def predict(self, x):
+        if isinstance(x, (list, tuple)):
+            return [self.predict(v) for v in x]
+        out = super().predict(x)
+        j = self._residual_idx(self.inputs)
+        if j is not None:
+            out = out + np.asarray(x, np.float64).reshape(len(x), -1)[:, j : j + 1]
+        return out
 
     @property
     def context(self) -> int:
@@ -227,6 +266,7 @@ class TCNStreamer(Streamer):
         self.w_out, self.b_out = g(net.out.weight)[:, :, 0], g(net.out.bias)
         self.w_skip, self.b_skip = g(net.skip.weight)[:, :, 0], g(net.skip.bias)
         self.lens = [(self.k - 1) * d + 1 for d in self.dil]
+        self.res = comp._residual_idx(comp.inputs)  # residual_input: its raw value is added to the estimate
         self.reset()
 
     def reset(self) -> None:
@@ -235,7 +275,8 @@ class TCNStreamer(Streamer):
         self.play_p: np.ndarray | None = None
 
     def step(self, x: np.ndarray) -> np.ndarray:
-        z = (np.asarray(x, np.float64).reshape(-1) - self.xm) / self.xs
+        x = np.asarray(x, np.float64).reshape(-1)
+        z = (x - self.xm) / self.xs
         gaps = None
         if self.play_r is not None:
             gaps, self.play_p = play_gaps(self.comp._play_u(z[None]), self.play_r, self.play_p)
@@ -259,7 +300,8 @@ class TCNStreamer(Streamer):
             h = h + a / (1.0 + np.exp(-a))
         self.t += 1
         y = self.w_out @ h + self.b_out + self.w_skip @ z + self.b_skip
-        return y * self.ys + self.ym
+        y = y * self.ys + self.ym
+        return y if self.res is None else y + x[self.res]
 
 
 # ---------------------------------------------------------------------------------------------------------------
