@@ -170,10 +170,9 @@ def bench_cuda_chain(cfg, E, T, N, device="cuda:0", repeats=5, depths=(0, 1, 2, 
         n_parts = N // 32 if wp.get_device(device).is_cuda else N
         bufs = outs3[:2] + [wp.empty(E * n_parts * T, dtype=wp.float64, device=device) for _ in range(2)]
 
-        def fused(depth, per_taxel=True, fresh=False, quad=None):  # outputs in reused buffers, as the plain kernel's outs3
+        def fused(depth, per_taxel=True, fresh=False):  # outputs in reused buffers, as the plain kernel's outs3
             _, _, box["g"], box["f"] = chain.run_pad_device(drive, T, 0, tp.taxel_area_m2, write_strain=per_taxel,
-                                                            write_stress=per_taxel, depth=depth, outs=None if fresh else bufs,
-                                                            quad=quad)
+                                                            write_stress=per_taxel, depth=depth, outs=None if fresh else bufs)
 
         t_depth = {d: _best(lambda d=d: fused(d), sync, repeats, rs) for d in depths}
         depth = min(t_depth, key=t_depth.get)
@@ -183,13 +182,6 @@ def bench_cuda_chain(cfg, E, T, N, device="cuda:0", repeats=5, depths=(0, 1, 2, 
         t_plain_fresh = _best(lambda: chain.run_device(drive, T, 0), sync, repeats, rs)  # the plain kernel, fresh arrays
         t_fa = _best(lambda: (fused(depth), readout(True)), sync, repeats, rs)
         t_fa0 = _best(lambda: (fused(depth, False), readout(True)), sync, repeats, rs)
-        # the group sums one step at a time (session 11's kernel) against four at a time (QUAD_SUMS), same run
-        t_f_q0 = _best(lambda: fused(depth, quad=False), sync, repeats, rs)
-        t_f_q1 = _best(lambda: fused(depth, quad=True), sync, repeats, rs)
-        t_fa_q0 = _best(lambda: (fused(depth, quad=False), readout(True)), sync, repeats, rs)
-        t_fa_q1 = _best(lambda: (fused(depth, quad=True), readout(True)), sync, repeats, rs)
-        rs(); fused(depth, quad=False); g_q0, f_q0 = box["g"].numpy(), box["f"].numpy()
-        rs(); fused(depth, quad=True); g_q1, f_q1 = box["g"].numpy(), box["f"].numpy()
         # GPU time of each kernel and copy of one fused chain + readout (what bounds it), then the host's gaps
         rs(); sync()
         wp.timing_begin(cuda_filter=wp.TIMING_ALL)
@@ -213,12 +205,6 @@ def bench_cuda_chain(cfg, E, T, N, device="cuda:0", repeats=5, depths=(0, 1, 2, 
         "g_equal_fraction": float(np.mean(g_f == g_t)),
         "force_max_abs_diff_n": float(np.max(np.abs(f_f - f_t))), "force_max_n": float(np.max(np.abs(f_t))),
         "activities_one_chain": {"wall_ms": t_prof * 1e3, "gpu_ms": sum(a["ms"] for a in activity), "list": activity},
-        "sums_by_steps": {"one step (session 11)": {"kernel_seconds": t_f_q0, "chain_seconds": t_fa_q0,
-                                                    "taxel_steps_per_s_chain": n / t_fa_q0},
-                          "four steps (quad)": {"kernel_seconds": t_f_q1, "chain_seconds": t_fa_q1,
-                                                "taxel_steps_per_s_chain": n / t_fa_q1},
-                          "g_equal_fraction": float(np.mean(g_q0 == g_q1)), "force_equal_fraction": float(np.mean(f_q0 == f_q1)),
-                          "g_max_rel_diff": float(np.max(np.abs(g_q1 - g_q0) / np.abs(g_q0)))},
     }
     res["before"] = {"taxel_steps_per_s_chain": n / t_b, "chain_seconds": t_b,
                      "stage_seconds": {"taxel kernel + channel sums": t_k, "serial readout + copies back": t_br}}

@@ -41,7 +41,7 @@ B)  # second machine: start-up and exit before / after on velostat (its physics 
     done
     pack B ;;
 G)  # the GPU tests of the fused kernel and the readout (four-step sums against one-step sums, bit for bit)
-    timeout ${2:-300} python3 -m pytest tests/test_gpu.py -q -m gpu -p no:cacheprovider -k "quad or fused or readout or full_chain" 2>&1 \
+    timeout ${2:-300} python3 -m pytest tests/test_gpu.py -q -m gpu -p no:cacheprovider -k "fused or readout or full_chain" 2>&1 \
         | grep -v "^Module" | tee $OUT/r/logs/pytest-gpu-h100-s12.log | tail -6
     pack G ;;
 P)  # cProfile of a 16-episode ntype run (main thread), top 45 by cumulative time (first machine, before the mujoco_warp cut)

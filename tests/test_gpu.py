@@ -80,22 +80,6 @@ def test_fused_pad_sum_cuda(gpu_device):
     assert np.abs(b["adc"].astype(int) - a["adc"].astype(int)).max() <= 1
 
 
-def test_quad_group_sums_equal_one_step_sums(gpu_device):
-    """The fused kernel's four-step group sums (QUAD_SUMS, CUDA) give the same bits as the one-step butterfly:
-    the same tree of pairs; a step count with a tail of 3 steps and a padded last warp (N = 300)."""
-    import warp as wp
-
-    tp = taxel_params(load_scene("cnt_pdms"))
-    E, T, N = 3, 403, 300
-    drive = np.random.default_rng(5).uniform(0, 0.04, (E, T, N)).astype(np.float32)
-    dg = wp.array(drive.reshape(-1), dtype=wp.float32, device=gpu_device)
-    one = TaxelChainWarp(tp, E, N, gpu_device).run_pad_device(dg, T, MODE_DISPLACEMENT, tp.taxel_area_m2, quad=False)
-    four = TaxelChainWarp(tp, E, N, gpu_device).run_pad_device(dg, T, MODE_DISPLACEMENT, tp.taxel_area_m2, quad=True)
-    for a, b in zip(one, four):
-        np.testing.assert_array_equal(b.numpy(), a.numpy())
-    assert np.ptp(one[2].numpy()) > 0
-
-
 def test_parallel_readout_cuda_equals_serial_cpu(gpu_device):
     """The time-parallel readout on the device (its default there) against the serial kernel on the cpu."""
     import warp as wp

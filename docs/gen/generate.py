@@ -362,7 +362,7 @@ def bench_gpu() -> str:
             if q and fz["prefetch_depth"] != 1:
                 # measured while QUAD_SUMS was on: prefetch 1 ran the four-step kernel, the other depths the one-step one
                 by = fz["seconds_by_prefetch_depth"]
-                rows.append(["group sums four steps per exchange (`QUAD_SUMS`, on while measured, now off): the fused kernel "
+                rows.append(["group sums four steps per exchange (`QUAD_SUMS`, on while measured, since removed): the fused kernel "
                              "at prefetch 1 (four-step) against the one-step kernel at the other depths (ms)",
                              f"four-step {num(1e3 * by['1'])}; one-step " + ", ".join(
                                  f"prefetch {d}: {num(1e3 * v)}" for d, v in by.items() if d != "1")])

@@ -284,168 +284,9 @@ def taxel_sum_kernel(n_prony: int, n_play: int, depth: int = PREFETCH, shuffle: 
     return wp.kernel(chain_sum, module="unique", enable_backward=False)
 
 
-# Four steps' sums at once (CUDA): each lane holds its g (or stress) of 4 consecutive steps; the first two levels
-# of the xor-16 / xor-8 butterfly exchange only what the partner keeps (steps {0,1} stay in lanes 0-15, {2,3} in
-# 16-31; then step 2h + o in the lanes with bit 16 = h, bit 8 = o), the last three levels run on that one value:
-# 3 + 2 x 2 + 2 x 3 = 12 shuffle instructions per 4 steps against 4 x 9 for `group_sum_f64` per step. Each step's
-# sum is the same tree of the same pairs as `group_sum_f64` (the pairs of lanes l, l ^ 16, then ^ 8, ^ 4, ^ 2, ^ 1;
-# a + b == b + a in IEEE arithmetic), so the same bits. Returns the sum of step 2h + o of the four.
-_quad_sum_snippet = """
-#if defined(__CUDA_ARCH__)
-    const unsigned int lane = threadIdx.x & 31u;
-    const bool h = (lane & 16u) != 0u;
-    const bool o = (lane & 8u) != 0u;
-    const float k0 = h ? x2 : x0;
-    const float k1 = h ? x3 : x1;
-    const float s0 = h ? x0 : x2;
-    const float s1 = h ? x1 : x3;
-    const double a0 = (double)k0 + (double)__shfl_xor_sync(0xffffffffu, s0, 16);
-    const double a1 = (double)k1 + (double)__shfl_xor_sync(0xffffffffu, s1, 16);
-    double v = (o ? a1 : a0) + __shfl_xor_sync(0xffffffffu, o ? a0 : a1, 8);
-    v += __shfl_xor_sync(0xffffffffu, v, 4);
-    v += __shfl_xor_sync(0xffffffffu, v, 2);
-    v += __shfl_xor_sync(0xffffffffu, v, 1);
-    return v;
-#else
-    return (double)x0;
-#endif
-"""
-
-
-@wp.func_native(_quad_sum_snippet)
-def quad_sum_f64(x0: wp.float32, x1: wp.float32, x2: wp.float32, x3: wp.float32) -> wp.float64: ...
-
-
-# Off: measured slower on the H100 (256 x 4096 x 1000, same run, bench/results/transduction-h100-s12.json): the
-# four-step kernel 12.19 ms against 10.62 ms (prefetch 2) and 11.30 ms (prefetch 0) for the one-step one (session
-# 11's 10.2 ms at prefetch 1 on another machine): a third of the shuffles, but four copies of the step in the loop
-# body; the same bits (tests/test_gpu.py). Kept for the record and the bench (`run_pad_device(quad=True)`).
-QUAD_SUMS = False
-
-
-@functools.cache
-def taxel_sum_quad_kernel(n_prony: int, n_play: int):
-    """`taxel_sum_kernel` (prefetch 1, CUDA warps of 32 lanes only) with the group sums taken four steps at a time
-    (`quad_sum_f64`): the steps of whole quads, then the last n_steps % 4 one at a time as before. After each
-    quad the lanes 0, 8, 16, 24 store the partials of its steps 0-3 (32 consecutive bytes); same partials, same
-    bits as `taxel_sum_kernel`'s."""
-    k = taxel_kernels(n_prony, n_play)
-    Params, vec_p, vec_k, invariants_f, core_f = k["Params"], k["vec_p"], k["vec_k"], k["invariants"], k["core"]
-
-    def chain_sum_quad(
-        drive: wp.array(dtype=wp.float32),  # [E*T*N]
-        n_steps: int,
-        n_taxels: int,
-        n_pad: int,
-        group: int,  # 32
-        mode: int,
-        p: Params,
-        st_strain: wp.array(dtype=wp.float32),
-        st_phi: wp.array(dtype=wp.float32),
-        st_prony: wp.array(dtype=vec_p),
-        st_gap: wp.array(dtype=wp.float32),
-        st_play: wp.array(dtype=vec_k),
-        st_damage: wp.array(dtype=wp.float32),
-        write_strain: int,
-        write_stress: int,
-        out_strain: wp.array(dtype=wp.float32),
-        out_stress: wp.array(dtype=wp.float32),
-        part_g: wp.array(dtype=wp.float64),
-        part_f: wp.array(dtype=wp.float64),
-    ):
-        tid = wp.tid()
-        ep = tid // n_pad
-        n = tid - ep * n_pad
-        active = n < n_taxels
-        nc = wp.min(n, n_taxels - 1)
-        sid = ep * n_taxels + nc
-        e = st_strain[sid]
-        phi = st_phi[sid]
-        h = st_prony[sid]
-        s = st_gap[sid]
-        z = st_play[sid]
-        dmg = st_damage[sid]
-        e_max, eb_sum, w_sum, phi_max = invariants_f(p)
-        n_parts = n_pad // group
-        w = n // group
-        lane = n - w * group
-        prow = (ep * n_parts + w) * n_steps
-        base = ep * n_steps * n_taxels + nc
-        last = wp.max(n_steps - 1, 0)
-        nxt = float(0.0)
-        if n_steps > 0:
-            nxt = drive[base]
-        n_full = (n_steps // 4) * 4
-        for kq in range(0, n_full, 4):
-            i0 = base + kq * n_taxels
-            d = nxt
-            nxt = drive[base + wp.min(kq + 1, last) * n_taxels]
-            e, phi, h, s, z, dmg, sig, g = core_f(p, e_max, eb_sum, w_sum, phi_max, mode, d, e, phi, h, s, z, dmg)
-            if write_strain != 0:
-                out_strain[i0] = e
-            if write_stress != 0:
-                out_stress[i0] = sig
-            g0 = wp.where(active, g, 0.0)
-            f0 = wp.where(active, sig, 0.0)
-            i1 = i0 + n_taxels
-            d = nxt
-            nxt = drive[base + wp.min(kq + 2, last) * n_taxels]
-            e, phi, h, s, z, dmg, sig, g = core_f(p, e_max, eb_sum, w_sum, phi_max, mode, d, e, phi, h, s, z, dmg)
-            if write_strain != 0:
-                out_strain[i1] = e
-            if write_stress != 0:
-                out_stress[i1] = sig
-            g1 = wp.where(active, g, 0.0)
-            f1 = wp.where(active, sig, 0.0)
-            i2 = i1 + n_taxels
-            d = nxt
-            nxt = drive[base + wp.min(kq + 3, last) * n_taxels]
-            e, phi, h, s, z, dmg, sig, g = core_f(p, e_max, eb_sum, w_sum, phi_max, mode, d, e, phi, h, s, z, dmg)
-            if write_strain != 0:
-                out_strain[i2] = e
-            if write_stress != 0:
-                out_stress[i2] = sig
-            g2 = wp.where(active, g, 0.0)
-            f2 = wp.where(active, sig, 0.0)
-            i3 = i2 + n_taxels
-            d = nxt
-            nxt = drive[base + wp.min(kq + 4, last) * n_taxels]
-            e, phi, h, s, z, dmg, sig, g = core_f(p, e_max, eb_sum, w_sum, phi_max, mode, d, e, phi, h, s, z, dmg)
-            if write_strain != 0:
-                out_strain[i3] = e
-            if write_stress != 0:
-                out_stress[i3] = sig
-            g3 = wp.where(active, g, 0.0)
-            f3 = wp.where(active, sig, 0.0)
-            sg = quad_sum_f64(g0, g1, g2, g3)
-            sf = quad_sum_f64(f0, f1, f2, f3)
-            if (lane & 7) == 0:
-                part_g[prow + kq + (lane >> 3)] = sg
-                part_f[prow + kq + (lane >> 3)] = sf
-        for kk in range(n_full, n_steps):
-            idx = base + kk * n_taxels
-            d = nxt
-            nxt = drive[base + wp.min(kk + 1, last) * n_taxels]
-            e, phi, h, s, z, dmg, sig, g = core_f(p, e_max, eb_sum, w_sum, phi_max, mode, d, e, phi, h, s, z, dmg)
-            if write_strain != 0:
-                out_strain[idx] = e
-            if write_stress != 0:
-                out_stress[idx] = sig
-            gs = group_sum_f64(wp.where(active, g, 0.0))
-            fs = group_sum_f64(wp.where(active, sig, 0.0))
-            if lane == 0:
-                part_g[prow + kk] = gs
-                part_f[prow + kk] = fs
-        if active:
-            st_strain[sid] = e
-            st_phi[sid] = phi
-            st_prony[sid] = h
-            st_gap[sid] = s
-            st_play[sid] = z
-            st_damage[sid] = dmg
-
-    chain_sum_quad.__name__ = chain_sum_quad.__qualname__ = f"taxel_chain_sum_quad_p{n_prony}_k{n_play}"
-    return wp.kernel(chain_sum_quad, module="unique", enable_backward=False)
+# Tried in session 12 and removed: the group sums taken four steps per warp exchange (12 shuffles per 4 steps
+# against 36; the same pairs, the same bits, tested on the H100) measured slower, 12.19 ms against 10.62 ms for the
+# fused kernel (four copies of the step in the loop body; bench/results/transduction-h100-s12.json, CHANGELOG).
 
 
 @wp.kernel
@@ -532,14 +373,12 @@ class TaxelChainWarp:
         return out
 
     def run_pad_device(self, drive: wp.array, n_steps: int, mode: int, area_m2: float, write_strain: bool = True,
-                       write_stress: bool = True, group: int | None = None, depth: int = PREFETCH, outs: list | None = None,
-                       quad: bool | None = None):
+                       write_stress: bool = True, group: int | None = None, depth: int = PREFETCH, outs: list | None = None):
         """The chain with the whole-pad channel sum fused in (`taxel_sum_kernel`) on a flat device array [E*T*N]:
         returns (strain or None, stress or None, pad conductance [E*T] float64, force [E*T] float64 = sum of the
         stress x area). group: lanes per partial sum (default 32 on CUDA, 1 on the CPU, where it is the plain
         per-row sum in taxel order). outs: [strain, stress, part_g, part_f] device buffers to reuse (sizes E*T*N
-        float32 where written, E * n_parts * T float64), as `run_device`'s outs. quad: the four-step sums
-        (`taxel_sum_quad_kernel`, CUDA, prefetch 1; default QUAD_SUMS); the same partials either way."""
+        float32 where written, E * n_parts * T float64), as `run_device`'s outs."""
         E, N, T, d = self.E, self.N, n_steps, self.device
         if group is None:
             group = WARP_LANES if wp.get_device(d).is_cuda else 1
@@ -557,13 +396,8 @@ class TaxelChainWarp:
             stress = wp.empty(size, dtype=wp.float32, device=d) if write_stress else empty
             part_g = wp.empty(E * n_parts * T, dtype=wp.float64, device=d)
             part_f = wp.empty(E * n_parts * T, dtype=wp.float64, device=d)
-        if quad is None:
-            quad = QUAD_SUMS
-        use_quad = quad and group == WARP_LANES and depth == 1 and wp.get_device(d).is_cuda
-        kern = (taxel_sum_quad_kernel(self.p.n_prony, self.p.n_play) if use_quad
-                else taxel_sum_kernel(self.p.n_prony, self.p.n_play, depth))
         wp.launch(
-            kern, dim=E * n_pad,
+            taxel_sum_kernel(self.p.n_prony, self.p.n_play, depth), dim=E * n_pad,
             inputs=[drive, T, N, n_pad, group, int(mode), self.params, *self._state_args(), int(write_strain),
                     int(write_stress), strain, stress, part_g, part_f],
             device=d,
