@@ -113,6 +113,15 @@ def to_host(arr: wp.array, site: str) -> np.ndarray:
     for a CUDA array, a view of the reused page-locked buffer of `site` (valid until its next copy)."""
     if not _STAGING.get() or not arr.device.is_cuda:
         return arr.numpy()
+    buf = _pinned_buffer(arr, site)
+    wp.copy(buf, arr)
+    wp.synchronize_device(arr.device)  # a copy into page-locked memory is asynchronous
+    return buf.numpy()
+
+
+def _pinned_buffer(arr: wp.array, site: str) -> wp.array:
+    """The reused page-locked host buffer of `site` for arr's shape and dtype (at most MAX_PINNED_PER_SITE kept
+    per site: the oldest shapes go first)."""
     key = (site, arr.shape, arr.dtype, str(arr.device))
     buf = _PINNED.get(key)
     if buf is None:
@@ -120,9 +129,7 @@ def to_host(arr: wp.array, site: str) -> np.ndarray:
         for k in same_site[: max(0, len(same_site) - MAX_PINNED_PER_SITE + 1)]:
             del _PINNED[k]
         buf = _PINNED[key] = wp.empty(arr.shape, dtype=arr.dtype, device="cpu", pinned=True)
-    wp.copy(buf, arr)
-    wp.synchronize_device(arr.device)  # a copy into page-locked memory is asynchronous
-    return buf.numpy()
+    return buf
 
 
 def to_host_many(arrs: list[wp.array], sites: list[str]) -> list[np.ndarray]:
@@ -132,13 +139,7 @@ def to_host_many(arrs: list[wp.array], sites: list[str]) -> list[np.ndarray]:
         return [to_host(a, s) for a, s in zip(arrs, sites)]
     bufs = []
     for arr, site in zip(arrs, sites):
-        key = (site, arr.shape, arr.dtype, str(arr.device))
-        buf = _PINNED.get(key)
-        if buf is None:
-            same_site = [k for k in _PINNED if k[0] == site]
-            for k in same_site[: max(0, len(same_site) - MAX_PINNED_PER_SITE + 1)]:
-                del _PINNED[k]
-            buf = _PINNED[key] = wp.empty(arr.shape, dtype=arr.dtype, device="cpu", pinned=True)
+        buf = _pinned_buffer(arr, site)
         wp.copy(buf, arr)
         bufs.append(buf)
     for dev in {str(a.device) for a in arrs}:
