@@ -441,6 +441,16 @@ def bench_gpu() -> str:
         fs = load(name)
         if not fs:
             continue
+        if fs.get("runs") and len({r.get("pack_overlap") for r in fs["runs"]}) > 1:  # session 12: the pack-overlap A/B
+            rows = [[i + 1, num(r["pack_overlap"]), num(r["profiled"]), num(r["seconds"])]
+                    + [num(r["feed_seconds"].get(k)) for k in ("simulate", "pack", "wait for pack")]
+                    for i, r in enumerate(fs["runs"])]
+            out += [f"The same stage with each slice packed after it (`feed.PACK_OVERLAP` off) or while the next slice runs "
+                    f"(on) (`{name}`, {fs['device_name']}, {fs['family']}, {fs['episodes']} episodes, "
+                    f"{num(fs['samples'])} samples, runs in the order made; with the overlap, pack s is the pack thread's "
+                    "own time, overlapping simulate, and the driver waits only for the last slice's):\n",
+                    table(["run", "pack overlap", "profiled", "stage s", "simulate s", "pack s", "waiting for the pack s"], rows)]
+            continue
         if fs.get("runs") and not any(r["profiled"] for r in fs["runs"]):
             rows = [[r["host_pass_threads"], num(r["seconds"])] + [num(r["feed_seconds"].get(k)) for k in ("simulate", "pack")]
                     for r in fs["runs"]]
