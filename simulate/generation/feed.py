@@ -416,7 +416,7 @@ def produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, secon
     return [packs[s] for s in shards]
 
 
-PACK_OVERLAP = True  # pack slice i (a thread of the driver; the copies release the GIL) while slice i + 1 runs its load
+PACK_OVERLAP = os.environ.get("PIEZOTWIN_PACK_OVERLAP", "1") != "0"  # (the variable: the bench's A/B) pack slice i (a thread of the driver; the copies release the GIL) while slice i + 1 runs its load
 # field and sensor chain, its outputs in the other set of staging buffers (session 12: velostat's 8192 episodes spent
 # 9.0 s simulating and 10.6 s packing one after the other on the H100); False: one after the other
 _PACK_STAGE = None
