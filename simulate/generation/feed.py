@@ -8,8 +8,8 @@ batches. Here a three-stage pipeline runs over batches of several shards' episod
    GPU time-slices between them, so one's host work overlaps the other's physics) and write the sensordata
    straight into shared memory;
 2. the driver runs the load field and the sensor chain of batch b on the same GPU, slice by slice; each slice's
-   outputs come back into reused page-locked buffers (two sets, alternating) and are packed, while the next slice
-   runs, into shared blocks that a `BlockPool`
+   outputs come back into reused page-locked buffers and are packed (before the next slice runs; PACK_OVERLAP:
+   while it runs) into shared blocks that a `BlockPool`
    lends until their shard is written (`iter_produce`); each length group goes in SLICES_PER_LENGTH slices and
    a shard goes to the writers as soon as its episodes are packed, and the first batches are smaller
    (RAMP_BATCHES), so the writers start early (a modest run is one batch);
@@ -416,9 +416,12 @@ def produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, secon
     return [packs[s] for s in shards]
 
 
-PACK_OVERLAP = os.environ.get("PIEZOTWIN_PACK_OVERLAP", "1") != "0"  # (the variable: the bench's A/B) pack slice i (a thread of the driver; the copies release the GIL) while slice i + 1 runs its load
-# field and sensor chain, its outputs in the other set of staging buffers (session 12: velostat's 8192 episodes spent
-# 9.0 s simulating and 10.6 s packing one after the other on the H100); False: one after the other
+PACK_OVERLAP = os.environ.get("PIEZOTWIN_PACK_OVERLAP", "0") == "1"  # pack slice i (a thread of the driver; the copies
+# release the GIL) while slice i + 1 runs its load field and sensor chain, its outputs in the other set of staging
+# buffers. Off by default: on the H100 (session 12, velostat 8192 episodes, same machine, off / on / off / on) the
+# plain CLI took 68.0 / 67.5 / 60.8 / 70.3 s: with the 12 writers busy the two stages slow each other (simulate
+# 8.9-10.2 s -> 15.7-16.2 s), the tail after the physics no shorter (20.9 s mean off, 21.9 on); without writers
+# the stage alone went 6.52 -> 5.54 s (feed-stage-velostat-h100-s12-overlap.json). The variable: the bench's A/B
 _PACK_STAGE = None
 
 
@@ -461,9 +464,9 @@ class Producer:
         episodes (of this batch and earlier ones) are packed. stepped: `step_worlds` of these episodes (all of
         them, or those its select kept: the protocols' indices say which), run in the physics process; this
         process then runs only the load field and the sensor chain. Each slice's outputs come back from the GPU
-        into reused page-locked buffers (`host_staging`) and is packed while the next slice runs (PACK_OVERLAP:
-        its copies in the other set of buffers, `staging_slot`); each length group goes in SLICES_PER_LENGTH
-        slices or more."""
+        into reused page-locked buffers (`host_staging`) and is packed before the next slice runs (or, with
+        PACK_OVERLAP, while it runs, its copies in the other set of buffers: `staging_slot`); each length group
+        goes in SLICES_PER_LENGTH slices or more."""
         import time
 
         from sensors.data.manifest import episode_seed
