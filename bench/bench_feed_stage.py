@@ -74,6 +74,8 @@ def main() -> None:
     ap.add_argument("--device", default="cuda")
     ap.add_argument("--host-threads", default="", help="comma list: rerun the stage with load_field.HOST_PASS_THREADS "
                     "at each (the A/B of the threaded host passes), on fresh made-up physics each time")
+    ap.add_argument("--pack-overlap", default="", help="comma list of 0 / 1: rerun the stage with feed.PACK_OVERLAP off / "
+                    "on (the A/B of packing slice i while slice i + 1 runs; profiled: the first), fresh made-up physics each time")
     ap.add_argument("--no-profile", action="store_true")
     ap.add_argument("--tag", default="local")
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
@@ -105,7 +107,12 @@ def main() -> None:
     runs = []
     prof = cProfile.Profile()
     try:
-        for i, th in enumerate([int(x) for x in a.host_threads.split(",") if x] or [lf.HOST_PASS_THREADS]):
+        if a.pack_overlap:
+            configs = [(lf.HOST_PASS_THREADS, bool(int(x))) for x in a.pack_overlap.split(",") if x]
+        else:
+            configs = [(int(x), feed.PACK_OVERLAP) for x in a.host_threads.split(",") if x] or [(lf.HOST_PASS_THREADS, feed.PACK_OVERLAP)]
+        for i, (th, overlap) in enumerate(configs):
+            feed.PACK_OVERLAP = overlap
             if i:  # fresh made-up physics: the stage unlinks its blocks
                 with ProcessPoolExecutor(1, mp_context=mp.get_context("spawn")) as ex:
                     stepped = ex.submit(made_up_physics, a.family, a.device, gids).result()
@@ -124,8 +131,9 @@ def main() -> None:
                 prof.disable()
             dt = time.perf_counter() - t0
             assert done == a.episodes
-            runs.append({"host_pass_threads": th, "profiled": profile, "seconds": dt, "feed_seconds": seconds})
-            print(f"stage {dt:.2f} s{' (profiled)' if profile else ''} with {th} host-pass thread(s): "
+            runs.append({"host_pass_threads": th, "pack_overlap": overlap, "profiled": profile, "seconds": dt,
+                         "feed_seconds": seconds})
+            print(f"stage {dt:.2f} s{' (profiled)' if profile else ''} with {th} host-pass thread(s), pack overlap {overlap}: "
                   + ", ".join(f"{k} {v:.2f} s" for k, v in seconds.items()))
     finally:
         pool.close()

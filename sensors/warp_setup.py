@@ -91,7 +91,10 @@ def resolve_device(device: str) -> str:
 
 # host_staging / to_host: copies back from the GPU into reused page-locked buffers where the caller allows it
 _STAGING: ContextVar[bool] = ContextVar("piezotwin_host_staging", default=False)
-_PINNED: dict[tuple, wp.array] = {}  # (site, shape, dtype, device) -> page-locked host array
+_PINNED: dict[tuple, wp.array] = {}  # ((site, slot), shape, dtype, device) -> page-locked host array
+# which set of staging buffers the copies go into: a consumer that still holds one slice's views while the next
+# slice is copied back (the GPU feed packs slice i while slice i + 1 runs) alternates slots (`staging_slot`)
+_SLOT: ContextVar[int] = ContextVar("piezotwin_staging_slot", default=0)
 MAX_PINNED_PER_SITE = 2  # e.g. the full slice and a group's last, shorter one
 
 
@@ -108,6 +111,17 @@ def host_staging() -> Iterator[None]:
         _STAGING.reset(token)
 
 
+@contextmanager
+def staging_slot(slot: int) -> Iterator[None]:
+    """Inside, `to_host` copies into the page-locked buffers of `slot` (one set per slot and call site): views
+    handed out under another slot stay valid."""
+    token = _SLOT.set(slot)
+    try:
+        yield
+    finally:
+        _SLOT.reset(token)
+
+
 def to_host(arr: wp.array, site: str) -> np.ndarray:
     """arr on the host: `arr.numpy()` (a new array, or arr's own memory on the CPU), or inside `host_staging`
     for a CUDA array, a view of the reused page-locked buffer of `site` (valid until its next copy)."""
@@ -120,8 +134,9 @@ def to_host(arr: wp.array, site: str) -> np.ndarray:
 
 
 def _pinned_buffer(arr: wp.array, site: str) -> wp.array:
-    """The reused page-locked host buffer of `site` for arr's shape and dtype (at most MAX_PINNED_PER_SITE kept
-    per site: the oldest shapes go first)."""
+    """The reused page-locked host buffer of `site` (in the current `staging_slot`) for arr's shape and dtype (at
+    most MAX_PINNED_PER_SITE kept per site and slot: the oldest shapes go first)."""
+    site = (site, _SLOT.get())
     key = (site, arr.shape, arr.dtype, str(arr.device))
     buf = _PINNED.get(key)
     if buf is None:

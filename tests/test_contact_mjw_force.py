@@ -104,3 +104,59 @@ def test_velostat_device_sensor_path_equals_host_path_mjw_cpu(monkeypatch):
 @pytest.mark.gpu
 def test_velostat_device_sensor_path_equals_host_path_cuda(gpu_device, monkeypatch):
     _velostat_feed_paths(gpu_device, 16, monkeypatch)
+
+
+def _velostat_feed_overlap(device: str, monkeypatch) -> None:
+    """velostat's feed producer on MuJoCo Warp (7 episodes, 2-episode shards, 2-episode slices): each slice packed
+    while the next runs (`feed.PACK_OVERLAP`; on CUDA its outputs in the other set of page-locked staging
+    buffers) gives bit for bit the shards packed one after the other and the plain path's channels, in the same
+    shard order and episode order, from one physics run."""
+    from sensors.data.manifest import episode_seed
+    from simulate.contact import load_field as contact
+    from simulate.generation import feed, run
+
+    dev = "cpu" if device == "cpu" else "cuda"
+    n = 7
+    cfg = load_scene("velostat", SHORT["velostat"] + ["generation.physics=mujoco_warp", f"generation.device={dev}",
+                                                      f"generation.episodes={n}", "generation.episodes_per_shard=2"])
+    physics, real = [], contact.simulate_sensors  # one physics run for every path
+    monkeypatch.setattr(contact, "simulate_sensors", lambda *a: physics[0] if physics else physics.append(real(*a)) or physics[0])
+    monkeypatch.setattr(run, "SENSOR_SLICE", 2)
+    sensor = run.make_sensor(cfg, "warp", contact.physics_engine(cfg)[1])
+    seeds = [episode_seed(cfg.generation.root_seed, k) for k in range(n)]
+    ref = run.simulate_episodes(cfg, seeds, [f"ep-{k:06d}" for k in range(n)], sensor, indices=list(range(n)))
+    assert max(float(r.channels["force"].data.max()) for r in ref) > 1.0  # the presses reach newtons
+    runs = {}
+    for overlap in (False, True):
+        monkeypatch.setattr(feed, "PACK_OVERLAP", overlap)
+        pool = feed.BlockPool()
+        try:
+            got, order = {}, []
+            for p in feed.iter_produce(cfg, [0, 1, 2, 3], sensor, pool=pool):
+                order.append((p.shard, [e[0] for e in p.episodes], [e[1]["seed"] for e in p.episodes]))
+                pieces = p.arrays({b: pool.blocks[b].buf for b in p.block_names})
+                for ep_id, _, piece, row in p.episodes:
+                    got[ep_id] = {c: np.array(pieces[piece][c][row] if spec[3] else pieces[piece][c])
+                                  for c, spec in p.specs.items()}
+                pieces = None
+            runs[overlap] = (got, order)
+        finally:
+            pool.close()
+    assert runs[True][1] == runs[False][1] and [o[0] for o in runs[True][1]] == [0, 1, 2, 3]
+    for r in ref:
+        for got, _ in runs.values():
+            assert list(got[r.ep_id]) == list(r.channels)
+            for c, ch in r.channels.items():
+                np.testing.assert_array_equal(got[r.ep_id][c], ch.data, err_msg=f"{r.ep_id} {c}")
+
+
+@needs_mjw
+@pytest.mark.slow
+def test_velostat_feed_pack_overlap_same_bytes_mjw_cpu(monkeypatch):
+    _velostat_feed_overlap("cpu", monkeypatch)
+
+
+@needs_mjw
+@pytest.mark.gpu
+def test_velostat_feed_pack_overlap_same_bytes_cuda(gpu_device, monkeypatch):
+    _velostat_feed_overlap(gpu_device, monkeypatch)

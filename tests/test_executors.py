@@ -298,19 +298,26 @@ def test_feed_hands_each_shard_on_as_its_last_slice_is_packed(monkeypatch):
             yield part, protos, arrays
 
     monkeypatch.setattr(run, "simulate_slices", slices)
-    got = {}
-    for p in feed.iter_produce(cfg, [0, 1, 2, 3], sensor):
-        events.append(f"shard {p.shard}")
-        for ep_id, _, piece, row in p.episodes:
-            got[ep_id] = {n: p.pieces[piece][n][row] if spec[3] else p.pieces[piece][n] for n, spec in p.specs.items()}
-    assert feed.SLICES_PER_LENGTH == 4 and events == [2, "shard 0", 2, "shard 1", 2, "shard 2", 1, "shard 3"]
+    runs = {}
+    for overlap in (False, True):  # packed one after the other, or slice i packed while slice i + 1 runs
+        monkeypatch.setattr(feed, "PACK_OVERLAP", overlap)
+        events.clear()
+        got = runs[overlap] = {}
+        for p in feed.iter_produce(cfg, [0, 1, 2, 3], sensor):
+            events.append(f"shard {p.shard}")
+            for ep_id, _, piece, row in p.episodes:
+                got[ep_id] = {n: p.pieces[piece][n][row] if spec[3] else p.pieces[piece][n] for n, spec in p.specs.items()}
+        assert feed.SLICES_PER_LENGTH == 4
+        assert events == ([2, 2, "shard 0", 2, "shard 1", 1, "shard 2", "shard 3"] if overlap  # one slice later
+                          else [2, "shard 0", 2, "shard 1", 2, "shard 2", 1, "shard 3"])
     monkeypatch.setattr(run, "simulate_slices", plain)
     seeds = [episode_seed(cfg.generation.root_seed, k) for k in range(7)]
     ref = run.simulate_episodes(cfg, seeds, [f"ep-{k:06d}" for k in range(7)], sensor, indices=list(range(7)))
     assert max(float(np.abs(r.channels["force_taxel"].data).max()) for r in ref) > 0.1  # they press
-    for r in ref:
-        for n, c in r.channels.items():
-            np.testing.assert_array_equal(got[r.ep_id][n], c.data, err_msg=f"{r.ep_id} {n}")
+    for got in runs.values():
+        for r in ref:
+            for n, c in r.channels.items():
+                np.testing.assert_array_equal(got[r.ep_id][n], c.data, err_msg=f"{r.ep_id} {n}")
 
 
 # fabric_1's staircase, shortened (the same kind, controls and sensor; two levels, 1 s dwells)

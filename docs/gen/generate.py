@@ -46,7 +46,8 @@ GPU_E2E = "gpu-pipeline-h100-s9-single-w.json"  # the single-frequency bench con
 GPU_E2E_MIX = "gpu-pipeline-h100-s11-mix.json"  # the compact 6 x 6 record with mixed frequencies, session 11's code: batches by episode length (was -s10-mix-ramp2, -s9-mix-w, -s9-mix, -s7-mix-final, -s6-mix, -s5-mix)
 GPU_E2E_MIX_AB = ["gpu-pipeline-h100-s11-mix-shards.json", "gpu-pipeline-h100-s11-mix-split.json",
                   "gpu-pipeline-h100-s10-mix-ramp2.json"]  # the same command with other batches (the A/B of that record)
-FEED_STAGE = ["feed-stage-fabric_1-h100-s11.json", "feed-stage-fabric_1-h100-s11-threads.json"]  # the feed's driver stage alone (bench/bench_feed_stage.py): profiled; the A/B of load_batch's host-pass threads
+FEED_STAGE = ["feed-stage-fabric_1-h100-s11.json", "feed-stage-fabric_1-h100-s11-threads.json",
+              "feed-stage-velostat-h100-s12-overlap.json"]  # the feed's driver stage alone (bench/bench_feed_stage.py): profiled; the A/B of load_batch's host-pass threads
 USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w12.json", "user-cli-h100-cnt-lz4.json",
             "user-cli-h100-s6.json", "user-cli-h100-s6-fabric-w8.json", "user-cli-h100-s6-cnt-cold.json",
             "user-cli-h100-s6-cnt.json", "user-cli-h100-s6-cnt-handon.json", "user-cli-h100-s7-cnt.json",
@@ -57,7 +58,10 @@ USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w
             "user-cli-h100-s9-cnt-f32.json", "user-cli-h100-s10-ntype.json", "user-cli-h100-s10-cnt.json",
             "user-cli-h100-s10-velostat.json", "user-cli-h100-s10-fabric.json", "user-cli-h100-s10-fabric-nostream.json",
             "user-cli-h100-s11-fabric.json", "user-cli-h100-s12-cnt.json", "user-cli-h100-s12-velostat.json",
-            "user-cli-h100-s12-ntype.json", "user-cli-h100-s12-fabric.json", "user-cli-h100-s12-fabric-b.json"]
+            "user-cli-h100-s12-ntype.json", "user-cli-h100-s12-fabric.json", "user-cli-h100-s12-fabric-b.json",
+            "user-cli-h100-s12-velostat-b.json", "user-cli-h100-s12-velostat-ab-off1.json",
+            "user-cli-h100-s12-velostat-ab-on1.json", "user-cli-h100-s12-velostat-ab-off2.json",
+            "user-cli-h100-s12-velostat-ab-on2.json"]
 USER_CLI_STARTUP = [  # session 12: start-up and exit of small runs, the base tree (b833838) against the branch, one machine per pair
     ("user-cli-h100-s12-startup-base-ntype-1.json", "user-cli-h100-s12-startup-ntype-1.json"),
     ("user-cli-h100-s12-startup-base-cnt_pdms-1.json", "user-cli-h100-s12-startup-cnt_pdms-1.json"),
@@ -223,7 +227,11 @@ def bench_user_cli() -> str:
            "same machine, one run per family: ntype's taxel fields and element loads on the device, `-s10-fabric` with the "
            "first batch streamed, `-s10-fabric-nostream` without (the stream then dropped); `-s12-*`: session 12's code, "
            "one run per family after a small warm-up run; `-s12-fabric-b`: the final session-12 code (the engine choice no "
-           "longer imports mujoco_warp), another machine, after a 256-episode warm-up run); "
+           "longer imports mujoco_warp), another machine, after a 256-episode warm-up run; `-s12-velostat-b`: each slice "
+           "packed while the next runs its sensor stage (`feed.PACK_OVERLAP` on), a fourth machine, after a 128-episode "
+           "warm-up run; `-s12-velostat-ab-off1`, `-on1`, `-off2`, `-on2`: the same code with the overlap off / on / off / "
+           "on (`PIEZOTWIN_PACK_OVERLAP`), one after the other on a fifth machine after a 128-episode warm-up run; "
+           "the overlap then left off); "
            "raw = a plain file of the same bytes "
            "on the same disk right after (issue 16's target: >= 50 % of it, or >= 1e6 samples/s):\n",
            table(["family", "episodes", "file", "engine (the CLI's line)", "s", "samples/s", "MB/s", "of raw MB/s"], rows)]
@@ -440,6 +448,16 @@ def bench_gpu() -> str:
     for name in FEED_STAGE:
         fs = load(name)
         if not fs:
+            continue
+        if fs.get("runs") and len({r.get("pack_overlap") for r in fs["runs"]}) > 1:  # session 12: the pack-overlap A/B
+            rows = [[i + 1, num(r["pack_overlap"]), num(r["profiled"]), num(r["seconds"])]
+                    + [num(r["feed_seconds"].get(k)) for k in ("simulate", "pack", "wait for pack")]
+                    for i, r in enumerate(fs["runs"])]
+            out += [f"The same stage with each slice packed after it (`feed.PACK_OVERLAP` off) or while the next slice runs "
+                    f"(on) (`{name}`, {fs['device_name']}, {fs['family']}, {fs['episodes']} episodes, "
+                    f"{num(fs['samples'])} samples, runs in the order made; with the overlap, pack s is the pack thread's "
+                    "own time, overlapping simulate, and the driver waits only for the last slice's):\n",
+                    table(["run", "pack overlap", "profiled", "stage s", "simulate s", "pack s", "waiting for the pack s"], rows)]
             continue
         if fs.get("runs") and not any(r["profiled"] for r in fs["runs"]):
             rows = [[r["host_pass_threads"], num(r["seconds"])] + [num(r["feed_seconds"].get(k)) for k in ("simulate", "pack")]

@@ -8,7 +8,8 @@ batches. Here a three-stage pipeline runs over batches of several shards' episod
    GPU time-slices between them, so one's host work overlaps the other's physics) and write the sensordata
    straight into shared memory;
 2. the driver runs the load field and the sensor chain of batch b on the same GPU, slice by slice; each slice's
-   outputs come back into reused page-locked buffers and are packed into shared blocks that a `BlockPool`
+   outputs come back into reused page-locked buffers and are packed (before the next slice runs; PACK_OVERLAP:
+   while it runs) into shared blocks that a `BlockPool`
    lends until their shard is written (`iter_produce`); each length group goes in SLICES_PER_LENGTH slices and
    a shard goes to the writers as soon as its episodes are packed, and the first batches are smaller
    (RAMP_BATCHES), so the writers start early (a modest run is one batch);
@@ -415,6 +416,24 @@ def produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, secon
     return [packs[s] for s in shards]
 
 
+PACK_OVERLAP = os.environ.get("PIEZOTWIN_PACK_OVERLAP", "0") == "1"  # pack slice i (a thread of the driver; the copies
+# release the GIL) while slice i + 1 runs its load field and sensor chain, its outputs in the other set of staging
+# buffers. Off by default: on the H100 (session 12, velostat 8192 episodes, same machine, off / on / off / on) the
+# plain CLI took 68.0 / 67.5 / 60.8 / 70.3 s: with the 12 writers busy the two stages slow each other (simulate
+# 8.9-10.2 s -> 15.7-16.2 s), the tail after the physics no shorter (20.9 s mean off, 21.9 on); without writers
+# the stage alone went 6.52 -> 5.54 s (feed-stage-velostat-h100-s12-overlap.json). The variable: the bench's A/B
+_PACK_STAGE = None
+
+
+def _pack_stage():
+    global _PACK_STAGE
+    if _PACK_STAGE is None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        _PACK_STAGE = ThreadPoolExecutor(1, thread_name_prefix="pack-stage")
+    return _PACK_STAGE
+
+
 SLICES_PER_LENGTH = 4  # slices (at most SENSOR_SLICE episodes each) per length group of a batch: a modest run's
 # shards are handed to the writers as the last length group's slices finish, not after the whole batch
 
@@ -445,12 +464,13 @@ class Producer:
         episodes (of this batch and earlier ones) are packed. stepped: `step_worlds` of these episodes (all of
         them, or those its select kept: the protocols' indices say which), run in the physics process; this
         process then runs only the load field and the sensor chain. Each slice's outputs come back from the GPU
-        into reused page-locked buffers (`host_staging`) and are packed before the next slice runs; each length
-        group goes in SLICES_PER_LENGTH slices or more."""
+        into reused page-locked buffers (`host_staging`) and is packed before the next slice runs (or, with
+        PACK_OVERLAP, while it runs, its copies in the other set of buffers: `staging_slot`); each length group
+        goes in SLICES_PER_LENGTH slices or more."""
         import time
 
         from sensors.data.manifest import episode_seed
-        from sensors.warp_setup import host_staging
+        from sensors.warp_setup import host_staging, staging_slot
         from simulate.generation.run import (
             episode_attrs,
             episode_ids_of_shard,
@@ -475,38 +495,62 @@ class Producer:
         else:
             gids = [k for s in shards for k in ids[s]]
         seeds = [episode_seed(cfg.generation.root_seed, k) for k in gids]
+
+        def pack(pos: list[int], protos_s: list, arrays: dict) -> list[PackedShard]:
+            """Pack one slice's outputs into their shards' pieces; the shards it completes (in the driver's
+            pack thread where PACK_OVERLAP, while the next slice runs; one slice at a time, in slice order)."""
+            t1 = time.perf_counter()
+            runs: dict[int, list[int]] = {}
+            for j, i in enumerate(pos):
+                runs.setdefault(owner[gids[i]], []).append(j)
+            done = []
+            for s, rows in runs.items():
+                p = packs[s]
+                p.specs = {n: (c.units, c.dims, c.description, c.per_episode) for n, c in arrays.items()}
+                take = slice(rows[0], rows[-1] + 1) if rows[-1] - rows[0] + 1 == len(rows) else rows
+                p.add_piece({n: (c.data[take] if c.per_episode else c.data) for n, c in arrays.items()}, self.pool)
+                for r, j in enumerate(rows):
+                    i = pos[j]
+                    placed[gids[i]] = (f"ep-{gids[i]:06d}", episode_attrs(seeds[i], protos_s[j], gids[i]),
+                                       len(p.pieces) - 1, r)
+                left[s] -= len(rows)
+                if not left[s]:
+                    p.episodes = [placed.pop(k) for k in ids[s]]
+                    done.append(packs.pop(s))
+                    del left[s]
+                    self.finished.add(s)
+            seconds["pack"] = seconds.get("pack", 0.0) + time.perf_counter() - t1
+            return sorted(done, key=lambda p: p.shard)
+
+        pending = None  # the previous slice's pack (a future) where PACK_OVERLAP
         try:
             with host_staging():
-                t0 = time.perf_counter()
-                for pos, protos_s, arrays in simulate_slices(cfg, seeds, self.sensor, self.threads, gids, protos, physics,
-                                                             SLICES_PER_LENGTH):
+                slices = simulate_slices(cfg, seeds, self.sensor, self.threads, gids, protos, physics, SLICES_PER_LENGTH)
+                k = 0
+                while True:
+                    t0 = time.perf_counter()
+                    with staging_slot(k % 2 if PACK_OVERLAP else 0):  # slice k - 1's views stay valid meanwhile
+                        item = next(slices, None)
                     t1 = time.perf_counter()
                     seconds["simulate"] = seconds.get("simulate", 0.0) + t1 - t0
-                    runs: dict[int, list[int]] = {}
-                    for j, i in enumerate(pos):
-                        runs.setdefault(owner[gids[i]], []).append(j)
-                    done = []
-                    for s, rows in runs.items():
-                        p = packs[s]
-                        p.specs = {n: (c.units, c.dims, c.description, c.per_episode) for n, c in arrays.items()}
-                        take = slice(rows[0], rows[-1] + 1) if rows[-1] - rows[0] + 1 == len(rows) else rows
-                        p.add_piece({n: (c.data[take] if c.per_episode else c.data) for n, c in arrays.items()}, self.pool)
-                        for r, j in enumerate(rows):
-                            i = pos[j]
-                            placed[gids[i]] = (f"ep-{gids[i]:06d}", episode_attrs(seeds[i], protos_s[j], gids[i]),
-                                               len(p.pieces) - 1, r)
-                        left[s] -= len(rows)
-                        if not left[s]:
-                            p.episodes = [placed.pop(k) for k in ids[s]]
-                            done.append(packs.pop(s))
-                            del left[s]
-                            self.finished.add(s)
-                    t0 = time.perf_counter()
-                    seconds["pack"] = seconds.get("pack", 0.0) + t0 - t1
-                    for p in sorted(done, key=lambda p: p.shard):
-                        yield p
-                    t0 = time.perf_counter()
+                    if pending is not None:
+                        done, pending = pending.result(), None
+                        seconds["wait for pack"] = seconds.get("wait for pack", 0.0) + time.perf_counter() - t1
+                        yield from done
+                    if item is None:
+                        break
+                    if PACK_OVERLAP:
+                        pending = _pack_stage().submit(pack, *item)
+                    else:
+                        yield from pack(*item)
+                    item = None
+                    k += 1
         finally:
+            if pending is not None:  # an error unwinding: let the pack stop touching the blocks first
+                try:
+                    pending.result()
+                except BaseException:  # noqa: BLE001 - the first error is the one raised
+                    pass
             physics = None
             for shm in blocks:
                 try:
