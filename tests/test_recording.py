@@ -269,6 +269,31 @@ def test_manifest_round_trip_and_verify(tmp_path):
         mf.read_manifest(tmp_path / "nowhere")
 
 
+def test_manifest_trusts_this_runs_writers_and_checks_the_rest(tmp_path, monkeypatch):
+    """build_manifest with the writers' entries (`described`) opens none of those shards again and writes the same
+    manifest; an entry whose file changed size, or of another config, is checked and described from the file."""
+    for i in range(3):
+        rng = np.random.default_rng(i)
+        eps = {f"ep-{k}": make_episode(rng, n=20) for k in range(2)}
+        write_recording(mf.shard_path(tmp_path, i), eps, source="sim", config_json=CONFIG, root_seed=7,
+                        shard_index=i, sensor_attrs={}, episode_attrs={f"ep-{k}": {"seed": k} for k in range(2)})
+    kw = dict(name="demo", n_shards=3, episodes_per_shard=2, config_sha256=CONFIG_SHA, root_seed=7)
+    mf.build_manifest(tmp_path, **kw)
+    want = (tmp_path / "manifest.json").read_text()
+    described = {i: s for i, s in enumerate(mf.read_manifest(tmp_path)["shards"])}
+    opened = []
+    real_complete, real_describe = mf.is_shard_complete, mf.describe_shard
+    monkeypatch.setattr(mf, "is_shard_complete", lambda p, c, **k: opened.append(Path(p).name) or real_complete(p, c, **k))
+    monkeypatch.setattr(mf, "describe_shard", lambda p, **k: opened.append(Path(p).name) or real_describe(p, **k))
+    mf.build_manifest(tmp_path, described=described, **kw)
+    assert opened == [] and (tmp_path / "manifest.json").read_text() == want
+    stale = {**described, 1: {**described[1], "bytes": described[1]["bytes"] + 1},
+             2: {**described[2], "config_sha256": "0" * 64}}
+    mf.build_manifest(tmp_path, described=stale, **kw)
+    assert sorted(opened) == sorted(["shard-00001.h5", "shard-00002.h5"] * 2)
+    assert (tmp_path / "manifest.json").read_text() == want
+
+
 def test_write_manifest_rejects_overlapping_splits(tmp_path):
     shards = [{"file": "shard-00000.h5", "sha256": "x", "bytes": 1, "episodes": ["a", "b"],
                "episode_seeds": [1, 2], "shard_seed": None}]
