@@ -16,7 +16,6 @@ seeds, paired over p (learn.sim2real.paired_improvement, blend - net). Test numb
 
 from __future__ import annotations
 
-import argparse
 import json
 import shlex
 import sys
@@ -48,19 +47,15 @@ def summary(lc: list[dict]) -> dict:
 
 def main(argv=None):
     import torch
+    from bench_s2r_pipeline_noise import pipeline_seed_args, pretrained_checkpoint
 
     from learn.checkpoint import load_checkpoint
-    from learn.sim2real import S2R_BUDGET, _evaluate_loop, generate_step, paired_improvement, pretrain_step
+    from learn.sim2real import S2R_BUDGET, _evaluate_loop, paired_improvement
     from scenes.randomize import Randomization
     from sensors import chain_fit as C
 
     torch.set_num_threads(1)
-    ap = argparse.ArgumentParser()
-    ap.add_argument("real")
-    ap.add_argument("--test-episodes", required=True)
-    ap.add_argument("--base", required=True, type=Path)
-    ap.add_argument("--work", required=True, type=Path)
-    ap.add_argument("--pipeline-seeds", type=int, nargs="+", default=[0, 1, 2])
+    ap = pipeline_seed_args()
     ap.add_argument("-o", "--out", required=True, type=Path)
     a = ap.parse_args(argv)
     bm = json.loads((a.base / "metrics.json").read_text())
@@ -85,20 +80,12 @@ def main(argv=None):
             continue
         B = {**S2R_BUDGET, **bm["budget"], "pipeline_seed": p, "static_blend": False}
         t0 = time.perf_counter()
-        if p == 0:
+        ck = pretrained_checkpoint(p, a.base, a.work, bm, params, rand, B, out["pretrain"])
+        if p == 0:  # the recorded run's learning curve and test results (its fine-tuning is the default's)
             lc = bm["learning_curve"]
-            out["pretrain"][key] = {k: bm["steps"]["pretrain"].get(k) for k in ("sim_valid_rmse", "epochs", "best_epoch", "wall_s")}
             test = {"pooled_pct_fs": bm["results"]["finetuned"]["rmse_pct_full_scale"],
                     "two_point_pct_fs": bm["results"]["zero_shot"]["two_point_gain"]["rmse_pct_full_scale"]}
         else:
-            d = a.work / key
-            d.mkdir(parents=True, exist_ok=True)
-            ck = d / "checkpoints" / "pretrained"
-            if not (ck / "config.json").is_file():
-                generate_step(params, rand, d / "sim.h5", B, 0)
-                info = pretrain_step(d / "sim.h5", ck, "tcn", B, 0)
-                out["pretrain"][key] = {**info, "wall_s": time.perf_counter() - t0}
-                print(f"{key} pre-trained: {info}", flush=True)
             m = _evaluate_loop(load_checkpoint(ck), params, a.real, a.test_episodes, B, 0, "sensor", "force",
                                float(B["fit_rate_hz"]), lambda k, n: None, print, sim=(), scratch=False)
             lc = m["learning_curve"]

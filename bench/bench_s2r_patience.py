@@ -17,7 +17,6 @@ validation tails (the determinism check). Never reads the test runs.
 
 from __future__ import annotations
 
-import argparse
 import json
 import shlex
 import sys
@@ -100,18 +99,14 @@ def score(rec: dict, patience: int, keep_initial: bool = True) -> dict:
 
 def main(argv=None):
     import torch
+    from bench_s2r_pipeline_noise import pipeline_seed_args
 
     from learn import finetune as FT
     from learn.checkpoint import load_checkpoint
     from learn.sim2real import S2R_BUDGET, curve_order
 
     torch.set_num_threads(1)
-    ap = argparse.ArgumentParser()
-    ap.add_argument("real")
-    ap.add_argument("--test-episodes", required=True)
-    ap.add_argument("--base", required=True, type=Path)
-    ap.add_argument("--work", required=True, type=Path)
-    ap.add_argument("--pipeline-seeds", type=int, nargs="+", default=[0, 1, 2])
+    ap = pipeline_seed_args()
     ap.add_argument("--patience", type=int, nargs="+", default=[20, 120], help="the stopping rules replayed")
     ap.add_argument("--scratch", action="store_true", help="also the scratch nets (one set: they do not depend on p)")
     ap.add_argument("-o", "--out", required=True, type=Path)

@@ -78,20 +78,49 @@ def stats(out: dict, seeds: list[int], methods: list[str]) -> dict:
     return st
 
 
-def main(argv=None):
-    import torch
-
-    from learn.sim2real import S2R_BUDGET, generate_step, pretrain_step
-    from scenes.randomize import Randomization
-    from sensors import chain_fit as C
-
-    torch.set_num_threads(1)
+def pipeline_seed_args() -> argparse.ArgumentParser:
+    """The arguments of the benches that rerun the loop over pipeline seeds (this one, bench_s2r_blend.py,
+    bench_s2r_patience.py): the real capture, its test runs, the recorded run (seed 0), a work folder for the
+    others and the seeds."""
     ap = argparse.ArgumentParser()
     ap.add_argument("real")
     ap.add_argument("--test-episodes", required=True)
     ap.add_argument("--base", required=True, type=Path)
     ap.add_argument("--work", required=True, type=Path)
     ap.add_argument("--pipeline-seeds", type=int, nargs="+", default=[0, 1, 2])
+    return ap
+
+
+def pretrained_checkpoint(p: int, base: Path, work: Path, bm: dict, params, rand, B: dict, pretrain: dict) -> Path:
+    """The pre-trained checkpoint of pipeline seed p: the recorded run's for p = 0 (its pre-training recorded from
+    its metrics `bm`), else made once under work/p<p> (randomized generation + pre-training with budget B, whose
+    pipeline_seed is p), its pre-training recorded in `pretrain`."""
+    from learn.sim2real import generate_step, pretrain_step
+
+    if p == 0:
+        pretrain["p0"] = {k: bm["steps"]["pretrain"].get(k) for k in ("sim_valid_rmse", "epochs", "best_epoch", "wall_s")}
+        return base / "checkpoints" / "pretrained"
+    d = work / f"p{p}"
+    d.mkdir(parents=True, exist_ok=True)
+    ck = d / "checkpoints" / "pretrained"
+    if not (ck / "config.json").is_file():
+        t0 = time.perf_counter()
+        generate_step(params, rand, d / "sim.h5", B, 0)
+        info = pretrain_step(d / "sim.h5", ck, "tcn", B, 0)
+        pretrain[f"p{p}"] = {**info, "wall_s": time.perf_counter() - t0}
+        print(f"p{p} pre-trained: {info}", flush=True)
+    return ck
+
+
+def main(argv=None):
+    import torch
+
+    from learn.sim2real import S2R_BUDGET
+    from scenes.randomize import Randomization
+    from sensors import chain_fit as C
+
+    torch.set_num_threads(1)
+    ap = pipeline_seed_args()
     ap.add_argument("--methods", nargs="+", default=["plain", "l2sp", "lpft"])
     ap.add_argument("-o", "--out", required=True, type=Path)
     a = ap.parse_args(argv)
@@ -108,19 +137,7 @@ def main(argv=None):
 
     for p in a.pipeline_seeds:
         B = {**S2R_BUDGET, **bm["budget"], "pipeline_seed": p}
-        if p == 0:
-            ck = a.base / "checkpoints" / "pretrained"
-            out["pretrain"]["p0"] = {k: bm["steps"]["pretrain"].get(k) for k in ("sim_valid_rmse", "epochs", "best_epoch", "wall_s")}
-        else:
-            d = a.work / f"p{p}"
-            d.mkdir(parents=True, exist_ok=True)
-            ck = d / "checkpoints" / "pretrained"
-            if not (ck / "config.json").is_file():
-                t0 = time.perf_counter()
-                generate_step(params, rand, d / "sim.h5", B, 0)
-                info = pretrain_step(d / "sim.h5", ck, "tcn", B, 0)
-                out["pretrain"][f"p{p}"] = {**info, "wall_s": time.perf_counter() - t0}
-                print(f"p{p} pre-trained: {info}", flush=True)
+        ck = pretrained_checkpoint(p, a.base, a.work, bm, params, rand, B, out["pretrain"])
         for meth in a.methods:
             key = f"p{p}/{meth}"
             if key in out["runs"]:
