@@ -30,7 +30,7 @@
 # seed). collect: `device_full_velostat.py merge` checks each seed's data (content and config hashes per folder)
 # and split against the record and merges ours, or refuses that seed (the record untouched, exit 3), then packs
 # the records and logs into $OUT/velostat-$VF_MODE.tgz. Default run folder runs/velostat-$VF_MODE-ours.
-# Estimate for 16 cores + one H100 (local measurements scaled, see DEVICE_RUN.txt): data ~1-2 min, chains ~2 min,
+# Estimate for 16 cores + one H100 (local measurements scaled, see bench/device_full_velostat.txt): data ~1-2 min, chains ~2 min,
 # ours ~2-5 min (<= 200 epochs of ~460 batches at ~2-3 ms a step); seeds 0-2 side by side ~8-10 min.
 set -u
 cd "$(dirname "$0")/.."
