@@ -391,10 +391,6 @@ def main() -> None:
               + f"; fresh arrays per call: fused kernel {1e3 * fz['fused_kernel_fresh_arrays_seconds']:.2f} ms, "
               f"plain kernel {1e3 * fz['plain_kernel_fresh_arrays_seconds']:.2f} ms"
               + f"; g vs tiled sum: max rel diff {fz['g_max_rel_diff_vs_tiled_sum']:.2g}, equal {fz['g_equal_fraction']:.4f}")
-        q = fz["sums_by_steps"]
-        print("  group sums: " + "; ".join(f"{k}: kernel {1e3 * v['kernel_seconds']:.2f} ms, chain {1e3 * v['chain_seconds']:.2f} ms "
-                                         f"= {v['taxel_steps_per_s_chain']:.3g}" for k, v in q.items() if isinstance(v, dict))
-              + f"; equal g {q['g_equal_fraction']:.4f}, force {q['force_equal_fraction']:.4f}, max rel {q['g_max_rel_diff']:.2g}")
         act = fz["activities_one_chain"]
         print(f"  one fused chain + readout: wall {act['wall_ms']:.2f} ms, GPU {act['gpu_ms']:.2f} ms: "
               + ", ".join(f"{a['name']} {a['ms']:.3f}" for a in act["list"]))

@@ -172,6 +172,56 @@ def conductance_ratio_wp(q: NetworkWp, x: float, dmg: float):
     return wp.exp(q.exponent * wp.log(rel) + q.gamma_s0 * x) / (1.0 - x)
 
 
+# CUDA's fast float32 exp (ex2.approx with the scaling by log2(e); CUDA C Programming Guide, "Intrinsic Functions":
+# max error 2 + floor(|1.173 x|) ulp); on the CPU the same call as wp.exp, so the CPU's bits do not change.
+_fast_exp_snippet = """
+#if defined(__CUDA_ARCH__)
+    return __expf(x);
+#else
+    return wp::exp(x);
+#endif
+"""
+
+
+@wp.func_native(_fast_exp_snippet)
+def fast_exp(x: wp.float32) -> wp.float32: ...
+
+
+# CUDA's approximate float32 division (div.approx.f32, as __fdividef: 2 ulp for |b| in [2^-126, 2^126]); on the
+# CPU the exact a / b, as Warp's own division there.
+_fast_div_snippet = """
+#if defined(__CUDA_ARCH__)
+    return __fdividef(a, b);
+#else
+    return a / b;
+#endif
+"""
+
+
+@wp.func_native(_fast_div_snippet)
+def fast_div(a: wp.float32, b: wp.float32) -> wp.float32: ...
+
+
+@wp.func
+def damage_approx_wp(q: NetworkWp, dmg: float, e_new: float):
+    """damage_wp with CUDA's approximate division (2 ulp; the exact one on the CPU)."""
+    d_eq = fast_div(q.damage_max * e_new, e_new + q.damage_strain)
+    out = dmg * q.damage_recovery
+    if d_eq > dmg:
+        out = dmg + (d_eq - dmg) * (1.0 - q.damage_decay)
+    return out
+
+
+@wp.func
+def conductance_ratio_approx_wp(q: NetworkWp, x: float, dmg: float):
+    """conductance_ratio_wp with CUDA's approximate division and exp (fast_exp; the exact ones on the CPU)."""
+    phi_eff = q.phi * (1.0 - dmg) * (1.0 + q.strain_gain * x)
+    rel = wp.max((phi_eff - q.phi_c) * q.inv_span, q.floor)
+    if q.exponent == 2.0:
+        return fast_div(rel * rel * fast_exp(q.gamma_s0 * x), 1.0 - x)
+    return fast_div(fast_exp(q.exponent * wp.log(rel) + q.gamma_s0 * x), 1.0 - x)
+
+
 @wp.kernel
 def _ratio_kernel(q: NetworkWp, x: wp.array(dtype=float), dmg: wp.array(dtype=float), out: wp.array(dtype=float)):
     i = wp.tid()

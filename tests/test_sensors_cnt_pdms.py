@@ -286,3 +286,34 @@ def test_readout_noise_batch_equals_per_episode():
     small = el.readout_noise_batch(seeds[:3], 50, 2, 1e-4, 2e-4)
     np.testing.assert_array_equal(small[2], el.readout_noise_v(seeds[2], 50, 2, 1e-4, 2e-4))
     np.testing.assert_array_equal(small[2], big[2, :50, :2])  # counter-based: a shorter episode is a prefix
+
+
+def test_approx_math_kernels_equal_exact_on_cpu():
+    """The taxel step's approximate divisions / exp (kernels.APPROX_MATH, CUDA's __fdividef / __expf) fall back to the
+    exact operations on the CPU: the plain and the fused kernels give the exact kernels' bits there (so the CPU path's
+    bytes do not depend on the switch). CUDA against the CPU: tests/test_gpu.py (rtol 1e-5)."""
+    import warp as wp
+
+    from sensors.cnt_pdms.kernels import TaxelChainWarp, taxel_kernels, taxel_sum_kernel
+    from sensors.cnt_pdms.params import taxel_params
+
+    tp = taxel_params(load_scene("cnt_pdms"))
+    E, T, N = 2, 120, 40
+    drive = np.random.default_rng(5).uniform(0, 0.04, (E, T, N)).astype(np.float32)
+    for mode, scale in ((0, 1.0), (1, 2e6)):
+        got = {}
+        for approx in (False, True):
+            ch = TaxelChainWarp(tp, E, N, "cpu")
+            dc = wp.array((drive * scale).reshape(-1), dtype=wp.float32, device="cpu")
+            o = [wp.empty(E * T * N, dtype=wp.float32, device="cpu") for _ in range(3)]
+            wp.launch(taxel_kernels(tp.n_prony, tp.n_play, approx)["chain"], dim=E * N,
+                      inputs=[dc, T, N, mode, ch.params, *ch._state_args(), *o], device="cpu")
+            ch.reset()
+            pg, pf = (wp.empty(E * N * T, dtype=wp.float64, device="cpu") for _ in range(2))
+            s2 = [wp.empty(E * T * N, dtype=wp.float32, device="cpu") for _ in range(2)]
+            wp.launch(taxel_sum_kernel(tp.n_prony, tp.n_play, approx=approx), dim=E * N,
+                      inputs=[dc, T, N, N, 1, mode, ch.params, *ch._state_args(), 1, 1, *s2, pg, pf], device="cpu")
+            got[approx] = [x.numpy() for x in (*o, *s2, pg, pf)]
+        assert np.abs(got[False][2]).max() > 0
+        for x, y in zip(got[False], got[True]):
+            np.testing.assert_array_equal(y, x)

@@ -26,12 +26,24 @@ import warp as wp
 
 from sensors.cnt_pdms.params import TaxelParams
 from sensors.cnt_pdms.reference import MAX_STRAIN_FRACTION, TaxelState
-from sensors.percolation import NetworkWp, conductance_ratio_wp, damage_wp, kinetics_wp, network_struct
+from sensors.percolation import (
+    NetworkWp, conductance_ratio_approx_wp, conductance_ratio_wp, damage_approx_wp, damage_wp, fast_div, kinetics_wp,
+    network_struct,
+)
 from sensors.warp_setup import init_warp, resolve_device
 
+# The taxel step's float32 divisions and exp as CUDA's approximate instructions (__fdividef: 2 ulp, fast_div;
+# sensors/percolation.py: fast_exp) instead of the IEEE-rounded ones (~10 instructions each, a slow path for the division): the fused
+# kernel is bound by its arithmetic, not its loads and stores (bench/results/transduction-h100-s12.json: 9.64 ms
+# with nothing per taxel written against 9.7-10.1 ms with both stores). CPU kernels are unchanged bit for bit (both
+# fall back to the exact operations there); CUDA against the CPU stays within tests/test_gpu.py's rtol 1e-5.
+APPROX_MATH = True
+
+
 @functools.cache
-def taxel_kernels(n_prony: int, n_play: int):
-    """Kernels and types for this many Prony terms and play operators; compiled once per pair."""
+def _taxel_types(n_prony: int, n_play: int):
+    """The state vectors, the parameter struct and the step's invariants for this many Prony terms and play
+    operators: one set, shared by the exact and the approximate kernels (so one Params value launches both)."""
     vec_p = wp.types.vector(length=n_prony, dtype=wp.float32)
     vec_k = wp.types.vector(length=n_play, dtype=wp.float32)
     strain_frac = float(MAX_STRAIN_FRACTION)
@@ -62,26 +74,46 @@ def taxel_kernels(n_prony: int, n_play: int):
         return e_max, eb_sum, w_sum, phi_max
 
     invariants.__name__ = invariants.__qualname__ = f"taxel_invariants_p{n_prony}_k{n_play}"
-    invariants_f = wp.func(invariants)
+    return vec_p, vec_k, Params, wp.func(invariants)
+
+
+@functools.cache
+def taxel_kernels(n_prony: int, n_play: int, approx: bool = APPROX_MATH):
+    """Kernels and types for this many Prony terms and play operators; compiled once per pair. approx: the step's
+    divisions and exp as CUDA's approximate instructions (`APPROX_MATH`; the CPU's code is the same either way)."""
+    vec_p, vec_k, Params, invariants_f = _taxel_types(n_prony, n_play)
 
     def core(p: Params, e_max: float, eb_sum: float, w_sum: float, phi_max: float, mode: int, d: float, e: float,
              phi: float, h: vec_p, s: float, z: vec_k, dmg: float):
         e_new = float(0.0)
         phi_new = float(0.0)
         m = 1.0 - p.softening * dmg
-        if mode == 1:
-            phi_new = wp.clamp((d / m - wp.dot(p.prony_decay, h) + eb_sum * phi) / (p.e_inf + eb_sum), 0.0, phi_max)
-            e_new = phi_new / (1.0 + phi_new / p.e_lock)
+        if wp.static(approx):
+            if mode == 1:
+                phi_new = wp.clamp(fast_div(fast_div(d, m) - wp.dot(p.prony_decay, h) + eb_sum * phi,
+                                                 p.e_inf + eb_sum), 0.0, phi_max)
+                e_new = fast_div(phi_new, 1.0 + fast_div(phi_new, p.e_lock))
+            else:
+                e_new = wp.clamp(d, 0.0, e_max)
+                phi_new = fast_div(e_new, 1.0 - fast_div(e_new, p.e_lock))
         else:
-            e_new = wp.clamp(d, 0.0, e_max)
-            phi_new = e_new / (1.0 - e_new / p.e_lock)
+            if mode == 1:
+                phi_new = wp.clamp((d / m - wp.dot(p.prony_decay, h) + eb_sum * phi) / (p.e_inf + eb_sum), 0.0, phi_max)
+                e_new = phi_new / (1.0 + phi_new / p.e_lock)
+            else:
+                e_new = wp.clamp(d, 0.0, e_max)
+                phi_new = e_new / (1.0 - e_new / p.e_lock)
         h_new = wp.cw_mul(p.prony_decay, h) + p.prony_eb * (phi_new - phi)
         sig = p.e_inf * phi_new
         for i in range(n_prony):
             sig += h_new[i]
         sig = m * sig
         s_new = kinetics_wp(p.net, s, e, e_new)
-        dmg_new = damage_wp(p.net, dmg, e_new)
+        dmg_new = float(0.0)
+        if wp.static(approx):
+            dmg_new = damage_approx_wp(p.net, dmg, e_new)
+        else:
+            dmg_new = damage_wp(p.net, dmg, e_new)
         e_net = (1.0 - w_sum) * s_new
         z_new = z
         for j in range(n_play):
@@ -89,17 +121,21 @@ def taxel_kernels(n_prony: int, n_play: int):
             zj = s_new + (zj - s_new) * p.recovery
             z_new[j] = zj
             e_net += p.play_w[j] * zj
-        g = p.g0 * conductance_ratio_wp(p.net, e_net, dmg_new)
+        g = float(0.0)
+        if wp.static(approx):
+            g = p.g0 * conductance_ratio_approx_wp(p.net, e_net, dmg_new)
+        else:
+            g = p.g0 * conductance_ratio_wp(p.net, e_net, dmg_new)
         return e_new, phi_new, h_new, s_new, z_new, dmg_new, sig, g
 
-    core.__name__ = core.__qualname__ = f"taxel_core_p{n_prony}_k{n_play}"
+    core.__name__ = core.__qualname__ = f"taxel_core_p{n_prony}_k{n_play}_a{int(approx)}"
     core_f = wp.func(core)
 
     def step(p: Params, mode: int, d: float, e: float, phi: float, h: vec_p, s: float, z: vec_k, dmg: float):
         e_max, eb_sum, w_sum, phi_max = invariants_f(p)
         return core_f(p, e_max, eb_sum, w_sum, phi_max, mode, d, e, phi, h, s, z, dmg)
 
-    step.__name__ = step.__qualname__ = f"taxel_step_p{n_prony}_k{n_play}"
+    step.__name__ = step.__qualname__ = f"taxel_step_p{n_prony}_k{n_play}_a{int(approx)}"
     step_f = wp.func(step)
 
     def chain(
@@ -141,7 +177,7 @@ def taxel_kernels(n_prony: int, n_play: int):
         st_play[tid] = z
         st_damage[tid] = dmg
 
-    chain.__name__ = chain.__qualname__ = f"taxel_chain_p{n_prony}_k{n_play}"
+    chain.__name__ = chain.__qualname__ = f"taxel_chain_p{n_prony}_k{n_play}_a{int(approx)}"
     k_chain = wp.kernel(chain, module="unique", enable_backward=False)
     return {"chain": k_chain, "Params": Params, "vec_p": vec_p, "vec_k": vec_k, "invariants": invariants_f, "core": core_f}
 
@@ -174,7 +210,8 @@ PREFETCH = 1  # drive samples loaded ahead of the step that uses them in the fus
 
 
 @functools.cache
-def taxel_sum_kernel(n_prony: int, n_play: int, depth: int = PREFETCH, shuffle: bool = True, parts: bool = True):
+def taxel_sum_kernel(n_prony: int, n_play: int, depth: int = PREFETCH, shuffle: bool = True, parts: bool = True,
+                     approx: bool = APPROX_MATH):
     """The taxel chain with the whole-pad channel sum fused in (issue 16): one thread per (episode, taxel) as in
     `chain`, the episode's taxels padded to whole groups (CUDA: warps of 32 lanes; padding lanes rerun the last
     taxel and add nothing), and per step each group's conductance and stress sums (float64, fixed order) kept as
@@ -183,8 +220,8 @@ def taxel_sum_kernel(n_prony: int, n_play: int, depth: int = PREFETCH, shuffle: 
     conductance is written, and strain / stress only when asked (write_strain / write_stress). `depth` drive
     samples are loaded ahead of their step (0: at the step), so a thread has loads in flight while it computes.
     shuffle / parts = False leave out the group sums / the partials' stores: wrong sums, for timing only
-    (bench/fused_variants.py)."""
-    k = taxel_kernels(n_prony, n_play)
+    (bench/fused_variants.py). approx: as `taxel_kernels`."""
+    k = taxel_kernels(n_prony, n_play, approx)
     Params, vec_p, vec_k, invariants_f, core_f = k["Params"], k["vec_p"], k["vec_k"], k["invariants"], k["core"]
     vec_d = wp.types.vector(length=max(depth, 1), dtype=wp.float32)
 
@@ -280,7 +317,8 @@ def taxel_sum_kernel(n_prony: int, n_play: int, depth: int = PREFETCH, shuffle: 
             st_play[sid] = z
             st_damage[sid] = dmg
 
-    chain_sum.__name__ = chain_sum.__qualname__ = f"taxel_chain_sum_p{n_prony}_k{n_play}_d{depth}_s{int(shuffle)}{int(parts)}"
+    chain_sum.__name__ = chain_sum.__qualname__ = (f"taxel_chain_sum_p{n_prony}_k{n_play}_d{depth}_s{int(shuffle)}{int(parts)}"
+                                                   f"_a{int(approx)}")
     return wp.kernel(chain_sum, module="unique", enable_backward=False)
 
 
