@@ -1317,10 +1317,13 @@ def report(m: dict[str, Any]) -> str:
                  f"of the table above: **{'yes' if F['ours_beats_every_paper_model_on_every_metric'] else 'no'}**"
                  + (f" (not better: {', '.join(lost)})." if lost else "."))
     if "tcn" in R and R["tcn"].get("valid_rmse_by_inputs"):
-        res = ((R["tcn"].get("hparams") or {}).get("member_hparams") or {}).get("residual_input")
+        mh = (R["tcn"].get("hparams") or {}).get("member_hparams") or {}
+        res, dw = mh.get("residual_input"), float(mh.get("diff_loss_weight") or 0.0)
         L.append(f"- Ours uses the **{R['tcn']['inputs']}** input set, chosen on the validation recordings (RMSE "
                  + ", ".join(f"{k} {v:.3f} N" for k, v in R["tcn"]["valid_rmse_by_inputs"].items()) + ")"
-                 + (f", as a correction to {res} (estimate = {res} + the TCN's output)." if res else "."))
+                 + (f", as a correction to {res} (estimate = {res} + the TCN's output)" if res else "")
+                 + (f"; trained with derivative matching (loss MSE + {dw:g} x the MSE of the {mh.get('diff_loss_lag')}"
+                    "-sample differences: Sobolev training, Czarnecki et al. 2017)." if dw else "."))
     if "tcn" in R and R["tcn"].get("members"):
         L.append(f"- The ensemble's {len(R['tcn']['members'])} members alone (training seeds "
                  + ", ".join(str(mm["seed"]) for mm in R["tcn"]["members"]) + "): RMSE "
