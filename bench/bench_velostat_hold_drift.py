@@ -138,7 +138,9 @@ def main() -> None:
              "literal_unit": [lit.predict(s) for s in va]}
     out: dict = {"run": str(run), "mode": m["mode"], "seed": a.seed, "split": "valid", "ours_inputs": inp,
                  "receptive_field_s": tcn.context / rate, "n_valid_recordings": len(va), "models": {},
-                 "ours_residual_input": tcn.members[0].hparams.get("residual_input")}
+                 "ours_residual_input": tcn.members[0].hparams.get("residual_input"),
+                 "ours_diff_loss": [float(tcn.members[0].hparams.get("diff_loss_weight") or 0.0),
+                                    int(tcn.members[0].hparams.get("diff_loss_lag") or 0)]}
     for k, pr in P.items():
         rows = []
         traj = {f"{lo:g}-{hi:g}": [] for lo, hi in AGES_S}
@@ -196,8 +198,10 @@ def main() -> None:
         old = json.loads(prev.read_text())
         if old.get("variants"):
             out["variants"] = old["variants"]
-            out["variants_from"] = {"run": old.get("run"), "git_commit": old.get("machine", {}).get("git_commit"),
-                                    "ours_inputs": old.get("ours_inputs")}
+            # where they were tried: the old file's own record of it if it already carried them over
+            out["variants_from"] = old.get("variants_from") or {
+                "run": old.get("run"), "git_commit": old.get("machine", {}).get("git_commit"),
+                "ours_inputs": old.get("ours_inputs")}
     out["machine"] = {"host_platform": platform.platform(), "date_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
                       "git_commit": subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
                                                    text=True).stdout.strip()}

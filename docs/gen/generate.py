@@ -1183,8 +1183,10 @@ def velostat_hold_drift() -> str:
     if not d:
         return ""
     res = d.get("ours_residual_input")
+    dw, dk = d.get("ours_diff_loss") or (0.0, 0)
     labels = {"ours": f"ours ({d['ours_inputs']} inputs{f', a correction to {res}' if res else ''}, "
-                      f"{num(d['receptive_field_s'])} s receptive field)",
+                      f"{num(d['receptive_field_s'])} s receptive field"
+                      f"{f', derivative matching {dw:g} x {dk}-sample differences' if dw else ''})",
               "ours_ideal_readout": "ours, the same recordings through an ideal readout (true R)",
               "ours_member0": "ours' first member alone", "paper_unit": "Creep comp. + BP (unit one-hot + ln R)",
               "literal_unit": "Creep comp. + BP, paper's literal inputs (unit index + R ohm)"}
