@@ -595,7 +595,7 @@ def fit_tcn_group(members: list[TCNCompensator], zdata: list[tuple], seeds: list
     from learn.train import seeded
 
     trs, vas, cfgs = [], [], []
-    diff = {m.diff_loss() for m in members}
+    diff = {(w, k if w else 10) for w, k in (m.diff_loss() for m in members)}  # weight 0: the lag plays no part
     if len(diff) != 1:
         raise ValueError(f"fit_tcn_group: the members must share diff_loss_weight and diff_loss_lag, got {sorted(diff)}")
     for m, (zx, zy, zv), s in zip(members, zdata, seeds):
