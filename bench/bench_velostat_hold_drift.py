@@ -17,6 +17,11 @@ Session 12's adoption rule (CHANGELOG "velostat, session 12"), from one file per
     PYTHONPATH=. python bench/bench_velostat_hold_drift.py --rule residual bench/results/velostat-residual-seed{0,1,2}.json
 writes bench/results/velostat-residual-rule.json: per seed today's default and the candidate (validation RMSE, hold
 drift), the paired differences' means and standard errors, and whether the rule adopts.
+
+Session 13's candidate (CHANGELOG "velostat, session 13"): --variants sobolev (derivative matching, the TCN's
+diff_loss_weight 1 / diff_loss_lag 10 samples, today's residual kept) -> bench/results/velostat-sobolev-seedS.json,
+then --rule sobolev -> bench/results/velostat-sobolev-rule.json. A variant without a "residual" key keeps the
+experiment's default (Mode.tcn_residual).
 """
 
 from __future__ import annotations
@@ -36,7 +41,11 @@ import torch
 VARIANTS = {"d128c128": {"dilations": [1, 2, 4, 8, 16, 32, 64, 128], "chunk": 128},
             "d128c256": {"dilations": [1, 2, 4, 8, 16, 32, 64, 128], "chunk": 256},
             # session 12's candidate: the input sets holding the compensated chain's force learn a correction to it
-            "residual": {"residual": "bp_comp_force_n"}}
+            "residual": {"residual": "bp_comp_force_n"},
+            # session 13's candidate: derivative matching (Sobolev training; Czarnecki et al., NeurIPS 2017): loss
+            # MSE + 1.0 * MSE of the 10-sample (1 s at 10 Hz: the hold drift's scale) differences, both fixed a
+            # priori (# estimate: not tuned); the residual on the compensated chain as today's default
+            "sobolev": {"diff_loss_weight": 1.0, "diff_loss_lag": 10}}
 # (every input set is trained: those without the residual channel as the run trained them, same seeds)
 AGES_S = ((0.0, 25.0), (25.0, 60.0), (60.0, float("inf")))
 FORCES_N = ((0.0, 3.0), (3.0, 8.0), (8.0, 16.0))
@@ -54,9 +63,9 @@ def rule(variant: str, files: list[str], out: str) -> dict:
                                "candidate": {"inputs": v["picked"], "valid_rmse": c["valid_rmse"],
                                              "drift_mean": c["drift_mean"], "drift_signed_mean": c["drift_signed_mean"]},
                                "file": f}
-    from learn.experiments.velostat import TCN_INPUTS
+    from learn.experiments.velostat import MODES, TCN_INPUTS
 
-    ch = VARIANTS[variant].get("residual")
+    ch = VARIANTS[variant].get("residual", MODES["quick"].tcn_residual)
     res: dict = {"variant": variant, "split": "valid", "mode": "quick", "seeds": per, "differences": {},
                  "residual_input_sets": [v for v, names in TCN_INPUTS.items() if ch in names]}
     ok = {}
@@ -129,7 +138,9 @@ def main() -> None:
              "literal_unit": [lit.predict(s) for s in va]}
     out: dict = {"run": str(run), "mode": m["mode"], "seed": a.seed, "split": "valid", "ours_inputs": inp,
                  "receptive_field_s": tcn.context / rate, "n_valid_recordings": len(va), "models": {},
-                 "ours_residual_input": tcn.members[0].hparams.get("residual_input")}
+                 "ours_residual_input": tcn.members[0].hparams.get("residual_input"),
+                 "ours_diff_loss": [float(tcn.members[0].hparams.get("diff_loss_weight") or 0.0),
+                                    int(tcn.members[0].hparams.get("diff_loss_lag") or 0)]}
     for k, pr in P.items():
         rows = []
         traj = {f"{lo:g}-{hi:g}": [] for lo, hi in AGES_S}
@@ -166,7 +177,7 @@ def main() -> None:
         out["variants"] = {}
         for name in a.variants.split(","):
             hp = {**md.tcn, **VARIANTS[name]}
-            residual = hp.pop("residual", None)
+            residual = hp.pop("residual", md.tcn_residual)  # none given: the experiment's default
             # every input set, as the experiment trains them (those without the residual channel as they are)
             ens, secs = V._fit_tcn_batched(F, seed=a.seed, n_members=md.tcn_members, member_hparams=hp,
                                            residual=residual)
@@ -178,7 +189,8 @@ def main() -> None:
                 res[v] = {"valid_rmse": M.rmse(yv, np.concatenate(pv)), "drift_mean": h["drift_mean"],
                           "drift_signed_mean": h["drift_signed_mean"], "epochs": [mm.history["epochs"] for mm in e.members]}
             pick = min(res, key=lambda v: res[v]["valid_rmse"])
-            out["variants"][name] = {"hparams": VARIANTS[name], "receptive_field_s": ens[pick].context / rate,
+            out["variants"][name] = {"hparams": VARIANTS[name], "residual_input": residual,
+                                     "receptive_field_s": ens[pick].context / rate,
                                      "fit_seconds": secs, "by_inputs": res, "picked": pick}
             print(name, json.dumps(out["variants"][name]), flush=True)
     prev = Path(a.out)
@@ -186,8 +198,10 @@ def main() -> None:
         old = json.loads(prev.read_text())
         if old.get("variants"):
             out["variants"] = old["variants"]
-            out["variants_from"] = {"run": old.get("run"), "git_commit": old.get("machine", {}).get("git_commit"),
-                                    "ours_inputs": old.get("ours_inputs")}
+            # where they were tried: the old file's own record of it if it already carried them over
+            out["variants_from"] = old.get("variants_from") or {
+                "run": old.get("run"), "git_commit": old.get("machine", {}).get("git_commit"),
+                "ours_inputs": old.get("ours_inputs")}
     out["machine"] = {"host_platform": platform.platform(), "date_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
                       "git_commit": subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
                                                    text=True).stdout.strip()}

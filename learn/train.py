@@ -173,6 +173,7 @@ def train_model(
     keep_initial: bool = False,
     penalty: Callable[[], torch.Tensor] | None = None,
     on_epoch: Callable[[int, nn.Module], None] | None = None,
+    loss_fn: Callable[..., torch.Tensor] | None = None,
 ) -> TrainHistory:
     """Train ``net`` so that ``net(x) ~ y`` in MSE; returns the history; leaves the best weights loaded.
 
@@ -183,6 +184,10 @@ def train_model(
     the first epoch's weights.
     ``penalty``: a term added to each batch's training loss (e.g. L2-SP's pull toward the pre-trained weights,
     learn.finetune); the validation loss that stops early stays the plain MSE.
+    ``loss_fn``: the fit criterion in place of the MSE, ``loss_fn(estimate, target)`` the batch's mean and
+    ``loss_fn(estimate, target, reduction="sum")`` a sum whose mean per target element is that mean (`evaluate`);
+    it is the training loss and the validation loss that stops early (e.g. the TCN's derivative matching,
+    learn.models.tcn.diff_matched_mse). None: the MSE, as before.
     """
     from rich.console import Console
     from rich.progress import (
@@ -204,7 +209,7 @@ def train_model(
     best_state = copy.deepcopy(net.state_dict())
     bad = 0
     if keep_initial and valid is not None:
-        hist.best_loss, hist.best_epoch = evaluate(net, *valid), -1
+        hist.best_loss, hist.best_epoch = evaluate(net, *valid, loss_fn=loss_fn), -1
     if on_epoch is not None:
         _probe(on_epoch, -1, net)
     t0 = time.perf_counter()
@@ -219,7 +224,7 @@ def train_model(
                 idx = idx.to(dev)
                 xb, yb = xt[idx], yt[idx]
                 opt.zero_grad(set_to_none=True)
-                loss = nn.functional.mse_loss(net(xb), yb)
+                loss = nn.functional.mse_loss(net(xb), yb) if loss_fn is None else loss_fn(net(xb), yb)
                 (loss + penalty() if penalty is not None else loss).backward()
                 if cfg.grad_clip:
                     nn.utils.clip_grad_norm_(net.parameters(), cfg.grad_clip)
@@ -227,7 +232,7 @@ def train_model(
                 tot += float(loss.detach()) * len(idx)
                 n += len(idx)
             hist.train_loss.append(tot / max(n, 1))
-            vl = evaluate(net, *valid) if valid is not None else hist.train_loss[-1]
+            vl = evaluate(net, *valid, loss_fn=loss_fn) if valid is not None else hist.train_loss[-1]
             hist.valid_loss.append(vl)
             if on_epoch is not None:
                 _probe(on_epoch, epoch, net)

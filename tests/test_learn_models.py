@@ -362,3 +362,85 @@ def test_tcn_residual_input_corrects_a_static_calibration(tmp_path):
         make_model("tcn", **hp).fit(xs, ys, inputs=["r", "f_other_n"])
     with pytest.raises(ValueError, match="one target"):
         make_model("tcn", **hp).fit(xs, [np.column_stack([y, y]) for y in ys], inputs=names)
+
+
+def test_tcn_diff_loss_hand_computed():
+    """diff_matched_mse on a hand-computable chunk: e = pred - y = -[0, 1, 3, 6] (one chunk of 4 outputs), lag 2:
+    levels (0 + 1 + 9 + 36) / 4 = 11.5, differences e_2 - e_0 = -3, e_3 - e_1 = -5 -> (9 + 25) / 2 = 17; a level
+    offset has no difference term, a ramp e_t = a t has (a k)^2; the sum form / numel is the mean form."""
+    from learn.models.tcn import _diffs, diff_matched_mse
+
+    y = torch.tensor([0.0, 1.0, 3.0, 6.0]).reshape(1, 4, 1)
+    p = torch.zeros_like(y)
+    assert float(diff_matched_mse(p, y, 1.0, 2)) == pytest.approx(11.5 + 17.0)
+    assert float(diff_matched_mse(p, y, 0.5, 2)) == pytest.approx(11.5 + 8.5)
+    assert float(diff_matched_mse(p, y, 0.5, 2, reduction="sum")) / 4 == pytest.approx(11.5 + 8.5)
+    assert float(diff_matched_mse(y + 2.0, y, 1.0, 2)) == pytest.approx(4.0)  # offset: levels only
+    t = torch.arange(8.0).reshape(1, 8, 1)
+    assert float(diff_matched_mse(0.5 * t, 0 * t, 1.0, 3) - (0.25 * t * t).mean()) == pytest.approx(1.5**2)
+    np.testing.assert_array_equal(_diffs(-y.transpose(1, 2), 2).numpy().ravel(), [-3.0, -5.0])  # [.., L] layout
+    with pytest.raises(ValueError, match="diff_loss_lag"):
+        diff_matched_mse(p, y, 1.0, 4)
+    with pytest.raises(ValueError, match="diff_loss_weight"):
+        make_model("tcn", diff_loss_weight=-1.0).diff_loss()
+
+
+def test_tcn_diff_loss_trains_on_chunks_and_batches_equal():
+    """Derivative matching in training: weight 0 is today's training bit for bit (losses and weights equal to
+    train_model's plain MSE on the same net and examples, whatever the lag); at lr 0 the first epoch's training and
+    validation losses equal mean(e^2) + w mean((D_k e)^2) computed by hand in numpy over every chunk's outputs
+    (differences inside a chunk only); the batched group equals the members trained one after another with the
+    new loss (same epochs and best epoch, training and validation losses within 1e-6, estimates within 1e-5;
+    measured ~1e-7, 3e-7: float summation order, which grows with epochs at a larger learning rate)."""
+    from learn.models.ensemble import fit_ensembles
+    from learn.train import seeded
+
+    sp = stratified_split(synth(), "frequency_hz", 0, (0.6, 0.1, 0.3))
+    tr, va, te = sp["train"], sp["valid"], sp["test"]
+    xs, ys, vx, vy = [s.x for s in tr], [s.y for s in tr], [s.x for s in va], [s.y for s in va]
+    hp = {"max_epochs": 3, "patience": 5, "channels": 8, "dilations": [1, 2, 4, 8], "lr": 2e-2, "chunk": 32}
+    # weight 0: the plain MSE loop, bit for bit
+    m0 = make_model("tcn", **hp, diff_loss_weight=0.0, diff_loss_lag=7).fit(xs, ys, valid=(vx, vy), seed=3)
+    ref = make_model("tcn", **hp)
+    zx, zy, zv = ref.fit_setup(xs, ys, (vx, vy))
+    with seeded(3):
+        ref.net = ref._build()
+    h = train_model(ref.net, ref._examples(zx, zy, True), ref._examples(*zv, False), ref.train_config(3), progress=False)
+    assert m0.history["train_loss"] == h.train_loss and m0.history["valid_loss"] == h.valid_loss
+    for name, t in ref.net.state_dict().items():
+        assert torch.equal(t, m0.net.state_dict()[name])
+    # lr 0: the losses of the initial net, by hand
+    w, k = 0.7, 5
+    hz = {**hp, "lr": 0.0, "max_epochs": 1, "diff_loss_weight": w, "diff_loss_lag": k}
+    m = make_model("tcn", **hz).fit(xs, ys, valid=(vx, vy), seed=3)
+    tx, ty = m._examples(*m.fit_setup(xs, ys)[:2], True)
+    ex, ey = m._examples(*zv, False)
+    with torch.no_grad():
+        def by_hand(x, y):
+            e = (m.net(x) - y).double().numpy()  # [chunks, L, 1]
+            d = e[:, k:] - e[:, :-k]
+            return float((e**2).mean() + w * (d**2).mean())
+        assert m.history["valid_loss"][0] == pytest.approx(by_hand(ex, ey), rel=1e-5)
+        assert m.history["train_loss"][0] == pytest.approx(by_hand(tx, ty), rel=1e-5)  # every batch 16 chunks
+    # batched = one after another, with the new loss (two input sets: 1 and 2 channels)
+    hd = {**hp, "max_epochs": 4, "patience": 1, "lr": 5e-3, "diff_loss_weight": 1.0, "diff_loss_lag": 10}
+    two = lambda x: np.column_stack([x, np.log(x)])
+    data = {"one": (xs, ys, (vx, vy)), "two": ([two(x) for x in xs], ys, ([two(x) for x in vx], vy))}
+    seq = {k2: make_model("ensemble", member="tcn", n_members=2, member_hparams=hd).fit(*d[:2], valid=d[2], seed=3)
+           for k2, d in data.items()}
+    bat = {k2: make_model("ensemble", member="tcn", n_members=2, member_hparams=hd, batched=True) for k2 in data}
+    fit_ensembles([(bat[k2], {"xs": d[0], "ys": d[1], "valid": d[2], "seed": 3}) for k2, d in data.items()])
+    for k2, f in (("one", lambda x: x), ("two", two)):
+        for a, b in zip(seq[k2].members, bat[k2].members):
+            assert (a.history["epochs"], a.history["best_epoch"]) == (b.history["epochs"], b.history["best_epoch"])
+            np.testing.assert_allclose(a.history["valid_loss"], b.history["valid_loss"], rtol=0, atol=1e-6)
+            np.testing.assert_allclose(a.history["train_loss"], b.history["train_loss"], rtol=0, atol=1e-6)
+        np.testing.assert_allclose(seq[k2].predict(f(te[0].x)), bat[k2].predict(f(te[0].x)), rtol=0, atol=1e-5)
+    # the derivative term changed the training (not the MSE path under another name)
+    plain = make_model("ensemble", member="tcn", n_members=2, member_hparams={**hd, "diff_loss_weight": 0.0}).fit(
+        *data["one"][:2], valid=data["one"][2], seed=3)
+    assert plain.members[0].history["valid_loss"][0] < seq["one"].members[0].history["valid_loss"][0]
+    with pytest.raises(ValueError, match="share diff_loss"):
+        mixed = [make_model("ensemble", member="tcn", n_members=1, member_hparams={**hd, "diff_loss_weight": v},
+                            batched=True) for v in (0.0, 1.0)]
+        fit_ensembles([(e, {"xs": xs, "ys": ys, "valid": (vx, vy), "seed": 3}) for e in mixed])

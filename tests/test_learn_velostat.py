@@ -268,13 +268,14 @@ def test_experiment_velostat_quick(quick_run):
     # and the A-E share < 1 N, and every chain on the worst hold error. Since session 12's residual default
     # (adopted on validation, quick seeds 0-2) ours picks the raw inputs at seed 0 (validation RMSE 1.141 N against
     # the residual sets' 1.245 / 1.275), which no longer beats raw_bp / paper_unit on RMSE nor every chain on the
-    # worst A-E point (velostat-quick.json; seed 0's calibrated ours did, 0.807 N)
+    # worst A-E point (velostat-quick.json; seed 0's calibrated ours did, 0.807 N); session 13's derivative matching
+    # (adopted on validation) keeps the raw pick (1.151 against 1.249 / 1.260 N), test RMSE 1.158 N
     assert R["tcn"]["hparams"]["n_members"] == 3 and len(R["tcn"]["members"]) == 3
     V = m["findings"]["ours_vs_every_paper_model"]
     for met in ("mae", "rmse", "r2", "hold_max_err_mean", "hold_max_err_worst", "ae_below_1n"):
         assert V[met]["literal_unit"] and V[met]["literal_cluster"], met
     assert all(V["hold_max_err_worst"].values()), V["hold_max_err_worst"]
-    assert R["tcn"]["test"]["rmse"] < 0.65 * R["literal_unit"]["test"]["rmse"]  # 1.17 against 1.99 N
+    assert R["tcn"]["test"]["rmse"] < 0.65 * R["literal_unit"]["test"]["rmse"]  # 1.16 against 1.99 N
     # the literal cluster chain trained through sect. 4.2's 500 epochs meets the paper's test-RMSE bound (< 2 N)
     assert m["bp_search"]["literal_cluster"]["test_holds_rmse"] < 2.0
     assert m["findings"]["literal_input_crowding"]["share_10_15n"] < 0.05

@@ -1183,8 +1183,10 @@ def velostat_hold_drift() -> str:
     if not d:
         return ""
     res = d.get("ours_residual_input")
+    dw, dk = d.get("ours_diff_loss") or (0.0, 0)
     labels = {"ours": f"ours ({d['ours_inputs']} inputs{f', a correction to {res}' if res else ''}, "
-                      f"{num(d['receptive_field_s'])} s receptive field)",
+                      f"{num(d['receptive_field_s'])} s receptive field"
+                      f"{f', derivative matching {dw:g} x {dk}-sample differences' if dw else ''})",
               "ours_ideal_readout": "ours, the same recordings through an ideal readout (true R)",
               "ours_member0": "ours' first member alone", "paper_unit": "Creep comp. + BP (unit one-hot + ln R)",
               "literal_unit": "Creep comp. + BP, paper's literal inputs (unit index + R ohm)"}
@@ -1212,30 +1214,44 @@ def velostat_hold_drift() -> str:
     return "\n".join(L) + "\n"
 
 
+# each design candidate's rule file: its heading, what it changes, and whether today's default it is scored against
+# already held the residual on the compensated chain (session 12's adoption)
+DESIGN_RULES = {
+    "residual": ("ours as a residual on the compensated chain", "CHANGELOG \"velostat, session 12\"",
+                 "Input sets holding the compensated chain's force (calibrated, aged) learn a correction to it "
+                 "(estimate = bp_comp_force_n + the TCN's output); ours is the input set of the lowest validation "
+                 "RMSE, as always.", False),
+    "sobolev": ("derivative matching (Sobolev training)", "CHANGELOG \"velostat, session 13\"",
+                "Ours' loss becomes MSE(y_hat, y) + 1 * MSE(D_10 y_hat, D_10 y), D_10 x_t = x_t - x_{t-10} (1 s at "
+                "10 Hz; Czarnecki et al., NeurIPS 2017), differences inside each training chunk; weight and lag fixed "
+                "a priori. Today's residual on the compensated chain kept (calibrated, aged: marked); ours is the "
+                "input set of the lowest validation RMSE, as always.", True),
+}
+
+
 def velostat_design_rule(variant: str = "residual") -> str:
     """bench/results/velostat-<variant>-rule.json (bench_velostat_hold_drift.py --rule): a model-design candidate for
     ours against today's default on the validation recordings of quick seeds 0-2, and the adoption rule's outcome
-    (CHANGELOG "velostat, session 12")."""
+    (CHANGELOG "velostat, session 12" and "session 13"; DESIGN_RULES)."""
     d = load(f"velostat-{variant}-rule.json")
     if not d:
         return ""
+    title, where, what, default_residual = DESIGN_RULES[variant]
     rs = set(d.get("residual_input_sets", []))
     cell = lambda r, cand=False: (f"{r['inputs']}{' (residual)' if cand and r['inputs'] in rs else ''}: "
                                   f"{num(r['valid_rmse'])} / {num(r['drift_mean'], 2)} ({r['drift_signed_mean']:+.2f})")
     diff = d["differences"]
-    rows = [[f"seed {sd}", cell(p["default"]), cell(p["candidate"], True),
+    rows = [[f"seed {sd}", cell(p["default"], default_residual), cell(p["candidate"], True),
              f"{diff['valid_rmse']['per_seed'][i]:+.3f}", f"{diff['drift_mean']['per_seed'][i]:+.3f}"]
             for i, (sd, p) in enumerate(d["seeds"].items())]
     rows.append(["mean ± SE", "", "", f"{diff['valid_rmse']['mean']:+.3f} ± {num(diff['valid_rmse']['se'], 2)}",
                  f"{diff['drift_mean']['mean']:+.3f} ± {num(diff['drift_mean']['se'], 2)}"])
     c = d["conditions"]
     return "\n".join([
-        f"### Model design on the validation recordings: ours as a {variant} on the compensated chain "
-        f"(`bench/results/velostat-{variant}-rule.json`)\n",
-        "Input sets holding the compensated chain's force (calibrated, aged) learn a correction to it (estimate = "
-        "bp_comp_force_n + the TCN's output); ours is the input set of the lowest validation RMSE, as always. "
-        "Per quick seed, ours as picked: inputs: validation RMSE (N) / mean |hold drift| (N) (signed), and the paired "
-        "differences candidate - default. Rule (set before scoring): adopt if the drift falls by more than its "
+        f"### Model design on the validation recordings: {title} (`bench/results/velostat-{variant}-rule.json`; "
+        f"{where})\n",
+        what + " Per quick seed, ours as picked: inputs: validation RMSE (N) / mean |hold drift| (N) (signed), and the "
+        "paired differences candidate - default. Rule (set before scoring): adopt if the drift falls by more than its "
         "seed-to-seed standard error and the RMSE rises by at most its own.\n",
         table(["seed", "default", "candidate", "Δ valid RMSE (N)", "Δ hold drift (N)"], rows),
         f"Drift falls by more than its SE: {num(c['drift_falls_by_more_than_se'])}; RMSE rises by at most its SE: "
@@ -1302,6 +1318,7 @@ def experiment(family: str) -> str:
         out.append(velostat_units_slow())
         out.append(velostat_hold_drift())
         out.append(velostat_design_rule())
+        out.append(velostat_design_rule("sobolev"))
     if family == "ntype":  # issue 14's targets on the paper's task, one column per recorded run and seed
         import importlib
 

@@ -50,6 +50,10 @@ class TorchCompensator(Compensator):
         return TrainConfig(lr=h["lr"], batch_size=h["batch_size"], max_epochs=h["max_epochs"], patience=h["patience"],
                            grad_clip=h["grad_clip"], max_batches_per_epoch=h["max_batches_per_epoch"], seed=seed)
 
+    def loss_fn(self):
+        """The fit criterion handed to learn.train.train_model (None: the MSE)."""
+        return None
+
     def _prepare(self, zx: list[np.ndarray]) -> None:
         """After the net is built, before training: set anything the net computes from the training inputs."""
 
@@ -59,7 +63,8 @@ class TorchCompensator(Compensator):
         self._prepare(zx)
         tr = self._examples(zx, zy, True)
         va = self._examples(*zv, False) if zv is not None else None
-        hist = train_model(self.net, tr, va, self.train_config(seed), progress=progress, description=self.kind)
+        hist = train_model(self.net, tr, va, self.train_config(seed), progress=progress, description=self.kind,
+                           loss_fn=self.loss_fn())
         return {**hist.to_json(), "n_train_examples": len(tr[0]), "n_valid_examples": 0 if va is None else len(va[0]),
                 "n_parameters": sum(p.numel() for p in self.net.parameters())}
 

@@ -25,6 +25,13 @@ the normalised gap g_j = (p_j - u) / r_j in [-1, 1]: the branch direction (small
 turning points lie (large widths), with the wiping-out (return-point) memory a receptive field of finite
 length does not have. Computed on whole sequences before the convolutions (it is recursive) and stepped in
 stream(); the widths live in the checkpoint as the buffer ``play_r``.
+
+``diff_loss_weight`` (lambda, default 0: the plain MSE) and ``diff_loss_lag`` (k samples, default 10): derivative
+matching (Sobolev training; Czarnecki et al., NeurIPS 2017, "Sobolev Training for Neural Networks"): the loss is
+MSE(y_hat, y) + lambda * MSE(D_k y_hat, D_k y), D_k x_t = x_t - x_{t-k}, differences taken only between two outputs
+of one training chunk (consecutive samples of one episode, every one a valid causal output), L - k per chunk of L.
+Where the label is flat (a hold) this penalises any change of the estimate over k samples: drift, without a hold
+detector. Training and the validation loss that stops early both use it (`diff_matched_mse`).
 """
 
 from __future__ import annotations
@@ -40,7 +47,25 @@ from learn.models.base import Streamer, register
 from learn.models.neural import TRAIN_DEFAULTS, TorchCompensator, _f32
 from learn.train import TrainConfig, TrainHistory
 
-__all__ = ["CausalTCN", "TCNCompensator", "fit_tcn_group", "play_gaps", "train_tcn_group"]
+__all__ = ["CausalTCN", "TCNCompensator", "diff_matched_mse", "fit_tcn_group", "play_gaps", "train_tcn_group"]
+
+
+def diff_matched_mse(pred: torch.Tensor, y: torch.Tensor, weight: float, lag: int, *, dim: int = 1,
+                     reduction: str = "mean") -> torch.Tensor:
+    """Sobolev training's loss on chunks (Czarnecki et al. 2017, "Sobolev Training for Neural Networks"):
+    mean(e^2) + weight * mean((D_lag e)^2), e = pred - y, D_lag e_t = e_t - e_{t-lag} along ``dim`` (the time axis
+    of one chunk's outputs; D_lag pred - D_lag y = D_lag e). reduction "sum": a sum whose mean per element of e is
+    that mean (the difference term counted L / (L - lag) times per difference), as learn.train.evaluate divides."""
+    e = pred - y
+    L = e.shape[dim]
+    if not 1 <= lag < L:
+        raise ValueError(f"tcn: diff_loss_lag {lag} needs 1 <= lag < the chunk's {L} outputs")
+    de = e.narrow(dim, lag, L - lag) - e.narrow(dim, 0, L - lag)
+    if reduction == "mean":
+        return (e * e).mean() + weight * (de * de).mean()
+    if reduction == "sum":
+        return (e * e).sum() + weight * (de * de).sum() * (L / (L - lag))
+    raise ValueError(f"reduction must be mean or sum, got {reduction!r}")
 
 
 def play_gaps(u: np.ndarray, r: np.ndarray, p0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -140,8 +165,24 @@ class TCNCompensator(TorchCompensator):
 
     DEFAULTS = {**TRAIN_DEFAULTS, "channels": 32, "kernel": 3, "dilations": [1, 2, 4, 8, 16, 32],
                 "chunk": 64, "batch_size": 16, "lr": 2e-3, "log_inputs": None, "play_widths": None,
-                "residual_input": None}
+                "residual_input": None, "diff_loss_weight": 0.0, "diff_loss_lag": 10}
     temporal = True
+
+    # ``diff_loss_weight`` / ``diff_loss_lag``: derivative matching (module docstring); weight 0 is the plain MSE
+    # (the very same code path as before). Lag 10 samples: 1 s at velostat's 10 Hz, the hold-drift metric's scale.
+
+    def diff_loss(self) -> tuple[float, int]:
+        """(weight, lag) of the derivative-matching term, checked."""
+        w, k = float(self.hparams["diff_loss_weight"]), int(self.hparams["diff_loss_lag"])
+        if not (np.isfinite(w) and w >= 0) or k < 1:
+            raise ValueError(f"tcn: diff_loss_weight must be >= 0 and diff_loss_lag >= 1, got {w}, {k}")
+        return w, k
+
+    def loss_fn(self):
+        w, k = self.diff_loss()
+        if w == 0:
+            return None
+        return lambda pred, y, reduction="mean": diff_matched_mse(pred, y, w, k, dim=1, reduction=reduction)
 
     # ``residual_input`` (an input channel's name, default none): the net learns a correction to that input
     # (a static calibration's estimate in the targets' unit, e.g. the compensated paper chain's force): it trains
@@ -316,9 +357,17 @@ def _layers(net: CausalTCN) -> list[tuple[nn.Parameter, int]]:
     return out + [(net.out.weight, -1), (net.out.bias, -1), (net.skip.weight, 1), (net.skip.bias, -1)]
 
 
+def _diffs(e: torch.Tensor, lag: int) -> torch.Tensor:
+    """e [..., L] -> e_t - e_{t-lag} [..., L - lag] along the last (time) axis of a chunk."""
+    L = e.shape[-1]
+    if not 1 <= lag < L:
+        raise ValueError(f"tcn: diff_loss_lag {lag} needs 1 <= lag < the chunk's {L} outputs")
+    return e[..., lag:] - e[..., : L - lag]
+
+
 def train_tcn_group(nets: list[CausalTCN], trains: list[tuple[torch.Tensor, torch.Tensor]],
                     valids: list[tuple[torch.Tensor, torch.Tensor] | None], cfgs: list[TrainConfig],
-                    device: str | None = None) -> list[TrainHistory]:
+                    device: str | None = None, diff_loss: tuple[float, int] = (0.0, 10)) -> list[TrainHistory]:
     """Train G TCNs of one architecture (their input channels may differ) as ONE network: each layer a grouped
     convolution over the members (groups = G), every member's weights in one flat buffer, so a step is one forward,
     one backward and one Adam update for all. Member g keeps what `learn.train.train_model` gives it alone: its
@@ -328,8 +377,10 @@ def train_tcn_group(nets: list[CausalTCN], trains: list[tuple[torch.Tensor, torc
     group). The members must share the number of training examples and every TrainConfig field but the seed (an
     ensemble's members on the same episodes). Equal to training them one after another up to float summation order
     (tests/test_learn_models.py). Inputs narrower than the widest member are padded with zero channels whose
-    weights start and stay at zero (zero input: zero gradient, zero Adam step). Leaves each net on the CPU with its
-    best weights; returns each member's TrainHistory (seconds: the group's wall time)."""
+    weights start and stay at zero (zero input: zero gradient, zero Adam step). ``diff_loss`` (weight, lag): every
+    member's loss (training and validation) is `diff_matched_mse` on its own outputs, shared by the members; weight
+    0 is the MSE as before. Leaves each net on the CPU with its best weights; returns each member's TrainHistory
+    (seconds: the group's wall time)."""
     from learn.train import current_device, resolve_device
 
     G = len(nets)
@@ -349,6 +400,7 @@ def train_tcn_group(nets: list[CausalTCN], trains: list[tuple[torch.Tensor, torc
     dev = torch.device(resolve_device(c0.device) if c0.device is not None else current_device())
     k, dil, n_out = nets[0].kernel, nets[0].dilations, nets[0].out.out_channels
     rf = nets[0].rf
+    dw, dk = float(diff_loss[0]), int(diff_loss[1])
     cin = [n.inp.in_channels for n in nets]
     cmax = max(cin)
 
@@ -451,7 +503,12 @@ def train_tcn_group(nets: list[CausalTCN], trains: list[tuple[torch.Tensor, torc
             idx = torch.stack([b[i] for b in batches]).to(dev)
             xb, yb = gather(Xt, Yt, uid, idx)
             flat.requires_grad_(True)
-            lossg = ((forward(flat, n, xb) - yb) ** 2).mean((0, 2, 3))
+            if dw:  # derivative matching: each member's own mean(e^2) + dw * mean((D_dk e)^2) along its chunks
+                e = forward(flat, n, xb) - yb
+                de = _diffs(e, dk)
+                lossg = (e * e).mean((0, 2, 3)) + dw * (de * de).mean((0, 2, 3))
+            else:
+                lossg = ((forward(flat, n, xb) - yb) ** 2).mean((0, 2, 3))
             (g,) = torch.autograd.grad(lossg.sum(), flat)
             flat.requires_grad_(False)
             with torch.no_grad():
@@ -471,13 +528,23 @@ def train_tcn_group(nets: list[CausalTCN], trains: list[tuple[torch.Tensor, torc
         if has_valid[0]:
             with torch.no_grad():
                 sq = torch.zeros(n, device=dev, dtype=torch.float64)
+                sqd = torch.zeros(n, device=dev, dtype=torch.float64)
                 nv = len(Xv[0])
                 allv = torch.arange(nv, device=dev)
                 for a in range(0, nv, 1024):
                     j = allv[a : a + 1024].expand(n, -1)
                     xb, yb = gather(Xv, Yv, uid_v, j)
-                    sq += ((forward(flat, n, xb) - yb) ** 2).sum((0, 2, 3)).double()
-                vl = (sq / (nv * Yv.shape[2] * Yv.shape[3])).cpu().tolist()
+                    if dw:
+                        e = forward(flat, n, xb) - yb
+                        de = _diffs(e, dk)
+                        sq += (e * e).sum((0, 2, 3)).double()
+                        sqd += (de * de).sum((0, 2, 3)).double()
+                    else:
+                        sq += ((forward(flat, n, xb) - yb) ** 2).sum((0, 2, 3)).double()
+                vl = sq / (nv * Yv.shape[2] * Yv.shape[3])
+                if dw:
+                    vl = vl + dw * sqd / (nv * Yv.shape[2] * (Yv.shape[3] - dk))
+                vl = vl.cpu().tolist()
         else:
             vl = tl
         keep = []
@@ -528,6 +595,9 @@ def fit_tcn_group(members: list[TCNCompensator], zdata: list[tuple], seeds: list
     from learn.train import seeded
 
     trs, vas, cfgs = [], [], []
+    diff = {(w, k if w else 10) for w, k in (m.diff_loss() for m in members)}  # weight 0: the lag plays no part
+    if len(diff) != 1:
+        raise ValueError(f"fit_tcn_group: the members must share diff_loss_weight and diff_loss_lag, got {sorted(diff)}")
     for m, (zx, zy, zv), s in zip(members, zdata, seeds):
         with seeded(s):
             m.net = m._build()
@@ -535,7 +605,7 @@ def fit_tcn_group(members: list[TCNCompensator], zdata: list[tuple], seeds: list
         trs.append(m._examples(zx, zy, True))
         vas.append(m._examples(*zv, False) if zv is not None else None)
         cfgs.append(m.train_config(s))
-    hists = train_tcn_group([m.net for m in members], trs, vas, cfgs)
+    hists = train_tcn_group([m.net for m in members], trs, vas, cfgs, diff_loss=diff.pop())
     for m, h, tr, va, s in zip(members, hists, trs, vas, seeds):
         m.history = {**h.to_json(), "n_train_examples": len(tr[0]), "n_valid_examples": 0 if va is None else len(va[0]),
                      "n_parameters": sum(p.numel() for p in m.net.parameters()), "batched_members": len(members)}
