@@ -304,9 +304,11 @@ def test_batched_tcn_members_equal_sequential_training():
 
 
 @pytest.mark.gpu
-def test_batched_tcn_members_on_cuda_match_sequential():
+@pytest.mark.parametrize("diff_loss_weight", [0.0, 1.0])
+def test_batched_tcn_members_on_cuda_match_sequential(diff_loss_weight):
     """On a CUDA device the batched members (grouped convolutions) follow the members trained alone there (same
-    seeds): the same epoch count and estimates within 2e-3 N of a ~3 N force (TF32 convolutions sum differently)."""
+    seeds): the same epoch count and estimates within 2e-3 N of a ~3 N force (TF32 convolutions sum differently);
+    with the plain MSE and with derivative matching (velostat's default since session 13)."""
     if not torch.cuda.is_available():
         pytest.skip("no CUDA device")
     from learn.models.ensemble import fit_ensembles
@@ -314,7 +316,8 @@ def test_batched_tcn_members_on_cuda_match_sequential():
 
     sp = stratified_split(synth(), "frequency_hz", 0, (0.6, 0.1, 0.3))
     tr, va, te = sp["train"], sp["valid"], sp["test"]
-    hp = {"max_epochs": 4, "patience": 10, "channels": 8, "dilations": [1, 2, 4, 8]}
+    hp = {"max_epochs": 4, "patience": 10, "channels": 8, "dilations": [1, 2, 4, 8],
+          "diff_loss_weight": diff_loss_weight, "diff_loss_lag": 5}
     d = ([s.x for s in tr], [s.y for s in tr], ([s.x for s in va], [s.y for s in va]))
     with training_device("cuda"):
         seq = make_model("ensemble", member="tcn", n_members=2, member_hparams=hp).fit(*d[:2], valid=d[2], seed=3)
