@@ -27,10 +27,12 @@ from learn import finetune as FT
 from learn import metrics as M
 from learn.data import Sequence, dumps, load_sequences
 from learn.experiments.common import fmt, md_table
+from learn.train import single_thread
 
 __all__ = ["checkpoint_input_map", "pretrain", "run_finetune"]
 
 
+@single_thread
 def pretrain(data_dir: str | Path, out_dir: str | Path, *, kind: str = "tcn", hparams: dict[str, Any] | None = None,
              input_channel: str = "resistance_measured", target: str = "force", transform: str = "log",
              seed: int = 0, progress: bool = False) -> dict[str, Any]:
@@ -84,6 +86,7 @@ def _curve_sizes(n: int) -> list[int]:
     return sizes
 
 
+@single_thread
 def run_finetune(checkpoint: str | Path, recording: str | Path, out_dir: str | Path, *,
                  train_fraction: float | None = None, test_glob: str | None = None, policy: str = "head",
                  lr: float = 3e-4, max_epochs: int = 300, patience: int = 30, scratch_epochs: int = 300,
@@ -479,12 +482,14 @@ def two_point_calibration(p, run_seq, rate_hz: float) -> tuple[TwoPoint, dict[st
                  "known_load_n": float(np.median(f[hold])), "level_ln": level, "calibration_end_sample": int(sl.stop)}
 
 
+@single_thread
 def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, test_glob: str, budget: dict | None = None,
                  seed: int = 0, input_channel: str = "sensor", target: str = "force", model: str = "tcn",
                  progress: bool = False, log: Callable[[str], None] = lambda s: None,
                  command: str | None = None) -> dict[str, Any]:
     """fit -> randomized generation -> pre-training -> fine-tuning -> report; each step's artefact is written
-    whole (tmp + rename) and skipped when present with the same step config (state.json)."""
+    whole (tmp + rename) and skipped when present with the same step config (state.json). Torch trains on one
+    thread (`single_thread`), so the numbers do not depend on the machine's core count."""
     import fnmatch
     import json
 

@@ -28,7 +28,7 @@ from typing import Any
 import torch
 from torch import nn
 
-__all__ = ["TrainConfig", "TrainHistory", "current_device", "resolve_device", "seeded", "stopping_epoch", "train_model",
+__all__ = ["TrainConfig", "TrainHistory", "current_device", "resolve_device", "seeded", "single_thread", "stopping_epoch", "train_model",
            "training_device"]
 
 TRAIN_DEVICES = ("cpu", "cuda", "auto")  # what --train-device accepts (also "cuda:N")
@@ -107,6 +107,25 @@ class TrainHistory:
             "stopped_early": self.stopped_early, "seconds": self.seconds, "device": self.device,
             "train_loss": self.train_loss, "valid_loss": self.valid_loss,
         }
+
+
+def single_thread(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """Run ``fn`` with torch on one intra-op thread (restored afterwards). The nets here are small: two threads
+    contending for two busy cores were several times slower than one. And a float sum split over threads is summed
+    in another order, so a training run's numbers would depend on the machine's core count (a pre-trained net,
+    then everything fine-tuned from it); on one thread they are a function of the data and the seeds alone."""
+    import functools
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        old = torch.get_num_threads()
+        torch.set_num_threads(1)
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            torch.set_num_threads(old)
+
+    return wrapper
 
 
 @contextlib.contextmanager

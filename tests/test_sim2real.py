@@ -138,3 +138,42 @@ def test_static_blend_weight_recovers_the_mix_and_its_ends():
     np.testing.assert_allclose(StaticBlend(net, S, 1.0).predict(x), net.predict(x))
     np.testing.assert_allclose(StaticBlend(net, S, 0.0).predict(x), S.predict(x))
     np.testing.assert_allclose(StaticBlend(net, S, 0.7).predict(x)[:, 0], truth, atol=1e-12)
+
+
+class _Seen(Exception):
+    """Raised by the probe once it has recorded torch's thread count inside an entry point."""
+
+
+@pytest.mark.parametrize("entry", ["pretrain", "run_finetune", "run_sim2real"])
+def test_sim2real_entry_points_train_on_one_thread(entry, monkeypatch, tmp_path):
+    """pretrain, run_finetune and run_sim2real train with torch on one thread whatever the caller set (a float sum
+    split over threads sums in another order: a 2-core user's pre-trained net, and all fine-tuned from it, differed
+    from the records made on one thread, session 13), and the caller's setting comes back, on error too."""
+    import torch
+
+    import learn.sim2real as S
+
+    seen = []
+
+    def probe(*a, **k):
+        seen.append(torch.get_num_threads())
+        raise _Seen
+
+    monkeypatch.setattr(S, "load_sequences", probe)  # pretrain's first step
+    monkeypatch.setattr(S, "checkpoint_input_map", probe)  # run_finetune's, after reading the checkpoint's config
+    monkeypatch.setattr("learn.checkpoint.read_config", lambda p: {})
+    monkeypatch.setattr("learn.checkpoint.load_checkpoint", lambda p: None)
+    monkeypatch.setattr(S.FT, "_torch_only", lambda c: None)
+    monkeypatch.setattr(S, "_fit_key", probe)  # run_sim2real's, reading its (empty) state before the first step
+    args = {"pretrain": (tmp_path / "data", tmp_path / "out"), "run_finetune": (tmp_path / "ck", tmp_path / "r.h5", tmp_path / "o"),
+            "run_sim2real": ("velostat", tmp_path / "r.h5", tmp_path / "o")}[entry]
+    kw = {"test_glob": "*"} if entry == "run_sim2real" else {}
+    old = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        with pytest.raises(_Seen):
+            getattr(S, entry)(*args, **kw)
+        assert seen == [1]
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(old)

@@ -15,6 +15,7 @@ import torch
 from learn import metrics as M
 from learn.data import Sequence
 from learn.models.base import Compensator
+from learn.train import single_thread  # re-exported: the experiments' entry points use it
 
 HISTORY_CURVES = ("train_loss", "valid_loss")  # per-epoch curves: "loss_curve", not "training"
 
@@ -71,23 +72,6 @@ def raw_hysteresis(seqs: Seq[Sequence], drive: str) -> dict[str, float]:
     cyc = [h for h in cyc if np.isfinite(h)]
     return {"hyst_mean": float(np.mean(cyc)) if cyc else float("nan"),
             "hyst_worst": float(np.max(cyc)) if cyc else float("nan"), "n_cycles": len(cyc)}
-
-
-def single_thread(fn: Callable[..., Any]) -> Callable[..., Any]:
-    """Run ``fn`` with torch on one thread (restored afterwards): the nets here are small, and two threads
-    contending for two busy cores were several times slower than one."""
-    import functools
-
-    @functools.wraps(fn)
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        old = torch.get_num_threads()
-        torch.set_num_threads(1)
-        try:
-            return fn(*args, **kwargs)
-        finally:
-            torch.set_num_threads(old)
-
-    return wrapper
 
 
 def fit_model(
