@@ -301,9 +301,9 @@ def test_experiment_velostat_quick(quick_run):
                    "low at 13-15 N): R in ohm min-max scaled gives 10-15 N 1.6 % of the input, and a scalar unit index "
                    "cannot follow 36 curves whose levels jump along the index (roughness 0.67, std ln R 0.41 over the "
                    "units; the paper bounds neither); ours loses the unsigned hold drift to two compensated chains "
-                   "(noise-following; its signed drift is the smallest) and, with session 12's residual default "
-                   "(ours picks the raw inputs at seed 0 on validation), RMSE / mean hold error / A-E to raw_bp and "
-                   "paper_unit")
+                   "(noise-following; its signed drift is the smallest) and, with session 12's residual default and "
+                   "session 13's derivative matching (ours picks the raw inputs at seed 0 on validation), RMSE / mean "
+                   "hold error / A-E to raw_bp and paper_unit")
 def test_experiment_velostat_quick_open_targets(quick_run):
     m = quick_run
     F = m["findings"]
