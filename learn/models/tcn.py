@@ -58,9 +58,7 @@ def diff_matched_mse(pred: torch.Tensor, y: torch.Tensor, weight: float, lag: in
     that mean (the difference term counted L / (L - lag) times per difference), as learn.train.evaluate divides."""
     e = pred - y
     L = e.shape[dim]
-    if not 1 <= lag < L:
-        raise ValueError(f"tcn: diff_loss_lag {lag} needs 1 <= lag < the chunk's {L} outputs")
-    de = e.narrow(dim, lag, L - lag) - e.narrow(dim, 0, L - lag)
+    de = _diffs(e, lag, dim)
     if reduction == "mean":
         return (e * e).mean() + weight * (de * de).mean()
     if reduction == "sum":
@@ -357,12 +355,12 @@ def _layers(net: CausalTCN) -> list[tuple[nn.Parameter, int]]:
     return out + [(net.out.weight, -1), (net.out.bias, -1), (net.skip.weight, 1), (net.skip.bias, -1)]
 
 
-def _diffs(e: torch.Tensor, lag: int) -> torch.Tensor:
-    """e [..., L] -> e_t - e_{t-lag} [..., L - lag] along the last (time) axis of a chunk."""
-    L = e.shape[-1]
+def _diffs(e: torch.Tensor, lag: int, dim: int = -1) -> torch.Tensor:
+    """e_t - e_{t-lag} along ``dim`` (the time axis of one chunk's L outputs): L - lag differences."""
+    L = e.shape[dim]
     if not 1 <= lag < L:
         raise ValueError(f"tcn: diff_loss_lag {lag} needs 1 <= lag < the chunk's {L} outputs")
-    return e[..., lag:] - e[..., : L - lag]
+    return e.narrow(dim, lag, L - lag) - e.narrow(dim, 0, L - lag)
 
 
 def train_tcn_group(nets: list[CausalTCN], trains: list[tuple[torch.Tensor, torch.Tensor]],
