@@ -78,6 +78,26 @@ def test_parallel_shard_summaries_equal_the_serial_read(generated):
     assert [s["n_episodes"] for s in serial] == [2, 1]
 
 
+def test_generate_summary_uses_the_writers_stored_summaries(generated, tmp_path):
+    # the end of `generate` prints the summaries the writers stored (no dataset read back, every shard), equal to
+    # reading the data; a shard written without one (an older piezotwin) sends it back to reading
+    import shutil
+
+    import h5py
+
+    from piezotwin.common import _stored_summaries, _summaries
+    from sensors.data.recording import SUMMARY_ATTR
+
+    out, _ = generated
+    files = sorted(out.glob("shard-*.h5"))
+    assert _stored_summaries(files) == _summaries(files, parallel=False)
+    old = tmp_path / files[1].name
+    shutil.copy(files[1], old)
+    with h5py.File(old, "r+") as f:
+        del f.attrs[SUMMARY_ATTR]
+    assert _stored_summaries([files[0], old]) is None
+
+
 def test_generate_path_leaves_out_torch_learn_and_scipy_signal():
     # what `piezotwin generate` imports before its first episode on the GPU feed: the CLI, the engine choice,
     # the executors, the feed and the sensor chains; none of them may pull in torch, learn or scipy.signal

@@ -113,6 +113,41 @@ def test_round_trip(tmp_path, compression):
     )
 
 
+def test_stored_summary_equals_reading_the_data_and_stays_out_of_the_content_hash(tmp_path):
+    # the writer's summary (from the arrays it writes) is what reading every dataset gives, including a channel
+    # with NaN and inf (finite range only), one with no finite value, an integer and a 0-d channel; it is not part
+    # of the content hash (derived from the hashed data), so removing it leaves the hash as it was
+    rng = np.random.default_rng(3)
+    eps = {}
+    for k, n in enumerate((40, 7, 1)):
+        e = make_episode(rng, n=n)
+        pos = rng.normal(size=(n, 2))
+        pos[::3] = np.nan
+        pos[0, 0] = np.inf
+        e["position"] = Channel(pos, "m", ("time", "xy"))
+        e["dead"] = Channel(np.full(n, np.nan, np.float32), "V", ("time",))
+        eps[f"ep{k}"] = e
+    p = write_recording(tmp_path / "s.h5", eps, source="sim", config_json=CONFIG, root_seed=1, shard_index=0,
+                        sensor_attrs={"family": "cnt_pdms"})
+    with Recording(p) as r:
+        read = r.summary()
+        stored = r.summary(from_data=False)
+        assert rc.SUMMARY_ATTR in r.attrs
+        assert r.compute_content_sha256() == r.content_sha256
+    assert stored == read
+    assert read["channels"]["dead"]["min"] is None and read["channels"]["dead"]["max"] is None
+    finite = np.concatenate([e["position"].data.ravel() for e in eps.values()])
+    finite = finite[np.isfinite(finite)]
+    assert read["channels"]["position"]["max"] == float(finite.max())
+    assert read["n_samples"] == 48 and read["channels"]["gain"]["n_samples"] == 3
+    with h5py.File(p, "r+") as f:  # as written by an older piezotwin: no stored summary
+        h = f.attrs["content_sha256"]
+        del f.attrs[rc.SUMMARY_ATTR]
+    with Recording(p) as r:
+        assert r.compute_content_sha256() == h
+        assert r.summary(from_data=False) == read  # read from the data where none is stored
+
+
 def test_chunk_len_divides_when_possible():
     assert rc._chunk_len(3000, 900) == 1000  # 2.7 MB: <= 1 MiB (1165 frames), the longest that divides 3000
     assert rc._chunk_len(100, 900) == 100  # fits: the whole series

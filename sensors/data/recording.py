@@ -36,6 +36,13 @@ attributes, the sensor attributes, the MJCF and the root attributes except those
 code that wrote it (``VOLATILE_ATTRS``: created_utc, generator*, version_*). Two runs that make the same data
 have the same content hash even though their files differ (timestamps); `content_sha256` defines it,
 `Recording.compute_content_sha256` recomputes it from the file.
+
+Stored summary. The writer keeps what `Recording.summary` reports (per channel units, dims, dtype, frame shape,
+samples, finite min and max; episodes' samples and duration) as it adds episodes, from the arrays in memory, and
+stores it in the root attribute ``summary_json`` (left out of the content hash: it is derived from the hashed data).
+`Recording.summary(from_data=False)` returns it without reading the data (the end of `piezotwin generate`);
+`summary()` reads every dataset (`piezotwin inspect`, which also meets any damaged chunk). Files without it
+(written before) are read.
 """
 
 from __future__ import annotations
@@ -99,6 +106,7 @@ __all__ = [
     "Recording",
     "RecordingError",
     "RecordingWriter",
+    "SUMMARY_ATTR",
     "content_sha256",
     "generator_info",
     "read_recording_summary",
@@ -291,8 +299,10 @@ def _get_attrs(obj: h5py.HLObject) -> dict[str, Any]:
 
 # --------------------------------------------------------------------------- content hash
 
-# root attributes left out of the content hash: when and by which code/library versions a file was written
-VOLATILE_ATTRS = ("created_utc", "generator", "generator_version", "generator_commit", "content_sha256")
+# root attributes left out of the content hash: when and by which code/library versions a file was written, and
+# what the writer derived from the hashed data (the content hash itself, the channel ranges of SUMMARY_ATTR)
+SUMMARY_ATTR = "summary_json"
+VOLATILE_ATTRS = ("created_utc", "generator", "generator_version", "generator_commit", "content_sha256", SUMMARY_ATTR)
 _VOLATILE_PREFIX = "version_"
 
 
@@ -487,6 +497,73 @@ class _Template:
         self.file.close()
 
 
+class _SummaryAccumulator:
+    """Episodes' samples and duration and per channel units, dims, dtype, frame shape, samples and finite min /
+    max, accumulated episode by episode: the one code behind `Recording.summary` (reading the file) and the
+    writer's stored summary (from the arrays it writes), so the two agree."""
+
+    def __init__(self) -> None:
+        self.n_samples = 0
+        self.duration_s = 0.0
+        self.channels: dict[str, dict[str, Any]] = {}
+
+    def add_time(self, t: Any) -> None:
+        """The episode's ``time`` channel (an array or an h5py dataset): its samples and n * mean(dt)."""
+        if t.ndim >= 1:
+            n = t.shape[0]
+            self.n_samples += n
+            if n >= 2:
+                self.duration_s += float(t[n - 1] - t[0]) * n / (n - 1)
+
+    def add_channel(self, name: str, units: str, dim_names: tuple[str, ...], dtype: np.dtype, shape: tuple[int, ...],
+                    blocks: Iterator[np.ndarray]) -> None:
+        c = self.channels.setdefault(name, {
+            "units": units, "dim_names": tuple(dim_names), "dtype": str(dtype),
+            "frame_shape": tuple(shape[1:]) if len(shape) else (), "n_samples": 0, "min": math.inf, "max": -math.inf,
+        })
+        c["n_samples"] += shape[0] if len(shape) else 1
+        for block in blocks:
+            b = np.asarray(block)
+            if b.size and b.dtype.kind in "fc":
+                b = b.real
+                lo, hi = b.min(), b.max()  # the common case, all finite, without a masked copy
+                if not (np.isfinite(lo) and np.isfinite(hi)):
+                    b = b[np.isfinite(b)]
+            if b.size:
+                c["min"] = min(c["min"], b.min().item())
+                c["max"] = max(c["max"], b.max().item())
+
+    def add_episode(self, channels: Mapping[str, Channel]) -> None:
+        """One episode from memory, as the writer holds it."""
+        if "time" in channels:
+            self.add_time(channels["time"].data)
+        for name in sorted(channels):
+            ch = channels[name]
+            d = np.asarray(ch.data)
+            self.add_channel(name, ch.units, ch.dim_names, d.dtype, d.shape, iter((d,)))
+
+    def result(self) -> dict[str, Any]:
+        """{"n_samples", "duration_s", "channels"}: min / max None where a channel has no finite value."""
+        chans = {}
+        for name, c in self.channels.items():
+            c = dict(c)
+            if c["min"] == math.inf:
+                c["min"] = c["max"] = None
+            chans[name] = c
+        return {"n_samples": self.n_samples, "duration_s": self.duration_s, "channels": chans}
+
+    def to_json(self) -> str:
+        return json.dumps(self.result())
+
+
+def _summary_from_json(text: str) -> dict[str, Any]:
+    d = json.loads(text)
+    for c in d["channels"].values():
+        c["dim_names"] = tuple(c["dim_names"])
+        c["frame_shape"] = tuple(c["frame_shape"])
+    return d
+
+
 class RecordingWriter:
     """Write one recording episode by episode, atomically (what `write_recording` does in one call).
 
@@ -557,6 +634,7 @@ class RecordingWriter:
         self._fast = _fast
         self._layouts: set[tuple] = set()  # the episode layouts this writer has written through templates
         self._digests: dict[str, bytes] = {}
+        self._summary = _SummaryAccumulator()  # stored as SUMMARY_ATTR at the end
         self.content_sha256: str | None = None  # set when the file is complete
         self.n_episodes = 0
         self.tmp = self.path.with_name(self.path.name + ".tmp")
@@ -594,6 +672,7 @@ class RecordingWriter:
         self._digests[ep_id] = _episode_digest(
             ep_id, _decoded_attrs(encoded),
             {name: (ch.data, ch.units, ch.dim_names, ch.description) for name, ch in channels.items()})
+        self._summary.add_episode(channels)
         self.n_episodes += 1
 
     def _template(self, channels: Mapping[str, Channel], encoded: Mapping[str, tuple[Any, bool]],
@@ -638,6 +717,7 @@ class RecordingWriter:
             self.content_sha256 = content_sha256(_get_attrs(self._f), _get_attrs(self._f["sensor"]), self._mjcf,
                                                  self._digests)
             self._f.attrs["content_sha256"] = self.content_sha256
+            self._f.attrs[SUMMARY_ATTR] = self._summary.to_json()
             self._f.close()
             self._f = self._eps = None
             _fsync(self.tmp)
@@ -898,48 +978,28 @@ class Recording:
             yield ds[i : i + step]
 
     @_damage_is_error
-    def summary(self) -> dict[str, Any]:
+    def summary(self, from_data: bool = True) -> dict[str, Any]:
         """Episodes, total duration (s) and per channel units, dims, shapes, min and max.
 
         The duration of an episode is n * mean(dt) of its ``time`` channel (its span plus one
-        sample period), so n samples at f Hz last n/f seconds.
+        sample period), so n samples at f Hz last n/f seconds. from_data=False: the summary the writer stored
+        (SUMMARY_ATTR, equal to reading; no dataset is read), where the file has one.
         """
-        duration = 0.0
-        n_samples = 0
-        chans: dict[str, dict[str, Any]] = {}
-        for ep in self.episode_ids:
-            g = self._group(ep)
-            if "time" in g and g["time"].ndim >= 1:
-                t = g["time"]
-                n = t.shape[0]
-                n_samples += n
-                if n >= 2:
-                    duration += float(t[n - 1] - t[0]) * n / (n - 1)
-            for name in sorted(g.keys()):
-                ds = g[name]
-                c = chans.setdefault(
-                    name,
-                    {
-                        "units": self.units(ep, name),
-                        "dim_names": self.dim_names(ep, name),
-                        "dtype": str(ds.dtype),
-                        "frame_shape": tuple(ds.shape[1:]) if ds.ndim else (),
-                        "n_samples": 0,
-                        "min": math.inf,
-                        "max": -math.inf,
-                    },
-                )
-                c["n_samples"] += ds.shape[0] if ds.ndim else 1
-                for block in self._blocks(ds):
-                    b = np.asarray(block)
-                    if b.dtype.kind in "fc":
-                        b = b.real[np.isfinite(b.real)]
-                    if b.size:
-                        c["min"] = min(c["min"], b.min().item())
-                        c["max"] = max(c["max"], b.max().item())
-        for c in chans.values():
-            if c["min"] == math.inf:
-                c["min"] = c["max"] = None
+        stored = None if from_data else self.attrs.get(SUMMARY_ATTR)
+        if stored is not None:
+            d = _summary_from_json(stored)
+        else:
+            acc = _SummaryAccumulator()
+            for ep in self.episode_ids:
+                g = self._group(ep)
+                if "time" in g:
+                    acc.add_time(g["time"])
+                for name in sorted(g.keys()):
+                    ds = g[name]
+                    acc.add_channel(name, self.units(ep, name), self.dim_names(ep, name), ds.dtype, ds.shape,
+                                    self._blocks(ds))
+            d = acc.result()
+        n_samples, duration, chans = d["n_samples"], d["duration_s"], d["channels"]
         a = self.attrs
         return {
             "path": str(self.path),
@@ -958,6 +1018,6 @@ class Recording:
         }
 
 
-def read_recording_summary(path: str | os.PathLike) -> dict[str, Any]:
+def read_recording_summary(path: str | os.PathLike, from_data: bool = True) -> dict[str, Any]:
     with Recording(path) as rec:
-        return rec.summary()
+        return rec.summary(from_data=from_data)
