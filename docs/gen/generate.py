@@ -61,7 +61,8 @@ USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w
             "user-cli-h100-s12-ntype.json", "user-cli-h100-s12-fabric.json", "user-cli-h100-s12-fabric-b.json",
             "user-cli-h100-s12-velostat-b.json", "user-cli-h100-s12-velostat-ab-off1.json",
             "user-cli-h100-s12-velostat-ab-on1.json", "user-cli-h100-s12-velostat-ab-off2.json",
-            "user-cli-h100-s12-velostat-ab-on2.json", "user-cli-h100-s13-fabric.json", "user-cli-h100-s13-fabric-b.json"]
+            "user-cli-h100-s12-velostat-ab-on2.json", "user-cli-h100-s13-fabric.json", "user-cli-h100-s13-fabric-b.json",
+            "user-cli-h200-s14.json", "user-cli-h200-s14-fabric.json"]
 USER_CLI_STARTUP = [  # session 12: start-up and exit of small runs, the base tree (b833838) against the branch, one machine per pair
     ("user-cli-h100-s12-startup-base-ntype-1.json", "user-cli-h100-s12-startup-ntype-1.json"),
     ("user-cli-h100-s12-startup-base-cnt_pdms-1.json", "user-cli-h100-s12-startup-cnt_pdms-1.json"),
@@ -212,7 +213,8 @@ def bench_user_cli() -> str:
     if not rows:
         return ""
     d0 = load(USER_CLI[0]) or {}
-    out = [f"The plain CLI as a user types it on one {d0.get('gpu', '?')} ({d0.get('cpus', '?')} host cores), "
+    out = [f"The plain CLI as a user types it on one {d0.get('gpu', '?')} ({d0.get('cpus', '?')} host cores; an H200 "
+           "where the file's name says h200), "
            "`piezotwin generate <family> -o X --episodes N`, defaults unless the file's name says otherwise "
            "(`-w12`: `--workers 12`, `-lz4`: `--set generation.compression=lz4`, `-w8`: `--workers 8`; `-s6`: session 6's "
            "defaults, lz4 and up to 12 writers / worker processes; `-cold`: a fresh machine, Warp's kernel cache empty, "
@@ -233,7 +235,10 @@ def bench_user_cli() -> str:
            "warm-up run; `-s12-velostat-ab-off1`, `-on1`, `-off2`, `-on2`: the same code with the overlap off / on / off / "
            "on (`PIEZOTWIN_PACK_OVERLAP`), one after the other on a fifth machine after a 128-episode warm-up run; "
            "the overlap then left off); `-s13-fabric`, `-s13-fabric-b`: session 13 (the manifest built from the writers' "
-           "entries, no shard reopened), two machines, each after a 256-episode warm-up run; "
+           "entries, no shard reopened), two machines, each after a 256-episode warm-up run; `user-cli-h200-s14*.json`: "
+           "session 14's code (each shard's writer stores its summary, so the command's closing summary reads no data "
+           "back and covers every shard) on an NVIDIA H200 machine of 16 cores, after a small warm-up run per family, "
+           "with MuJoCo Warp stepping velostat's and fabric_1's worlds alone on the same machine; "
            "raw = a plain file of the same bytes "
            "on the same disk right after (issue 16's target: >= 50 % of it, or >= 1e6 samples/s):\n",
            table(["family", "episodes", "file", "engine (the CLI's line)", "s", "samples/s", "MB/s", "of raw MB/s"], rows)]
