@@ -26,6 +26,25 @@ def test_batched_controls_equal_the_per_episode_ones():
     np.testing.assert_array_equal(controls_batch(cfg, protos, t), _controls(cfg, protos, t))
 
 
+def test_stick_slip_path_kernel_matches_numpy():
+    """The path kernel of the C MuJoCo stage (one thread per episode and indenter walking its steps) equals the
+    numpy `stick_slip` on a path that sticks, slips past mu N, lifts off and re-contacts."""
+    from simulate.contact.press_stroke import stick_slip
+    from simulate.contact.stick_slip_kernels import stick_slip_path
+
+    rng = np.random.default_rng(5)
+    E, S, C, k_t, mu = 4, 400, 3, 1.3e4, 0.8
+    t = np.linspace(0.0, 1.0, S)
+    xy = (0.01 * rng.uniform(-1, 1, (E, 1, C, 2))
+          + 4e-4 * np.sin(2 * np.pi * t)[None, :, None, None] * rng.uniform(-1, 1, (E, 1, C, 2)))
+    normal = np.clip(rng.uniform(1.0, 5.0, (E, 1, C)) * np.sin(np.pi * 1.3 * t)[None, :, None], 0.0, None)
+    ref = stick_slip(xy, normal, k_t, mu)
+    mag = np.hypot(ref[..., 0], ref[..., 1])
+    assert (mag >= mu * normal * (1 - 1e-9))[normal > 0].any() and (mag < mu * normal * (1 - 1e-6)).any()  # slips, sticks
+    assert (ref[normal == 0] == 0).all() and (normal == 0).any()  # lifted off: no shear
+    np.testing.assert_allclose(stick_slip_path(xy, normal, k_t, mu), ref, rtol=1e-12, atol=1e-15)
+
+
 def test_stick_slip_kernel_matches_numpy():
     """The Warp kernel stepped along a path (stick, slip past mu N, lift-off and re-contact) equals `stick_slip`."""
     import warp as wp

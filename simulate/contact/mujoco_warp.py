@@ -20,6 +20,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from simulate.contact.stick_slip_kernels import stick_slip_update
+
 
 CHUNK_BYTES = 256 * 2**20  # device memory for one chunk of controls + recorded sensors
 CONTROL_THREADS = 4  # host threads making the next chunk's controls (32k episodes: ~6 s of numpy per batch)
@@ -199,27 +201,13 @@ def _stick_slip_step(sensordata: wp.array2d(dtype=wp.float32), per: int, k_t: wp
                      anchor: wp.array2d(dtype=wp.float64), force: wp.array2d(dtype=wp.float32)):
     """One physics step of `simulate.contact.press_stroke.stick_slip` for world w, indenter c (float64 state)."""
     w, c = wp.tid()
-    x = wp.float64(sensordata[w, c * per + 0])
-    y = wp.float64(sensordata[w, c * per + 1])
     cap = mu * wp.max(wp.float64(-sensordata[w, c * per + 6]), wp.float64(0.0))  # netforce z on the pad: -normal
-    ax = anchor[w, 2 * c + 0]
-    ay = anchor[w, 2 * c + 1]
-    if not (cap > wp.float64(0.0)):  # out of contact: the anchor follows the indenter
-        ax = x
-        ay = y
-    fx = k_t * (x - ax)
-    fy = k_t * (y - ay)
-    mag = wp.sqrt(fx * fx + fy * fy)
-    if mag > cap:  # slip: the force on the friction cone, the anchor dragged behind
-        sc = cap / mag
-        fx = fx * sc
-        fy = fy * sc
-        ax = x - fx / k_t
-        ay = y - fy / k_t
-    anchor[w, 2 * c + 0] = ax
-    anchor[w, 2 * c + 1] = ay
-    force[w, 2 * c + 0] = wp.float32(fx)
-    force[w, 2 * c + 1] = wp.float32(fy)
+    r = stick_slip_update(wp.float64(sensordata[w, c * per + 0]), wp.float64(sensordata[w, c * per + 1]), cap,
+                          anchor[w, 2 * c + 0], anchor[w, 2 * c + 1], k_t)
+    anchor[w, 2 * c + 0] = r[2]
+    anchor[w, 2 * c + 1] = r[3]
+    force[w, 2 * c + 0] = wp.float32(r[0])
+    force[w, 2 * c + 1] = wp.float32(r[1])
 
 
 @wp.kernel

@@ -32,6 +32,7 @@ from scenes.config import SceneConfig
 from sensors.base import LoadBatch
 from sensors.taxels import interval_coverage, sphere_overlap, taxel_area_m2, taxel_xy_m
 from simulate.contact.mjcf import SENSORS_PER_INDENTER, shear_stiffness_n_per_m
+from simulate.contact.stick_slip_kernels import stick_slip_path
 from simulate.protocols.indenter import (
     EpisodeProtocol,
     press_stroke_force,
@@ -68,7 +69,9 @@ def controls_batch(cfg: SceneConfig, protocols: list[EpisodeProtocol], t: np.nda
 
 
 def stick_slip(xy: np.ndarray, normal_n: np.ndarray, k_t: float, mu: float) -> np.ndarray:
-    """Coulomb stick-slip shear force (N) on the pad along a tangential path.
+    """Coulomb stick-slip shear force (N) on the pad along a tangential path: the numpy reference of the Warp
+    kernels (`simulate.contact.stick_slip_kernels`: the C MuJoCo path runs `stick_slip_path`, MuJoCo Warp a step
+    kernel after every device step).
 
     xy: (E, S, C, 2) indenter x/y at physics steps; normal_n: (E, S, C) normal force (N, >= 0).
     Returns (E, S, C, 2) tangential force on the pad (in the direction the indenter drags the surface).
@@ -162,7 +165,7 @@ def iter_press_stroke(cfg: SceneConfig, protocols: list[EpisodeProtocol], thread
         _, sd = mujoco.rollout.rollout(m, datas if threads > 1 else datas[0], states[a:b], ctrl[a:b], nstep=nstep)
         sd = np.concatenate([sens0[a:b, None], sd], axis=1).reshape(b - a, nstep + 1, C, per)
         normal = np.clip(-sd[..., 6], 0.0, None)  # netforce on the pad, z: compressive normal = -F_z
-        shear = stick_slip(sd[..., 0:2], normal, k_t, mu)
+        shear = stick_slip_path(sd[..., 0:2], normal, k_t, mu)  # the Warp kernel of `stick_slip`
         r = np.concatenate([[0], rows + 1])
         sdr = sd[:, r]
         pos[a:b], fn[a:b], ft[a:b], found[a:b] = sdr[..., 0:3], normal[:, r], shear[:, r], sdr[..., 3]
