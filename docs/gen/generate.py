@@ -62,7 +62,7 @@ USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w
             "user-cli-h100-s12-velostat-b.json", "user-cli-h100-s12-velostat-ab-off1.json",
             "user-cli-h100-s12-velostat-ab-on1.json", "user-cli-h100-s12-velostat-ab-off2.json",
             "user-cli-h100-s12-velostat-ab-on2.json", "user-cli-h100-s13-fabric.json", "user-cli-h100-s13-fabric-b.json",
-            "user-cli-h200-s14.json", "user-cli-h200-s14-fabric.json"]
+            "user-cli-h200-s14.json", "user-cli-h200-s14-fabric.json", "user-cli-h200-s14-ntype.json"]
 USER_CLI_STARTUP = [  # session 12: start-up and exit of small runs, the base tree (b833838) against the branch, one machine per pair
     ("user-cli-h100-s12-startup-base-ntype-1.json", "user-cli-h100-s12-startup-ntype-1.json"),
     ("user-cli-h100-s12-startup-base-cnt_pdms-1.json", "user-cli-h100-s12-startup-cnt_pdms-1.json"),
@@ -238,7 +238,10 @@ def bench_user_cli() -> str:
            "entries, no shard reopened), two machines, each after a 256-episode warm-up run; `user-cli-h200-s14*.json`: "
            "session 14's code (each shard's writer stores its summary, so the command's closing summary reads no data "
            "back and covers every shard) on an NVIDIA H200 machine of 16 cores, after a small warm-up run per family, "
-           "with MuJoCo Warp stepping velostat's and fabric_1's worlds alone on the same machine; "
+           "with MuJoCo Warp stepping velostat's and fabric_1's worlds alone on the same machine; `-s14-ntype`: the "
+           "final session-14 code (the stick-slip law one Warp function for both contact stages) on another fresh H200 "
+           "machine, right after `pytest -m gpu tests/test_press_stroke_mjw.py` instead of a warm-up run (its "
+           "driver's simulate stage 25.9 s against 16.6 s in `user-cli-h200-s14.json`: not an A/B); "
            "raw = a plain file of the same bytes "
            "on the same disk right after (issue 16's target: >= 50 % of it, or >= 1e6 samples/s):\n",
            table(["family", "episodes", "file", "engine (the CLI's line)", "s", "samples/s", "MB/s", "of raw MB/s"], rows)]
