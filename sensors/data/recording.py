@@ -1,6 +1,6 @@
 """The HDF5 recording format: one file per shard, same schema for simulated and real data.
 
-Layout (see DESIGN.md section 4)::
+Layout (docs/dataset.md)::
 
     /                      attrs: format, format_version, source, created_utc, generator,
                                   generator_version, generator_commit, config_json, config_sha256,

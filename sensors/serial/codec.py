@@ -1,6 +1,6 @@
 """Serial framings of tactile sensor boards: pure incremental decoders and the matching encoders.
 
-Three framings (DESIGN.md section 4):
+Three framings (docs/real-sensors.md):
 
 ``text``   ``value[,value...]\\n`` lines (commas, semicolons, tabs or spaces), ``\\r`` ignored; the usual
            Arduino output. No integrity check: a line that does not parse, or whose number of values
