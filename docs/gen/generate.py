@@ -74,6 +74,9 @@ FUSED_MATH = "fused-math-h100-s13.json"  # the fused kernel with exact against a
 GPU_PHYSICS = "gpu-pipeline-h100-physics.json"
 PHYSICS_PROFILE = "physics-profile-h100-s4.json"
 MULTI_GPU = "gpu-pipeline-h200x2.json"
+# the latest plain-CLI run of each family (issue 16's README table): `piezotwin generate FAMILY -o X --episodes N` with
+# defaults, one GPU machine, after a warm-up run (bench/bench_user_cli.py, bench/bench_mjw_alone.py)
+USER_CLI_LATEST = ["user-cli-h200-s14.json", "user-cli-h200-s14-fabric.json"]
 
 
 # ----------------------------------------------------------------------------------------------- formatting
@@ -1477,6 +1480,16 @@ def headline_rows() -> list[list[str]]:
                      + (", pad sum fused into the taxel kernel, default record)" if fz else ")"),
                      f"{num(fz['taxel_steps_per_s_chain'] if fz else tr['warp_cuda']['taxel_steps_per_s_chain'])} taxel-steps/s",
                      link(tname)])
+    for name in USER_CLI_LATEST:
+        d = load(name) or {}
+        for fam, r in d.get("runs", {}).items():
+            if "error" in r:
+                continue
+            alone = r.get("mjw_alone")
+            rows.append([f"`piezotwin generate {fam} -o X --episodes {r['episodes']}` as typed (defaults), one {d.get('gpu')}",
+                         f"{num(r['seconds'])} s, {num(r.get('samples_per_s'))} samples/s, {pct(r['of_raw'])} of the disk's raw speed"
+                         + (f", {pct(r['samples_per_s'] / alone['samples_per_s'])} of MuJoCo Warp stepping alone" if alone else ""),
+                         link(name)])
     mg = load(MULTI_GPU)
     if mg:
         rows.append([f"physics scaling to {mg['physics_multi_gpu']['gpus']} x {mg['device_name']}",
