@@ -161,13 +161,13 @@ def _print_dataset_header(m: dict) -> None:
 def _stored_summaries(files: list[Path]) -> list[dict] | None:
     """Each shard's summary as its writer stored it (no dataset read: ~1 ms a shard), or None where a shard has
     none (written by an older piezotwin)."""
-    from sensors.data.recording import SUMMARY_ATTR, Recording, RecordingError
+    from sensors.data.recording import Recording, RecordingError
 
     out = []
     for p in files:
         try:
             with Recording(p) as rec:
-                if rec.attrs.get(SUMMARY_ATTR) is None:
+                if not rec.has_stored_summary:
                     return None
                 out.append(rec.summary(from_data=False))
         except (RecordingError, OSError, RuntimeError) as exc:

@@ -297,6 +297,17 @@ def _get_attrs(obj: h5py.HLObject) -> dict[str, Any]:
     return out
 
 
+def _get_attr_subset(obj: h5py.HLObject, keys: tuple[str, ...]) -> dict[str, Any]:
+    """`_get_attrs` of the named attributes only (those present): a file's provenance without decoding its config."""
+    json_keys = set(json.loads(_decode_value(obj.attrs.get(_JSON_ATTRS, "[]"))))
+    out = {}
+    for key in keys:
+        if key in obj.attrs:
+            v = _decode_value(obj.attrs[key])
+            out[key] = json.loads(v) if key in json_keys else v
+    return out
+
+
 # --------------------------------------------------------------------------- content hash
 
 # root attributes left out of the content hash: when and by which code/library versions a file was written, and
@@ -977,6 +988,11 @@ class Recording:
         for i in range(0, ds.shape[0], step):
             yield ds[i : i + step]
 
+    @property
+    def has_stored_summary(self) -> bool:
+        """Whether the writer stored its summary (SUMMARY_ATTR; files written before do not have it)."""
+        return SUMMARY_ATTR in self._f.attrs
+
     @_damage_is_error
     def summary(self, from_data: bool = True) -> dict[str, Any]:
         """Episodes, total duration (s) and per channel units, dims, shapes, min and max.
@@ -985,10 +1001,16 @@ class Recording:
         sample period), so n samples at f Hz last n/f seconds. from_data=False: the summary the writer stored
         (SUMMARY_ATTR, equal to reading; no dataset is read), where the file has one.
         """
-        stored = None if from_data else self.attrs.get(SUMMARY_ATTR)
-        if stored is not None:
-            d = _summary_from_json(stored)
+        keys = ("format_version", "source", "created_utc", "generator", "config_sha256", "content_sha256",
+                "root_seed", "shard_index")
+        # the stored summary with the root attributes it reports, read one by one (not the config and versions)
+        a = {} if from_data else _get_attr_subset(self._f, (SUMMARY_ATTR, *keys))
+        if a.get(SUMMARY_ATTR) is not None:
+            d = _summary_from_json(a[SUMMARY_ATTR])
+            n_episodes = len(self._f["episodes"])
         else:
+            a = self.attrs
+            n_episodes = len(self.episode_ids)
             acc = _SummaryAccumulator()
             for ep in self.episode_ids:
                 g = self._group(ep)
@@ -1000,7 +1022,6 @@ class Recording:
                                     self._blocks(ds))
             d = acc.result()
         n_samples, duration, chans = d["n_samples"], d["duration_s"], d["channels"]
-        a = self.attrs
         return {
             "path": str(self.path),
             "format_version": a["format_version"],
@@ -1008,10 +1029,10 @@ class Recording:
             "created_utc": a.get("created_utc"),
             "generator": a.get("generator"),
             "config_sha256": a.get("config_sha256"),
-            "content_sha256": self.content_sha256,
+            "content_sha256": a.get("content_sha256") or self.content_sha256,
             "root_seed": a.get("root_seed"),
             "shard_index": a.get("shard_index"),
-            "n_episodes": len(self.episode_ids),
+            "n_episodes": n_episodes,
             "n_samples": n_samples,
             "duration_s": duration,
             "channels": chans,
