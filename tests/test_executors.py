@@ -190,6 +190,11 @@ def test_gpu_feed_equals_serial_and_retries_a_killed_writer(tmp_path, monkeypatc
             for ep in ra.episode_ids:
                 np.testing.assert_equal(rb.episode_attrs(ep), ra.episode_attrs(ep))
             assert ra.sensor_attrs.keys() == rb.sensor_attrs.keys()
+            # the feed's writers store the summary that reading the data gives, as the serial loop's writer does
+            stored, read = rb.summary(from_data=False), rb.summary()
+            assert rb.has_stored_summary and stored == read
+            assert {k: v for k, v in stored.items() if k not in ("path", "created_utc")} == \
+                {k: v for k, v in ra.summary(from_data=False).items() if k not in ("path", "created_utc")}
     # the manifest entries the writers made equal what the driver reads back from the files
     from sensors.data.manifest import describe_shard, verify_manifest
 
