@@ -159,7 +159,7 @@ def _print_dataset_header(m: dict) -> None:
 
 
 def _stored_summaries(files: list[Path]) -> list[dict] | None:
-    """Each shard's summary as its writer stored it (no dataset read: ~1 ms a shard), or None where a shard has
+    """Each shard's summary as its writer stored it (no dataset read: a few ms a shard), or None where a shard has
     none (written by an older piezotwin)."""
     from sensors.data.recording import Recording, RecordingError
 

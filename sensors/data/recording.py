@@ -287,24 +287,16 @@ def _decoded_attrs(encoded: Mapping[str, tuple[Any, bool]]) -> dict[str, Any]:
     return out
 
 
-def _get_attrs(obj: h5py.HLObject) -> dict[str, Any]:
-    raw = dict(obj.attrs)
-    json_keys = set(json.loads(_decode_value(raw.pop(_JSON_ATTRS, "[]"))))
+def _get_attrs(obj: h5py.HLObject, keys: tuple[str, ...] | None = None) -> dict[str, Any]:
+    """The attributes decoded (JSON ones parsed); ``keys``: only those named (the ones present), e.g. a file's
+    provenance without decoding its config."""
+    attrs = obj.attrs
+    json_keys = set(json.loads(_decode_value(attrs.get(_JSON_ATTRS, "[]"))))
+    names = sorted(k for k in attrs if k != _JSON_ATTRS) if keys is None else [k for k in keys if k in attrs]
     out = {}
-    for key in sorted(raw):
-        v = _decode_value(raw[key])
+    for key in names:
+        v = _decode_value(attrs[key])
         out[key] = json.loads(v) if key in json_keys else v
-    return out
-
-
-def _get_attr_subset(obj: h5py.HLObject, keys: tuple[str, ...]) -> dict[str, Any]:
-    """`_get_attrs` of the named attributes only (those present): a file's provenance without decoding its config."""
-    json_keys = set(json.loads(_decode_value(obj.attrs.get(_JSON_ATTRS, "[]"))))
-    out = {}
-    for key in keys:
-        if key in obj.attrs:
-            v = _decode_value(obj.attrs[key])
-            out[key] = json.loads(v) if key in json_keys else v
     return out
 
 
@@ -535,14 +527,18 @@ class _SummaryAccumulator:
         c["n_samples"] += shape[0] if len(shape) else 1
         for block in blocks:
             b = np.asarray(block)
-            if b.size and b.dtype.kind in "fc":
+            if not b.size:
+                continue
+            if b.dtype.kind in "fc":
                 b = b.real
-                lo, hi = b.min(), b.max()  # the common case, all finite, without a masked copy
-                if not (np.isfinite(lo) and np.isfinite(hi)):
-                    b = b[np.isfinite(b)]
-            if b.size:
-                c["min"] = min(c["min"], b.min().item())
-                c["max"] = max(c["max"], b.max().item())
+            lo, hi = b.min(), b.max()  # one pass each; a masked copy only where a value is not finite
+            if b.dtype.kind in "fc" and not (np.isfinite(lo) and np.isfinite(hi)):
+                b = b[np.isfinite(b)]
+                if not b.size:
+                    continue
+                lo, hi = b.min(), b.max()
+            c["min"] = min(c["min"], lo.item())
+            c["max"] = max(c["max"], hi.item())
 
     def add_episode(self, channels: Mapping[str, Channel]) -> None:
         """One episode from memory, as the writer holds it."""
@@ -1004,7 +1000,7 @@ class Recording:
         keys = ("format_version", "source", "created_utc", "generator", "config_sha256", "content_sha256",
                 "root_seed", "shard_index")
         # the stored summary with the root attributes it reports, read one by one (not the config and versions)
-        a = {} if from_data else _get_attr_subset(self._f, (SUMMARY_ATTR, *keys))
+        a = {} if from_data else _get_attrs(self._f, (SUMMARY_ATTR, *keys))
         if a.get(SUMMARY_ATTR) is not None:
             d = _summary_from_json(a[SUMMARY_ATTR])
             n_episodes = len(self._f["episodes"])

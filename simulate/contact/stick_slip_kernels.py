@@ -5,7 +5,7 @@ Model (Johnson, Contact Mechanics, 1985, sect. 7.2, the Cattaneo-Mindlin stick-s
 and where |f| > mu N the force is held on the friction cone and the stick anchor a dragged behind; out of contact
 (N = 0) the anchor follows the indenter. State in float64, like the reference.
 
-- `stick_slip_update`: one physics step of one indenter (shared by both kernels below);
+- `stick_slip_update`: one physics step of one indenter (shared by both stages' kernels);
 - `_stick_slip_path`: a whole path, one thread per (episode, indenter) walking its steps: the C MuJoCo path, which
   records the path first (`mujoco.rollout`) and applies the law after (the shear does not act back on MuJoCo);
 - the MuJoCo Warp path applies `stick_slip_update` after every device step (`simulate.contact.mujoco_warp`).
