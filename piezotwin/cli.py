@@ -153,7 +153,7 @@ def generate(
         console.print(f"resumed: {len(skipped)} complete shard(s) kept")
     console.print(f"wrote {manifest}")
     console.print(chosen.line(), highlight=False, soft_wrap=True)
-    _print_dataset_summary(out, stored=True)
+    _print_dataset_summary(out)
     cli_s = {"before the shards (engine choice, Warp init, checks)": t_ready - t_in, "generate": t_gen - t_ready,
              "dataset summary": time.perf_counter() - t_gen}
     if os.environ.get(T0_ENV):

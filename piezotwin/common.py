@@ -158,28 +158,12 @@ def _print_dataset_header(m: dict) -> None:
                   highlight=False, soft_wrap=True)
 
 
-def _stored_summaries(files: list[Path]) -> list[dict] | None:
-    """Each shard's summary as its writer stored it (no dataset read: a few ms a shard), or None where a shard has
-    none (written by an older piezotwin)."""
-    from sensors.data.recording import Recording, RecordingError
-
-    out = []
-    for p in files:
-        try:
-            with Recording(p) as rec:
-                if not rec.has_stored_summary:
-                    return None
-                out.append(rec.summary(from_data=False))
-        except (RecordingError, OSError, RuntimeError) as exc:
-            unreadable(p, exc)
-    return out
-
-
-def _print_dataset_summary(directory: Path, max_shards: int = 8, stored: bool = False) -> None:
-    """The whole dataset in one table: totals from the manifest, channel ranges merged over its shards (the
-    first `max_shards` of a larger one, said so in the title). stored=True (right after `generate` wrote the
-    shards): the summaries their writers stored, over every shard, where all have one; else the data is read."""
+def _print_dataset_summary(directory: Path, max_shards: int = 8) -> None:
+    """The whole dataset in one table: totals from the manifest, channel ranges merged over its shards. From the
+    manifest's "summary" (its shards' stored summaries merged when it was written: no shard opened) where it has
+    one; else the data of the first `max_shards` shards is read (a larger dataset says so in the title)."""
     from sensors.data.manifest import ManifestError, read_manifest
+    from sensors.data.recording import merge_summaries
 
     try:
         m = read_manifest(directory)
@@ -187,20 +171,13 @@ def _print_dataset_summary(directory: Path, max_shards: int = 8, stored: bool = 
         fail(str(exc))
     _print_dataset_header(m)
     files = [directory / s["file"] for s in m["shards"]]
-    sums = _stored_summaries(files) if stored else None
-    if sums is None:
+    merged, n_read = m.get("summary"), len(files)
+    if not (isinstance(merged, dict) and {"n_samples", "duration_s", "channels"} <= set(merged)):
         sums = _summaries(files[:max_shards],
                           episodes=sum(len(s.get("episodes", ())) for s in m["shards"][:max_shards]))
-    chans: dict[str, dict] = {}
-    for s in sums:
-        for name, c in s["channels"].items():
-            d = chans.setdefault(name, dict(c))
-            for key, pick in (("min", min), ("max", max)):
-                vals = [v for v in (d[key], c[key]) if v is not None]
-                d[key] = pick(vals) if vals else None
-    seconds = sum(s["duration_s"] for s in sums)
-    samples = sum(s["n_samples"] for s in sums)
-    over = (f"all {len(files)} shards" if len(sums) == len(files)
-            else f"the first {len(sums)} of {len(files)} shards (piezotwin inspect {directory} reads all)")
-    console.print(f"{samples} samples, {seconds:.1f} s of recording in {over}", highlight=False, soft_wrap=True)
-    console.print(_channel_table(chans, title=f"channels, ranges over {over}"))
+        merged, n_read = merge_summaries(sums), len(sums)
+    over = (f"all {len(files)} shards" if n_read == len(files)
+            else f"the first {n_read} of {len(files)} shards (piezotwin inspect {directory} reads all)")
+    console.print(f"{merged['n_samples']} samples, {merged['duration_s']:.1f} s of recording in {over}",
+                  highlight=False, soft_wrap=True)
+    console.print(_channel_table(merged["channels"], title=f"channels, ranges over {over}"))

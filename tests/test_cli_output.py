@@ -78,24 +78,38 @@ def test_parallel_shard_summaries_equal_the_serial_read(generated):
     assert [s["n_episodes"] for s in serial] == [2, 1]
 
 
-def test_generate_summary_uses_the_writers_stored_summaries(generated, tmp_path):
-    # the end of `generate` prints the summaries the writers stored (no dataset read back, every shard), equal to
-    # reading the data; a shard written without one (an older piezotwin) sends it back to reading
-    import shutil
+def test_generate_summary_is_the_manifests_merge_of_the_stored_summaries(generated, tmp_path):
+    # the end of `generate` prints the manifest's summary (the writers' stored summaries merged, no shard opened),
+    # equal to reading every shard's data; a manifest without one (an older piezotwin) sends it back to reading
+    import json
 
-    import h5py
+    from piezotwin.common import _summaries
+    from sensors.data.manifest import read_manifest
+    from sensors.data.recording import merge_summaries
 
-    from piezotwin.common import _stored_summaries, _summaries
-    from sensors.data.recording import SUMMARY_ATTR
-
-    out, _ = generated
+    out, text = generated
     files = sorted(out.glob("shard-*.h5"))
-    assert _stored_summaries(files) == _summaries(files, parallel=False)
-    old = tmp_path / files[1].name
-    shutil.copy(files[1], old)
-    with h5py.File(old, "r+") as f:
-        del f.attrs[SUMMARY_ATTR]
-    assert _stored_summaries([files[0], old]) is None
+    read = merge_summaries(_summaries(files, parallel=False))
+    stored = read_manifest(out)["summary"]
+    assert json.loads(json.dumps(read)) == stored
+    assert stored["n_samples"] == sum(s["n_samples"] for s in _summaries(files, parallel=False))
+    assert f"{stored['n_samples']} samples" in text
+    old = tmp_path / "old"
+    old.mkdir()
+    m = json.loads((out / "manifest.json").read_text())
+    del m["summary"]
+    (old / "manifest.json").write_text(json.dumps(m))
+    for f in files:
+        (old / f.name).symlink_to(f)
+    from piezotwin import common
+
+    common.console.record = True
+    try:
+        common._print_dataset_summary(old)
+        again = common.console.export_text()
+    finally:
+        common.console.record = False
+    assert f"{stored['n_samples']} samples" in again and "ranges over all 2 shards" in again
 
 
 def test_generate_path_leaves_out_torch_learn_and_scipy_signal():

@@ -319,7 +319,9 @@ def test_manifest_trusts_this_runs_writers_and_checks_the_rest(tmp_path, monkeyp
         return {k: v for k, v in mf.read_manifest(tmp_path).items() if k != "created_utc"}
 
     want = manifest()
-    described = {i: s for i, s in enumerate(mf.read_manifest(tmp_path)["shards"])}
+    assert want["summary"]["n_samples"] == 3 * 2 * 20  # the shards' stored summaries, merged
+    described = {i: mf.describe_shard(mf.shard_path(tmp_path, i)) for i in range(3)}  # as the writers make them
+    assert all("summary" in d for d in described.values())
     opened = []
     real_complete, real_describe = mf.is_shard_complete, mf.describe_shard
     monkeypatch.setattr(mf, "is_shard_complete", lambda p, c, **k: opened.append(Path(p).name) or real_complete(p, c, **k))

@@ -18,6 +18,11 @@ attributes that are not timestamps or code versions, sensors.data.recording) and
 ``content_sha256`` over them: equal for equal data, so a regenerated dataset is checked by one number, where
 ``dataset_sha256`` (over the files' bytes, which hold their creation time) differs between identical runs.
 
+Summary. Each shard's writer stores its summary (sample count, duration, per channel units, dims and finite
+min / max: ``summary_json``, sensors.data.recording); the manifest's ``summary`` merges them over the shards
+(``merge_summaries``), so a dataset's channel ranges read without opening a shard. A dataset whose shards were
+written without one has no ``summary``.
+
 Resumption. A shard counts as present when its file opens as a recording whose config_sha256 is
 the dataset's (``is_shard_complete``); ``first_missing_shards`` lists those still to generate.
 Because shards are renamed into place only when whole, an interrupted run leaves at most a
@@ -37,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from sensors.data.recording import Recording, _natural_key
+from sensors.data.recording import Recording, _natural_key, merge_summaries
 
 MANIFEST_FORMAT = "piezotwin-dataset"
 MANIFEST_VERSION = 1
@@ -165,16 +170,27 @@ def describe_shard(path: str | os.PathLike, *, with_sha256: bool = True) -> dict
         sseed = rec.attrs.get("shard_seed")
         cfg = rec.config_sha256
         content = rec.content_sha256
-    return shard_entry(path, eps, seeds, cfg, sseed, with_sha256=with_sha256, content_sha256=content)
+        summary = _stored_summary(rec)
+    return shard_entry(path, eps, seeds, cfg, sseed, with_sha256=with_sha256, content_sha256=content, summary=summary)
+
+
+def _stored_summary(rec: Recording) -> dict[str, Any] | None:
+    """The summary a shard's writer stored ({"n_samples", "duration_s", "channels"}), None where it has none."""
+    if not rec.has_stored_summary:
+        return None
+    s = rec.summary(from_data=False)
+    return {k: s[k] for k in ("n_samples", "duration_s", "channels")}
 
 
 def shard_entry(
     path: str | os.PathLike, episodes: list[str], episode_seeds: list, config_sha256: str, shard_seed: int | None = None,
-    *, with_sha256: bool = True, content_sha256: str | None = None,
+    *, with_sha256: bool = True, content_sha256: str | None = None, summary: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Manifest entry of a shard whose episodes and seeds the caller knows (the process that just wrote it:
     no need to read every episode back); `describe_shard` reads them from the file. content_sha256: the
-    writer's (RecordingWriter.content_sha256); None reads it from the file's root attribute."""
+    writer's (RecordingWriter.content_sha256); None reads it from the file's root attribute. summary: the
+    shard's stored summary (RecordingWriter.summary), carried under "summary" until `build_manifest` merges the
+    shards' into the dataset's (it is not written per shard)."""
     path = Path(path)
     if content_sha256 is None:
         with Recording(path) as rec:
@@ -188,6 +204,7 @@ def shard_entry(
         "episode_seeds": list(episode_seeds),
         "shard_seed": shard_seed,
         "config_sha256": config_sha256,
+        **({"summary": dict(summary)} if summary is not None else {}),
     }
 
 
@@ -288,8 +305,10 @@ def write_manifest(
     shards: Sequence[Mapping[str, Any]],
     splits: Mapping[str, Sequence[str]],
     extra: Mapping[str, Any] | None = None,
+    summary: Mapping[str, Any] | None = None,
 ) -> Path:
-    """Write ``<directory>/manifest.json`` atomically (tmp file + os.replace); returns its path."""
+    """Write ``<directory>/manifest.json`` atomically (tmp file + os.replace); returns its path. summary: the
+    dataset's (`sensors.data.recording.merge_summaries` of its shards'), written as "summary" where given."""
     directory = Path(directory)
     if set(splits) != set(SPLIT_NAMES):
         raise ValueError(f"splits must have exactly the keys {SPLIT_NAMES}, got {sorted(splits)}")
@@ -318,6 +337,8 @@ def write_manifest(
         "shards": shard_list,
         "splits": {k: list(splits[k]) for k in SPLIT_NAMES},
     }
+    if summary is not None:
+        manifest["summary"] = dict(summary)
     if extra:
         clash = set(extra) & set(manifest)
         if clash:
@@ -393,7 +414,8 @@ def build_manifest(
                if i not in known and not is_shard_complete(shard_path(directory, i), config_sha256)]
     if missing:
         raise ValueError(f"{directory}: shards {missing[:10]} are missing or incomplete")
-    shards = [known[i] if i in known else describe_shard(shard_path(directory, i)) for i in range(n_shards)]
+    shards = [dict(known[i]) if i in known else describe_shard(shard_path(directory, i)) for i in range(n_shards)]
+    parts = [s.pop("summary", None) for s in shards]
     ids = [episode_key(s["file"], ep) for s in shards for ep in s["episodes"]]
     seed = split_seed if split_seed is not None else (root_seed or 0)
     return write_manifest(
@@ -405,6 +427,8 @@ def build_manifest(
         shards=shards,
         splits=make_splits(ids, seed, fractions),
         extra=extra,
+        # the shards' stored summaries merged (no dataset read); none where a shard was written without one
+        summary=merge_summaries(parts) if parts and all(p is not None for p in parts) else None,
     )
 
 

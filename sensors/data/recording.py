@@ -60,7 +60,7 @@ import subprocess
 import sys
 import threading
 from collections import OrderedDict
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -109,6 +109,7 @@ __all__ = [
     "SUMMARY_ATTR",
     "content_sha256",
     "generator_info",
+    "merge_summaries",
     "read_recording_summary",
     "write_recording",
 ]
@@ -563,6 +564,26 @@ class _SummaryAccumulator:
         return json.dumps(self.result())
 
 
+def merge_summaries(parts: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """One summary ({"n_samples", "duration_s", "channels"}) of several recordings' (`Recording.summary` or the
+    writers' stored ones), in their order: samples and durations summed, per channel its samples summed and the
+    smallest min / largest max (None where no part has a finite value); units, dims, dtype and frame shape as the
+    first part that has the channel gives them."""
+    chans: dict[str, dict[str, Any]] = {}
+    for part in parts:
+        for name, c in part["channels"].items():
+            d = chans.get(name)
+            if d is None:
+                chans[name] = dict(c)
+                continue
+            d["n_samples"] = d.get("n_samples", 0) + c.get("n_samples", 0)
+            for key, pick in (("min", min), ("max", max)):
+                vals = [v for v in (d[key], c[key]) if v is not None]
+                d[key] = pick(vals) if vals else None
+    return {"n_samples": sum(p["n_samples"] for p in parts), "duration_s": sum(p["duration_s"] for p in parts),
+            "channels": chans}
+
+
 def _summary_from_json(text: str) -> dict[str, Any]:
     d = json.loads(text)
     for c in d["channels"].values():
@@ -643,6 +664,7 @@ class RecordingWriter:
         self._digests: dict[str, bytes] = {}
         self._summary = _SummaryAccumulator()  # stored as SUMMARY_ATTR at the end
         self.content_sha256: str | None = None  # set when the file is complete
+        self.summary: dict[str, Any] | None = None  # set when the file is complete: the stored summary as a dict
         self.n_episodes = 0
         self.tmp = self.path.with_name(self.path.name + ".tmp")
 
@@ -724,7 +746,8 @@ class RecordingWriter:
             self.content_sha256 = content_sha256(_get_attrs(self._f), _get_attrs(self._f["sensor"]), self._mjcf,
                                                  self._digests)
             self._f.attrs["content_sha256"] = self.content_sha256
-            self._f.attrs[SUMMARY_ATTR] = self._summary.to_json()
+            stored = self._summary.to_json()
+            self._f.attrs[SUMMARY_ATTR] = stored
             self._f.close()
             self._f = self._eps = None
             _fsync(self.tmp)
@@ -732,6 +755,7 @@ class RecordingWriter:
         except BaseException:
             self._abort()
             raise
+        self.summary = _summary_from_json(stored)  # what a reader of the file gets, JSON round trip included
         try:  # make the rename durable; best effort (not every filesystem allows it)
             _fsync(self.path.parent)
         except OSError:

@@ -277,7 +277,8 @@ class PackedShard:
 
 def write_packed_shard(cfg: SceneConfig, out_dir: str, packed: PackedShard, sensor_attrs: dict, mjcf: str) -> tuple[dict, dict]:
     """Writer task: write one packed shard atomically (what write_shard would write); returns its manifest
-    entry (sha256 of the file just written, from the page cache), so the driver need not read it back, and
+    entry (sha256 of the file just written, from the page cache; content hash and summary as the writer made
+    them), so the driver need not read it back, and
     the seconds this writer spent on "episodes" (HDF5), "close, fsync" and "sha256"."""
     import time
 
@@ -306,7 +307,8 @@ def write_packed_shard(cfg: SceneConfig, out_dir: str, packed: PackedShard, sens
                 shm.close()
             except BufferError:  # views still held by a failing write's frames: the process cleans up
                 pass
-    entry = shard_entry(w.path, [e[0] for e in packed.episodes], [e[1]["seed"] for e in packed.episodes], config_sha256(cfg))
+    entry = shard_entry(w.path, [e[0] for e in packed.episodes], [e[1]["seed"] for e in packed.episodes], config_sha256(cfg),
+                        content_sha256=w.content_sha256, summary=w.summary)
     return entry, {"episodes": t1 - t0, "close, fsync": t2 - t1, "sha256": time.perf_counter() - t2}
 
 
