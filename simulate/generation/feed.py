@@ -436,8 +436,9 @@ def _pack_stage():
     return _PACK_STAGE
 
 
-SLICES_PER_LENGTH = 4  # slices (at most SENSOR_SLICE episodes each) per length group of a batch: a modest run's
-# shards are handed to the writers as the last length group's slices finish, not after the whole batch
+SLICES_PER_LENGTH = int(os.environ.get("PIEZOTWIN_FEED_SLICES", "4"))  # slices (at most SENSOR_SLICE episodes each)
+# per length group of a batch: a modest run's shards are handed to the writers as the last length group's slices
+# finish, not after the whole batch. The variable: the bench's A/B (the writes left after the last slice, its share)
 
 
 def iter_produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, seconds: dict | None = None,

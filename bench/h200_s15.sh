@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# The device calls of session 15 (issue 16: the dataset summary merged into the manifest, no shard reopened; the
+# feed's slices per length group as an A/B), run from the worktree copy on the H200 machine with the packages
+# unpacked in /root/site: `bash bench/h200_s15.sh A|B`. Logs and result files go to $OUT as one tar per mode.
+source "$(dirname "$0")/h100_lib.sh"  # environment, cli (plain CLI + MuJoCo Warp alone), pack
+warm() {  # a small run that compiles / loads the family's kernels (not timed)
+    timeout 200 python3 bench/bench_user_cli.py --families $1 --episodes 256 --tag warm-$1 2>&1 | grep -v "^Module" | tail -1 | cut -c1-300
+}
+case "$1" in
+A)  # fabric_1: warm-up, then the plain CLI (default slices) + stepping alone
+    warm fabric_1
+    cli fabric_1 8192 h200-s15-fabric; pack A ;;
+B)  # fabric_1 with 8 slices per length group (no alone: A's machine), velostat and cnt_pdms with the defaults
+    PIEZOTWIN_FEED_SLICES=8 cli fabric_1 8192 h200-s15-fabric-s8 noalone
+    warm velostat
+    cli velostat 8192 h200-s15-velostat
+    warm cnt_pdms
+    cli cnt_pdms 4096 h200-s15-cnt noalone
+    pack B ;;
+esac
