@@ -62,7 +62,9 @@ USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w
             "user-cli-h100-s12-velostat-b.json", "user-cli-h100-s12-velostat-ab-off1.json",
             "user-cli-h100-s12-velostat-ab-on1.json", "user-cli-h100-s12-velostat-ab-off2.json",
             "user-cli-h100-s12-velostat-ab-on2.json", "user-cli-h100-s13-fabric.json", "user-cli-h100-s13-fabric-b.json",
-            "user-cli-h200-s14.json", "user-cli-h200-s14-fabric.json", "user-cli-h200-s14-ntype.json"]
+            "user-cli-h200-s14.json", "user-cli-h200-s14-fabric.json", "user-cli-h200-s14-ntype.json",
+            "user-cli-h200-s15-fabric.json", "user-cli-h200-s15-fabric-b.json", "user-cli-h200-s15-fabric-s8.json",
+            "user-cli-h200-s15-velostat.json", "user-cli-h200-s15-cnt.json"]
 USER_CLI_STARTUP = [  # session 12: start-up and exit of small runs, the base tree (b833838) against the branch, one machine per pair
     ("user-cli-h100-s12-startup-base-ntype-1.json", "user-cli-h100-s12-startup-ntype-1.json"),
     ("user-cli-h100-s12-startup-base-cnt_pdms-1.json", "user-cli-h100-s12-startup-cnt_pdms-1.json"),
@@ -76,7 +78,10 @@ PHYSICS_PROFILE = "physics-profile-h100-s4.json"
 MULTI_GPU = "gpu-pipeline-h200x2.json"
 # the latest plain-CLI run of each family (issue 16's README table): `piezotwin generate FAMILY -o X --episodes N` with
 # defaults, one GPU machine, after a warm-up run (bench/bench_user_cli.py, bench/bench_mjw_alone.py)
-USER_CLI_LATEST = ["user-cli-h200-s14.json", "user-cli-h200-s14-fabric.json"]
+# (file, family): ntype not re-measured in session 15, its warm run of session 14
+USER_CLI_LATEST = [("user-cli-h200-s15-cnt.json", "cnt_pdms"), ("user-cli-h200-s15-velostat.json", "velostat"),
+                   ("user-cli-h200-s14.json", "ntype"), ("user-cli-h200-s15-fabric.json", "fabric_1"),
+                   ("user-cli-h200-s15-fabric-b.json", "fabric_1")]
 
 
 # ----------------------------------------------------------------------------------------------- formatting
@@ -245,6 +250,11 @@ def bench_user_cli() -> str:
            "final session-14 code (the stick-slip law one Warp function for both contact stages) on another fresh H200 "
            "machine, right after `pytest -m gpu tests/test_press_stroke_mjw.py` instead of a warm-up run (its "
            "driver's simulate stage 25.9 s against 16.6 s in `user-cli-h200-s14.json`: not an A/B); "
+           "`user-cli-h200-s15*.json`: session 15's code (the dataset's summary merged into the manifest from the writers' "
+           "stored summaries, no shard reopened) on one H200 machine of 16 cores, after a 256-episode warm-up run per "
+           "family, in this order: `-fabric` (then stepping alone), `-fabric-s8` (8 slices per length group, "
+           "`PIEZOTWIN_FEED_SLICES=8`, no alone run), `-velostat` (then stepping alone), `-cnt`, `-fabric-b` (then stepping "
+           "alone again); "
            "raw = a plain file of the same bytes "
            "on the same disk right after (issue 16's target: >= 50 % of it, or >= 1e6 samples/s):\n",
            table(["family", "episodes", "file", "engine (the CLI's line)", "s", "samples/s", "MB/s", "of raw MB/s"], rows)]
@@ -1480,10 +1490,10 @@ def headline_rows() -> list[list[str]]:
                      + (", pad sum fused into the taxel kernel, default record)" if fz else ")"),
                      f"{num(fz['taxel_steps_per_s_chain'] if fz else tr['warp_cuda']['taxel_steps_per_s_chain'])} taxel-steps/s",
                      link(tname)])
-    for name in USER_CLI_LATEST:
+    for name, family in USER_CLI_LATEST:
         d = load(name) or {}
         for fam, r in d.get("runs", {}).items():
-            if "error" in r:
+            if "error" in r or fam != family:
                 continue
             alone = r.get("mjw_alone")
             rows.append([f"`piezotwin generate {fam} -o X --episodes {r['episodes']}` as typed (defaults), one {d.get('gpu')}",
