@@ -17,4 +17,13 @@ B)  # fabric_1 with 8 slices per length group (no alone: A's machine), velostat 
     warm cnt_pdms
     cli cnt_pdms 4096 h200-s15-cnt noalone
     pack B ;;
+R)  # the staging buffers unpinned while the writers finish (exit after the last write was 1.6-1.7 s): velostat with
+    # stepping alone, cnt_pdms; then the GPU test of release_staging
+    warm velostat
+    cli velostat 8192 h200-s15-velostat-rel
+    warm cnt_pdms
+    cli cnt_pdms 4096 h200-s15-cnt-rel noalone
+    timeout 120 python3 -m pytest tests/test_gpu.py -q -m gpu -p no:cacheprovider -k release 2>&1 | grep -v "^Module" \
+        | tee $OUT/r/logs/pytest-gpu-release-h200-s15.log | tail -3
+    pack R ;;
 esac

@@ -101,3 +101,22 @@ def test_parallel_readout_cuda_equals_serial_cpu(gpu_device):
             np.testing.assert_allclose(got[k], ref[k], rtol=1e-12, err_msg=k)
         np.testing.assert_allclose(got["filtered_v"], ref["filtered_v"], rtol=0, atol=2 * ep.lsb_v)
         np.testing.assert_allclose(st_g.pink, st.pink, rtol=1e-9, atol=1e-9)
+
+
+def test_release_staging_frees_the_pinned_buffers_and_keeps_views(gpu_device):
+    # the GPU feed unpins its staging buffers while the writers finish: the buffers go, a view handed out before
+    # keeps its values (it holds its buffer), and the next copy makes a new buffer
+    import warp as wp
+
+    from sensors import warp_setup as ws
+
+    if not str(gpu_device).startswith("cuda"):
+        pytest.skip("page-locked staging is for CUDA arrays")
+    src = wp.array(np.arange(1000, dtype=np.float32), device=gpu_device)
+    with ws.host_staging():
+        view = ws.to_host(src, "test-release")
+    assert ws.release_staging() >= 4000 and ws.release_staging() == 0
+    np.testing.assert_array_equal(view, np.arange(1000, dtype=np.float32))
+    with ws.host_staging():
+        again = ws.to_host(src, "test-release")
+    assert again is not view and ws.release_staging() >= 4000

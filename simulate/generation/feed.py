@@ -44,7 +44,8 @@ RAMP_BATCHES = 2  # batches of worlds / 4 and worlds / 2 episodes before the ful
 PHYSICS_PROCESSES = 2  # each steps its own batch: one's host work (protocols, controls) overlaps the other's GPU work
 # where the driver's time went in the last generate_feed of this process (for bench/): "start-up" (Warp, the
 # sensor), "simulate" (load field, sensor chain, channel arrays; protocols and physics too for kinds with their
-# own contact stage), "pack", "wait for physics", "wait for writers", "shut down" (the process pools); and,
+# own contact stage), "pack", "wait for physics", "wait for writers", "release staging" (the page-locked buffers,
+# freed while the writers finish), "shut down" (the process pools); and,
 # summed over the writer processes, "writers: episodes" (HDF5), "writers: close, fsync", "writers: sha256"; and
 # summed over the physics tasks, "physics: ..." (see step_worlds; the first batch's apart)
 LAST_RUN_SECONDS: dict[str, float] = {}
@@ -722,6 +723,12 @@ def generate_feed(
                 collect(0, block=False)
         shared.drain()
         t0 = time.perf_counter()
+        if device != "cpu":  # the last copies from the GPU are packed: unpin the staging buffers while the writers finish
+            from sensors.warp_setup import release_staging
+
+            release_staging()
+            add("release staging", t0)
+            t0 = time.perf_counter()
         collect(None)
         add("wait for writers", t0)
     finally:
