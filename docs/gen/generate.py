@@ -64,7 +64,8 @@ USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w
             "user-cli-h100-s12-velostat-ab-on2.json", "user-cli-h100-s13-fabric.json", "user-cli-h100-s13-fabric-b.json",
             "user-cli-h200-s14.json", "user-cli-h200-s14-fabric.json", "user-cli-h200-s14-ntype.json",
             "user-cli-h200-s15-fabric.json", "user-cli-h200-s15-fabric-b.json", "user-cli-h200-s15-fabric-s8.json",
-            "user-cli-h200-s15-velostat.json", "user-cli-h200-s15-cnt.json"]
+            "user-cli-h200-s15-velostat.json", "user-cli-h200-s15-cnt.json", "user-cli-h200-s15-velostat-rel.json",
+            "user-cli-h200-s15-cnt-rel.json"]
 USER_CLI_STARTUP = [  # session 12: start-up and exit of small runs, the base tree (b833838) against the branch, one machine per pair
     ("user-cli-h100-s12-startup-base-ntype-1.json", "user-cli-h100-s12-startup-ntype-1.json"),
     ("user-cli-h100-s12-startup-base-cnt_pdms-1.json", "user-cli-h100-s12-startup-cnt_pdms-1.json"),
@@ -254,7 +255,9 @@ def bench_user_cli() -> str:
            "stored summaries, no shard reopened) on one H200 machine of 16 cores, after a 256-episode warm-up run per "
            "family, in this order: `-fabric` (then stepping alone), `-fabric-s8` (8 slices per length group, "
            "`PIEZOTWIN_FEED_SLICES=8`, no alone run), `-velostat` (then stepping alone), `-cnt`, `-fabric-b` (then stepping "
-           "alone again); "
+           "alone again); `-velostat-rel` (then stepping alone), `-cnt-rel`: the final session-15 code (the page-locked "
+           "staging buffers freed while the writers finish, not at the process's exit) on a second H200 machine, slower "
+           "throughout (its physics, sensor stage and writers), after a 256-episode warm-up run per family; "
            "raw = a plain file of the same bytes "
            "on the same disk right after (issue 16's target: >= 50 % of it, or >= 1e6 samples/s):\n",
            table(["family", "episodes", "file", "engine (the CLI's line)", "s", "samples/s", "MB/s", "of raw MB/s"], rows)]
