@@ -65,7 +65,7 @@ USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w
             "user-cli-h200-s14.json", "user-cli-h200-s14-fabric.json", "user-cli-h200-s14-ntype.json",
             "user-cli-h200-s15-fabric.json", "user-cli-h200-s15-fabric-b.json", "user-cli-h200-s15-fabric-s8.json",
             "user-cli-h200-s15-velostat.json", "user-cli-h200-s15-cnt.json", "user-cli-h200-s15-velostat-rel.json",
-            "user-cli-h200-s15-cnt-rel.json"]
+            "user-cli-h200-s15-cnt-rel.json", "user-cli-h200-s15-fabric-trim.json"]
 USER_CLI_STARTUP = [  # session 12: start-up and exit of small runs, the base tree (b833838) against the branch, one machine per pair
     ("user-cli-h100-s12-startup-base-ntype-1.json", "user-cli-h100-s12-startup-ntype-1.json"),
     ("user-cli-h100-s12-startup-base-cnt_pdms-1.json", "user-cli-h100-s12-startup-cnt_pdms-1.json"),
@@ -82,7 +82,7 @@ MULTI_GPU = "gpu-pipeline-h200x2.json"
 # (file, family): ntype not re-measured in session 15, its warm run of session 14
 USER_CLI_LATEST = [("user-cli-h200-s15-cnt.json", "cnt_pdms"), ("user-cli-h200-s15-velostat.json", "velostat"),
                    ("user-cli-h200-s14.json", "ntype"), ("user-cli-h200-s15-fabric.json", "fabric_1"),
-                   ("user-cli-h200-s15-fabric-b.json", "fabric_1")]
+                   ("user-cli-h200-s15-fabric-b.json", "fabric_1"), ("user-cli-h200-s15-fabric-trim.json", "fabric_1")]
 
 
 # ----------------------------------------------------------------------------------------------- formatting
@@ -258,6 +258,8 @@ def bench_user_cli() -> str:
            "alone again); `-velostat-rel` (then stepping alone), `-cnt-rel`: the final session-15 code (the page-locked "
            "staging buffers freed while the writers finish, not at the process's exit) on a second H200 machine, slower "
            "throughout (its physics, sensor stage and writers), after a 256-episode warm-up run per family; "
+           "`-fabric-trim` (then stepping alone): the contact sensor trimmed to found + force (7 sensordata values per "
+           "indenter, was 20), on a third H200 machine after a 256-episode warm-up run; "
            "raw = a plain file of the same bytes "
            "on the same disk right after (issue 16's target: >= 50 % of it, or >= 1e6 samples/s):\n",
            table(["family", "episodes", "file", "engine (the CLI's line)", "s", "samples/s", "MB/s", "of raw MB/s"], rows)]
