@@ -26,11 +26,4 @@ R)  # the staging buffers unpinned while the writers finish (exit after the last
     timeout 120 python3 -m pytest tests/test_gpu.py -q -m gpu -p no:cacheprovider -k release 2>&1 | grep -v "^Module" \
         | tee $OUT/r/logs/pytest-gpu-release-h200-s15.log | tail -3
     pack R ;;
-T)  # the contact sensor trimmed to found + force (7 sensordata values per indenter, was 20): fabric_1 and velostat,
-    # each after a warm-up run, with stepping alone; then the GPU tests that read the sensordata layout
-    warm fabric_1
-    cli fabric_1 8192 h200-s15-fabric-trim
-    warm velostat
-    cli velostat 8192 h200-s15-velostat-trim
-    pack T ;;
 esac

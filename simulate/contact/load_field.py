@@ -36,7 +36,7 @@ from simulate.protocols.indenter import EpisodeProtocol, target_waveforms, xy_wa
 
 MAX_STEPS_PER_CHUNK = 4_000_000  # episodes x steps per rollout call (bounds the rollout's output memory)
 
-# sensordata layout of build_mjcf (SENSORS_PER_INDENTER per indenter): jointpos x, y, z; contact netforce: found, force(3)
+# sensordata layout of build_mjcf: jointpos x, y, z; contact netforce: found, force(3), torque(3), dist, pos(3), ...
 _POS = slice(0, 3)
 _FOUND = 3
 _FORCE = slice(4, 7)

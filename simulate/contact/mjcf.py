@@ -134,17 +134,15 @@ def indenter_suffix(i: int) -> str:
     return "" if i == 0 else str(i)
 
 
-SENSORS_PER_INDENTER = 3 + 4  # jointpos x, y, z + contact netforce (found, force): all that the load field and the
-# stick-slip stage read. The sensor's torque, dist, pos, normal and tangent (13 more values) were read by nothing and
-# were 65 % of the sensordata the GPU feed copies to the host and passes over (fabric_1, 8192 episodes: 6.7 GB)
+SENSORS_PER_INDENTER = 3 + 17  # jointpos x, y, z + contact netforce
 
 
 def build_mjcf(cfg: SceneConfig) -> str:
     """MJCF string of the scene. Actuators: x, y position servos; z position servo (displacement
     control, ctrl = target height of the indenter's lowest point, m) or z motor (force control,
     ctrl = vertical force on the indenter, N, negative = into the pad). Sensors, in order:
-    jointpos x, y, z (3), then the contact sensor with reduce="netforce" (found, force(3): 4 values, force = force
-    on the pad, global frame).
+    jointpos x, y, z (3), then the contact sensor with reduce="netforce" (found, force(3), torque(3),
+    dist, pos(3), normal(3), tangent(3): 17 values, force = force on the pad, global frame).
 
     With indenter.count = n > 1 the scene holds n identical indenters (bodies indenter, indenter1, ...),
     each with its own joints, actuators (x, y, z per indenter, in that order) and sensors
@@ -183,7 +181,7 @@ def build_mjcf(cfg: SceneConfig) -> str:
         sens.append(f"""    <jointpos name="pos_x{x}" joint="slide_x{x}"/>
     <jointpos name="pos_y{x}" joint="slide_y{x}"/>
     <jointpos name="pos_z{x}" joint="slide_z{x}"/>
-    <contact name="press_net{x}" geom1="indenter{x}" geom2="pad" data="found force"
+    <contact name="press_net{x}" geom1="indenter{x}" geom2="pad" data="found force torque dist pos normal tangent"
              reduce="netforce"/>
 """)
     return f"""<mujoco model="piezotwin_{cfg.name}">

@@ -321,7 +321,6 @@ def feed_worlds(cfg: SceneConfig) -> int:
     after another, so mixed frequencies keep FEED_WORLDS worlds in each), while the batch's sensordata stays
     within BATCH_RAM_FRACTION of the host's memory."""
     from simulate.contact.load_field import CONTACT_STAGES
-    from simulate.contact.mjcf import SENSORS_PER_INDENTER
 
     p, s = cfg.protocol, cfg.sampling
     if p.kind in CONTACT_STAGES:
@@ -333,7 +332,7 @@ def feed_worlds(cfg: SceneConfig) -> int:
         return FEED_WORLDS
     freqs = sorted(set(p.frequencies_hz))
     mean_samples = sum(cfg.episode_duration_s(f) for f in freqs) / len(freqs) * s.sample_rate_hz + 1
-    per_episode = 8 * SENSORS_PER_INDENTER * mean_samples  # float64 sensordata per sample (build_mjcf's sensors)
+    per_episode = 8 * 20 * mean_samples  # float64 sensordata, 20 values per sample (build_mjcf's sensors)
     ram = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     return max(FEED_WORLDS, min(FEED_WORLDS * len(freqs), int(BATCH_RAM_FRACTION * ram / per_episode)))
 
@@ -379,7 +378,6 @@ def _schedule(cfg: SceneConfig, todo: list[int], worlds: int) -> list[tuple[list
     import math
 
     from sensors.data.manifest import episode_seed
-    from simulate.contact.mjcf import SENSORS_PER_INDENTER
     from simulate.generation.run import episode_ids_of_shard, episode_protocols
 
     eps = {s: len(episode_ids_of_shard(cfg, s)) for s in todo}
@@ -393,12 +391,12 @@ def _schedule(cfg: SceneConfig, todo: list[int], worlds: int) -> list[tuple[list
 
     def windows(lengths: list[int], min_parts: int) -> list[list[int]]:
         """Consecutive runs of the shards, about equal in episodes, each with about FEED_WORLDS of these lengths'
-        episodes per length at most and their sensordata (float64, SENSORS_PER_INDENTER values per sample) within `ram`, as
+        episodes per length at most and their sensordata (float64, 20 values per sample) within `ram`, as
         expected from the sample's share and mean length (SAMPLE_MARGIN: a share a little above the sample's
         does not split a batch in two: two batches of short episodes would step side by side first and hold the
         long ones back, as the H100 measured: -s11-mix-split)."""
         share = len(lengths) / len(n)
-        cap = min(FEED_WORLDS * len(set(lengths)), ram / (8 * SENSORS_PER_INDENTER * (sum(lengths) / len(lengths) + 1)))
+        cap = min(FEED_WORLDS * len(set(lengths)), ram / (8 * 20 * (sum(lengths) / len(lengths) + 1)))
         parts = min(len(todo), max(1, min_parts, math.ceil(total * share / (SAMPLE_MARGIN * max(1.0, cap)))))
         out, acc = [[]], 0
         for s in todo:
