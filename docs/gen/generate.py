@@ -82,7 +82,7 @@ MULTI_GPU = "gpu-pipeline-h200x2.json"
 # (file, family): ntype not re-measured in session 15, its warm run of session 14
 USER_CLI_LATEST = [("user-cli-h200-s15-cnt.json", "cnt_pdms"), ("user-cli-h200-s15-velostat.json", "velostat"),
                    ("user-cli-h200-s14.json", "ntype"), ("user-cli-h200-s15-fabric.json", "fabric_1"),
-                   ("user-cli-h200-s15-fabric-b.json", "fabric_1"), ("user-cli-h200-s15-fabric-trim.json", "fabric_1")]
+                   ("user-cli-h200-s15-fabric-b.json", "fabric_1")]
 
 
 # ----------------------------------------------------------------------------------------------- formatting
@@ -259,7 +259,8 @@ def bench_user_cli() -> str:
            "staging buffers freed while the writers finish, not at the process's exit) on a second H200 machine, slower "
            "throughout (its physics, sensor stage and writers), after a 256-episode warm-up run per family; "
            "`-fabric-trim` (then stepping alone): the contact sensor trimmed to found + force (7 sensordata values per "
-           "indenter, was 20), on a third H200 machine after a 256-episode warm-up run; "
+           "indenter, was 20; reverted after the run: it changes the stored MJCF and so every content hash), on a third "
+           "H200 machine after a 256-episode warm-up run; "
            "raw = a plain file of the same bytes "
            "on the same disk right after (issue 16's target: >= 50 % of it, or >= 1e6 samples/s):\n",
            table(["family", "episodes", "file", "engine (the CLI's line)", "s", "samples/s", "MB/s", "of raw MB/s"], rows)]
