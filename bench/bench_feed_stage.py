@@ -44,9 +44,10 @@ def made_up_physics(family: str, device: str, gids: list[int]) -> tuple[list, di
     for n, idx in length_groups(protos):
         E = len(idx)
         target = lf.sample_targets(cfg, [protos[i] for i in idx], n)
-        shm = shared_memory.SharedMemory(create=True, size=8 * (E * n * m.nsensordata + E * n))
-        sens = np.ndarray((E, n, m.nsensordata), np.float64, buffer=shm.buf)
-        block = np.zeros((min(E, rows), n, m.nsensordata))
+        ns = len(lf.read_columns(m))  # what simulate_sensors keeps
+        shm = shared_memory.SharedMemory(create=True, size=8 * (E * n * ns + E * n))
+        sens = np.ndarray((E, n, ns), np.float64, buffer=shm.buf)
+        block = np.zeros((min(E, rows), n, ns))
         block[..., lf._POS] = rng.normal(0.0, 1e-5, (len(block), n, 3))
         block[..., lf._FORCE] = np.stack([rng.normal(0, 0.01, (len(block), n)), rng.normal(0, 0.01, (len(block), n)),
                                           -np.abs(target[: len(block)])], -1)

@@ -50,14 +50,15 @@ def main() -> None:
     # load the kernels (Warp's cache is warm from the CLI run): 64 worlds of the same model, two samples
     import numpy as np
 
-    from simulate.contact.load_field import build_model, physics_engine
+    from simulate.contact.load_field import build_model, physics_engine, read_columns
     from simulate.contact.mujoco_warp import WarpWorlds
 
     m = build_model(cfg)
     sub = cfg.sampling.substeps
     q0 = np.zeros((64, m.nq))
     q0[:, 2] = cfg.indenter.start_gap_m
-    WarpWorlds(m, 64, physics_engine(cfg)[1]).run(q0, np.zeros((64, 2 * sub, m.nu)), np.zeros(m.nsensordata), sub, 3)
+    cols = read_columns(m)  # the columns step_worlds records (the same kernels)
+    WarpWorlds(m, 64, physics_engine(cfg)[1], columns=cols).run(q0, np.zeros((64, 2 * sub, m.nu)), np.zeros(len(cols)), sub, 3)
     batches = []
     samples = 0
     steps = 0

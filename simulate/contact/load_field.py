@@ -31,7 +31,7 @@ from sensors.taxels import (
     taxel_area_m2,
     taxel_xy_m,
 )
-from simulate.contact.mjcf import build_mjcf, contact_design
+from simulate.contact.mjcf import SENSORS_PER_INDENTER, build_mjcf, contact_design
 from simulate.protocols.indenter import EpisodeProtocol, target_waveforms, xy_waveforms
 
 MAX_STEPS_PER_CHUNK = 4_000_000  # episodes x steps per rollout call (bounds the rollout's output memory)
@@ -40,6 +40,17 @@ MAX_STEPS_PER_CHUNK = 4_000_000  # episodes x steps per rollout call (bounds the
 _POS = slice(0, 3)
 _FOUND = 3
 _FORCE = slice(4, 7)
+READ_PER_INDENTER = 7  # the values of each indenter's block that anything downstream reads: jointpos, found, force
+
+
+def read_columns(m: mujoco.MjModel) -> tuple[int, ...]:
+    """The sensordata indices `simulate_sensors` keeps: each indenter's first READ_PER_INDENTER values (jointpos
+    x, y, z; contact found, force). The contact sensor's torque, dist, pos, normal and tangent (13 of every 20
+    values) are read by nothing: on MuJoCo Warp they stay on the device (fabric_1, 8192 episodes: 2.3 GB of float64
+    sensordata in the GPU feed's shared memory instead of 6.7 GB). The MJCF keeps them (its text is in every shard
+    and in the content hash)."""
+    per = SENSORS_PER_INDENTER
+    return tuple(c * per + j for c in range(m.nsensordata // per) for j in range(READ_PER_INDENTER))
 
 
 def build_model(cfg: SceneConfig) -> mujoco.MjModel:
@@ -131,7 +142,8 @@ def physics_engine(cfg: SceneConfig) -> tuple[str, str]:
 def simulate_sensors(
     cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1, alloc=None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Run the episodes; returns sensordata (E, T, nsensordata) at the sample times and target (E, T).
+    """Run the episodes; returns their sensordata at the sample times, the `read_columns` only (E, T, 7 per
+    indenter), and target (E, T).
     Stepping: C MuJoCo's rollout on `threads` threads, or MuJoCo Warp worlds (`physics_engine`).
     alloc(shape) -> float64 array: where the sensordata goes (default np.zeros; the GPU feed's physics
     process passes a view of a shared-memory block, so the worlds' output needs no second copy)."""
@@ -142,27 +154,29 @@ def simulate_sensors(
     mjcf = build_mjcf(cfg)
     m = mujoco.MjModel.from_xml_string(mjcf)
     E = len(protocols)
+    cols = read_columns(m)
     if engine == "mujoco_warp":
         from simulate.contact.mujoco_warp import box_primitive_for, worlds_for
 
         # controls are made chunk by chunk on a host thread while the worlds step (no (E, nstep, 3) array)
         states0, sens0 = _initial_states(m, cfg, protocols, episode_controls(cfg, protocols, nstep, slice(0, 1))[0][:, 0])
         qpos0 = states0[:, 1 : 1 + m.nq]  # full-physics state = (time, qpos, qvel, ...)
-        out = worlds_for(m, mjcf, E, device, box_primitive=box_primitive_for(cfg.protocol.control)).run(qpos0, lambda sl, eps: episode_controls(cfg, protocols[eps], nstep, sl)[0], sens0, sub, n,
-                                                 out=None if alloc is None else alloc((E, n, m.nsensordata)))
+        worlds = worlds_for(m, mjcf, E, device, box_primitive=box_primitive_for(cfg.protocol.control), columns=cols)
+        out = worlds.run(qpos0, lambda sl, eps: episode_controls(cfg, protocols[eps], nstep, sl)[0], sens0[:, cols], sub, n,
+                         out=None if alloc is None else alloc((E, n, len(cols))))
     else:
         ctrl, _ = episode_controls(cfg, protocols, nstep)
         states0, sens0 = _initial_states(m, cfg, protocols, ctrl[:, 0])
         rows = np.arange(1, n) * sub - 1
-        out = np.zeros((E, n, m.nsensordata)) if alloc is None else alloc((E, n, m.nsensordata))
-        out[:, 0] = sens0
+        out = np.zeros((E, n, len(cols))) if alloc is None else alloc((E, n, len(cols)))
+        out[:, 0] = sens0[:, cols]
         datas = [mujoco.MjData(m) for _ in range(max(1, threads))]
         data_arg = datas if threads > 1 else datas[0]
         chunk = max(max(1, threads), MAX_STEPS_PER_CHUNK // nstep)
         for a in range(0, E, chunk):
             b = min(E, a + chunk)
             _, sd = mujoco.rollout.rollout(m, data_arg, states0[a:b], ctrl[a:b], nstep=nstep)
-            out[a:b, 1:] = sd[:, rows]
+            out[a:b, 1:] = sd[:, rows][..., cols]
     return out, sample_targets(cfg, protocols, n)
 
 
@@ -221,7 +235,7 @@ def padded_controls(cfg: SceneConfig, protocols: list[EpisodeProtocol], nsteps: 
 
 def simulate_sensors_padded(cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     """MuJoCo Warp only: episodes of mixed lengths as one batch of worlds, stepped as long as the longest;
-    returns {n_samples: (sensordata (E_n, n, ns), target (E_n, n))} in `length_groups` order. An episode's
+    returns {n_samples: (sensordata (E_n, n, `read_columns`), target (E_n, n))} in `length_groups` order. An episode's
     samples depend only on its own controls up to then, so each equals its run in a batch of its own length."""
     from simulate.contact.mujoco_warp import box_primitive_for, worlds_for
 
@@ -238,8 +252,9 @@ def simulate_sensors_padded(cfg: SceneConfig, protocols: list[EpisodeProtocol], 
     m = mujoco.MjModel.from_xml_string(mjcf)
     ctrl = padded_controls(cfg, protocols, nsteps)
     states0, sens0 = _initial_states(m, cfg, protocols, ctrl(slice(0, 1), slice(0, len(protocols)))[:, 0])
-    out = worlds_for(m, mjcf, len(protocols), device, box_primitive=box_primitive_for(cfg.protocol.control)).run(
-        states0[:, 1 : 1 + m.nq], ctrl, sens0, sub, n)
+    cols = read_columns(m)
+    out = worlds_for(m, mjcf, len(protocols), device, box_primitive=box_primitive_for(cfg.protocol.control),
+                     columns=cols).run(states0[:, 1 : 1 + m.nq], ctrl, sens0[:, cols], sub, n)
     res = {}
     for k in sorted(set(lengths.tolist())):
         j = np.flatnonzero(lengths == k)
@@ -379,7 +394,7 @@ def _columns(sens: np.ndarray, top: float) -> tuple[np.ndarray, np.ndarray, np.n
 
 def load_batch(cfg: SceneConfig, sens: np.ndarray, target: np.ndarray, device_fields: str | None = None,
                fields: tuple | None = None) -> LoadBatch:
-    """LoadBatch of episodes from their sensordata (E, T, nsensordata) and target (E, T): pose and net force
+    """LoadBatch of episodes from their sensordata (E, T, ns: `read_columns`, or all of it) and target (E, T): pose and net force
     from the MJCF sensors, the taxel fields by `load_field` (numpy) or, on the MuJoCo Warp path, by Warp
     kernels on the physics device (kept there as flat Warp arrays when device_fields names that device).
     fields: (deformation, pressure, shear) made already (the GPU feed's time chunks), not computed again."""

@@ -1,8 +1,8 @@
 """The contact stage on MuJoCo Warp: all episodes as batched worlds on one device (GPU, or Warp's CPU).
 
 Same model, controls and outputs as the C MuJoCo `rollout` path of `simulate.contact.load_field.simulate_sensors`,
-which calls `WarpWorlds.run` when generation.physics picks MuJoCo Warp: sensordata (E, T, nsensordata) read
-after every `substeps`-th step, so everything downstream (load field, sensor chain, recording) is shared.
+which calls `WarpWorlds.run` when generation.physics picks MuJoCo Warp: the sensordata columns the load field reads
+(E, T, len(read_columns)) after every `substeps`-th step, so everything downstream (load field, sensor chain, recording) is shared.
 Source of the engine: MuJoCo Warp 4.0 (`mujoco_warp`).
 
 On CUDA one sample period (substeps x [set ctrl, step] + record sensors) is captured once as a CUDA graph
@@ -40,6 +40,13 @@ def _record(sensordata: wp.array2d(dtype=wp.float32), counter: wp.array(dtype=wp
 
 
 @wp.kernel
+def _record_columns(sensordata: wp.array2d(dtype=wp.float32), columns: wp.array(dtype=wp.int32),
+                    counter: wp.array(dtype=wp.int32), out: wp.array3d(dtype=wp.float32)):
+    w, j = wp.tid()
+    out[w, counter[1], j] = sensordata[w, columns[j]]
+
+
+@wp.kernel
 def _advance(counter: wp.array(dtype=wp.int32), which: int):
     counter[which] = counter[which] + 1
 
@@ -59,10 +66,13 @@ def available() -> bool:
 class WarpWorlds:
     """E batched MuJoCo Warp worlds of one scene on one device; run() replays the episodes' controls.
 
-    Shapes: ctrl (E, nstep, nu) float; returns sensordata (E, n_samples, nsensordata) float64.
+    Shapes: ctrl (E, nstep, nu) float; returns sensordata (E, n_samples, ns) float64, ns = nsensordata, or with
+    `columns` (indices into the sensordata) only those, in that order: the values nothing downstream reads are
+    then neither copied off the device nor stored.
     """
 
-    def __init__(self, m, n_worlds: int, device: str, sensors_every_step: bool = False, box_primitive: bool = True):
+    def __init__(self, m, n_worlds: int, device: str, sensors_every_step: bool = False, box_primitive: bool = True,
+                 columns: tuple[int, ...] | None = None):
         import copy
 
         import mujoco
@@ -92,6 +102,8 @@ class WarpWorlds:
             pairs = max(1, m.npair)
             self.d = mjw.put_data(m, self.mjd, nworld=n_worlds, nconmax=8 * pairs, njmax=8 * 3 * pairs + 2 * m.nu)
             self.counter = wp.zeros(2, dtype=wp.int32)
+            self.columns = None if columns is None else wp.array(np.asarray(columns, np.int32), dtype=wp.int32)
+        self.n_recorded = m.nsensordata if columns is None else len(columns)  # recorded sensor values per world
 
     n_extra = 0  # recorded values per world after the sensordata (subclasses: state of their own per-step kernels)
 
@@ -101,13 +113,16 @@ class WarpWorlds:
     def _step_sample(self, seq: wp.array3d, out: wp.array3d, substeps: int) -> None:
         import mujoco_warp as mjw
 
-        E, nu, ns = self.E, self.mjm.nu, self.mjm.nsensordata
+        E, nu, ns = self.E, self.mjm.nu, self.n_recorded
         for i in range(substeps):
             wp.launch(_set_ctrl, dim=(E, nu), inputs=[seq, self.counter, self.d.ctrl])
             mjw.step(self.m if i == substeps - 1 else self.m_quiet, self.d)
             self._after_step()
             wp.launch(_advance, dim=1, inputs=[self.counter, 0])
-        wp.launch(_record, dim=(E, ns), inputs=[self.d.sensordata, self.counter, out])
+        if self.columns is None:
+            wp.launch(_record, dim=(E, ns), inputs=[self.d.sensordata, self.counter, out])
+        else:
+            wp.launch(_record_columns, dim=(E, ns), inputs=[self.d.sensordata, self.columns, self.counter, out])
         self._record_extra(out)
         wp.launch(_advance, dim=1, inputs=[self.counter, 1])
 
@@ -124,13 +139,13 @@ class WarpWorlds:
 
         ctrl: (E, nstep, nu) array, or a function (steps, episodes) of two slices returning those rows; the
         next chunk's controls are made on CONTROL_THREADS host threads (blocks of episodes; numpy releases the
-        GIL) while the device runs the current one. out: a (E, n_samples, nsensordata + n_extra) float64 array to
+        GIL) while the device runs the current one. out: a (E, n_samples, n_recorded + n_extra) float64 array to
         fill (default a new one); sens0 has as many columns.
         """
         import mujoco_warp as mjw
         from concurrent.futures import ThreadPoolExecutor
 
-        E, nu, ns = self.E, self.mjm.nu, self.mjm.nsensordata + self.n_extra
+        E, nu, ns = self.E, self.mjm.nu, self.n_recorded + self.n_extra
         ctrl_rows = ctrl if callable(ctrl) else (lambda sl, eps: ctrl[eps, sl])
         out = np.zeros((E, n_samples, ns)) if out is None else out
         out[:, 0] = sens0
@@ -253,14 +268,15 @@ def box_primitive_for(control: str) -> bool:
 
 
 def worlds_for(m, mjcf: str, n_worlds: int, device: str, stick_slip: tuple | None = None,
-               box_primitive: bool = True) -> WarpWorlds:
+               box_primitive: bool = True, columns: tuple[int, ...] | None = None) -> WarpWorlds:
     """The process's worlds for this scene and batch size, made once (put_model, put_data for n_worlds, the
     CUDA graph) and reused by the next batch of the same shape (the GPU feed's physics processes step one
     batch after another); a different scene or size replaces them. stick_slip: (per_indenter, count, k_t, mu)
-    for `StickSlipWorlds`. box_primitive: see WarpWorlds (False for displacement control: `box_primitive_for`)."""
-    key = (mjcf, n_worlds, device, stick_slip, box_primitive)
+    for `StickSlipWorlds`. box_primitive: see WarpWorlds (False for displacement control: `box_primitive_for`).
+    columns: the sensordata values to record (WarpWorlds; None: all)."""
+    key = (mjcf, n_worlds, device, stick_slip, box_primitive, columns)
     if key not in _CACHED:
         _CACHED.clear()  # free the old worlds' device memory before allocating new ones
-        _CACHED[key] = (WarpWorlds(m, n_worlds, device, box_primitive=box_primitive) if stick_slip is None
-                        else StickSlipWorlds(m, n_worlds, device, *stick_slip))
+        _CACHED[key] = (WarpWorlds(m, n_worlds, device, box_primitive=box_primitive, columns=columns)
+                        if stick_slip is None else StickSlipWorlds(m, n_worlds, device, *stick_slip))
     return _CACHED[key]
