@@ -26,4 +26,12 @@ R)  # the staging buffers unpinned while the writers finish (exit after the last
     timeout 120 python3 -m pytest tests/test_gpu.py -q -m gpu -p no:cacheprovider -k release 2>&1 | grep -v "^Module" \
         | tee $OUT/r/logs/pytest-gpu-release-h200-s15.log | tail -3
     pack R ;;
+T)  # fabric_1 and velostat, each after a warm-up run, with stepping alone (session 15 ran this with the MJCF's
+    # contact sensor trimmed, since reverted: -fabric-trim); `T cols` measures the recorded columns
+    # (load_field.read_columns) against -fabric, -fabric-b and -velostat
+    warm fabric_1
+    cli fabric_1 8192 h200-s15-fabric-${2:-trim}
+    warm velostat
+    cli velostat 8192 h200-s15-velostat-${2:-trim}
+    pack T ;;
 esac
