@@ -134,7 +134,7 @@ def _channel_table(channels: dict, title: str | None = None) -> Table:
         t.add_column(col, justify="right" if col in ("min", "max") else "left")
     fmt = lambda v: "-" if v is None else f"{v:.4g}"
     for name, c in channels.items():
-        t.add_row(name, c["units"], ",".join(c["dim_names"]), str(c["frame_shape"]), fmt(c["min"]), fmt(c["max"]))
+        t.add_row(name, c["units"], ",".join(c["dim_names"]), str(tuple(c["frame_shape"])), fmt(c["min"]), fmt(c["max"]))
     return t
 
 

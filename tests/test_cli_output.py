@@ -94,6 +94,7 @@ def test_generate_summary_is_the_manifests_merge_of_the_stored_summaries(generat
     assert json.loads(json.dumps(read)) == stored
     assert stored["n_samples"] == sum(s["n_samples"] for s in _summaries(files, parallel=False))
     assert f"{stored['n_samples']} samples" in text
+    assert "(25,)" in text and "[25]" not in text  # frame shapes print as inspect prints them (JSON gives lists)
     old = tmp_path / "old"
     old.mkdir()
     m = json.loads((out / "manifest.json").read_text())
