@@ -313,6 +313,8 @@ def write_packed_shard(cfg: SceneConfig, out_dir: str, packed: PackedShard, sens
     return entry, {"episodes": t1 - t0, "close, fsync": t2 - t1, "sha256": time.perf_counter() - t2}
 
 
+SIZING_VALUES_PER_SAMPLE = 20  # float64 values per sample that batch sizing counts (the whole sensordata, as when
+# the batches were measured; `simulate_sensors` now keeps 7 per indenter, so the sizing has ~3x headroom)
 BATCH_RAM_FRACTION = 0.1  # a batch's sensordata (float64, in shared memory) at most this much of the host's memory
 
 
@@ -320,7 +322,7 @@ def feed_worlds(cfg: SceneConfig) -> int:
     """Episodes per feed batch: FEED_WORLDS for each episode length the protocol draws (`length_groups` step one
     after another, so mixed frequencies keep FEED_WORLDS worlds in each), while the batch's sensordata stays
     within BATCH_RAM_FRACTION of the host's memory."""
-    from simulate.contact.load_field import CONTACT_STAGES, READ_PER_INDENTER
+    from simulate.contact.load_field import CONTACT_STAGES
 
     p, s = cfg.protocol, cfg.sampling
     if p.kind in CONTACT_STAGES:
@@ -332,7 +334,9 @@ def feed_worlds(cfg: SceneConfig) -> int:
         return FEED_WORLDS
     freqs = sorted(set(p.frequencies_hz))
     mean_samples = sum(cfg.episode_duration_s(f) for f in freqs) / len(freqs) * s.sample_rate_hz + 1
-    per_episode = 8 * READ_PER_INDENTER * cfg.indenter.count * mean_samples  # float64 sensordata (`read_columns`)
+    # sized as measured (20 float64 values per sample, session 11): the sensordata now keeps READ_PER_INDENTER of
+    # them (`read_columns`), so a batch holds ~7/20 of this; the batches stay those the benches measured
+    per_episode = 8 * SIZING_VALUES_PER_SAMPLE * mean_samples
     ram = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     return max(FEED_WORLDS, min(FEED_WORLDS * len(freqs), int(BATCH_RAM_FRACTION * ram / per_episode)))
 
@@ -378,7 +382,6 @@ def _schedule(cfg: SceneConfig, todo: list[int], worlds: int) -> list[tuple[list
     import math
 
     from sensors.data.manifest import episode_seed
-    from simulate.contact.load_field import READ_PER_INDENTER
     from simulate.generation.run import episode_ids_of_shard, episode_protocols
 
     eps = {s: len(episode_ids_of_shard(cfg, s)) for s in todo}
@@ -392,13 +395,12 @@ def _schedule(cfg: SceneConfig, todo: list[int], worlds: int) -> list[tuple[list
 
     def windows(lengths: list[int], min_parts: int) -> list[list[int]]:
         """Consecutive runs of the shards, about equal in episodes, each with about FEED_WORLDS of these lengths'
-        episodes per length at most and their sensordata (float64, `read_columns` per sample) within `ram`, as
+        episodes per length at most and their sensordata (SIZING_VALUES_PER_SAMPLE float64 per sample) within `ram`, as
         expected from the sample's share and mean length (SAMPLE_MARGIN: a share a little above the sample's
         does not split a batch in two: two batches of short episodes would step side by side first and hold the
         long ones back, as the H100 measured: -s11-mix-split)."""
         share = len(lengths) / len(n)
-        cap = min(FEED_WORLDS * len(set(lengths)), ram / (8 * READ_PER_INDENTER * cfg.indenter.count
-                                                          * (sum(lengths) / len(lengths) + 1)))
+        cap = min(FEED_WORLDS * len(set(lengths)), ram / (8 * SIZING_VALUES_PER_SAMPLE * (sum(lengths) / len(lengths) + 1)))
         parts = min(len(todo), max(1, min_parts, math.ceil(total * share / (SAMPLE_MARGIN * max(1.0, cap)))))
         out, acc = [[]], 0
         for s in todo:
