@@ -321,6 +321,28 @@ def bench_user_cli() -> str:
                 "issue 16's target for the slow quasi-static protocols: the CLI run at >= 80 % of it:\n",
                 table(["family", "episodes", "file", "physics step ms", "batches", "alone s", "alone samples/s",
                        "alone world-steps/s", "CLI s", "CLI samples/s", "CLI / alone"], alone)]
+    split = []
+    for name, family in USER_CLI_LATEST:
+        r = (load(name) or {}).get("runs", {}).get(family)
+        if not r or "error" in r or "timings" not in r:
+            continue
+        t, c = r["timings"].get("feed", {}), r["timings"].get("cli", {})
+        phys = sum(v for k, v in t.items() if k.startswith("wait for physics"))
+        writers = [t.get(f"writers: {k}", 0.0) for k in ("episodes", "close, fsync", "sha256")]
+        a = r.get("mjw_alone")
+        split.append([family, r["episodes"], f"`{name}`", num(r["seconds"]),
+                      num(c.get("before the shards (engine choice, Warp init, checks)")), num(phys),
+                      num(t.get("simulate")), num(t.get("pack")), num(t.get("wait for writers")),
+                      num(sum(writers)), num(c.get("dataset summary")), num(c.get("exit (after the last write)")),
+                      num(a["seconds"]) if a else "–"])
+    if split:
+        out += ["Where the latest plain-CLI run of each family spent its wall time (the README's rows; seconds from the "
+                "CLI's and the feed's own timers, the feed's summed over its batches; the driver waits for the physics "
+                "processes, then runs the sensor stage and packs slice by slice, then waits for the writers; "
+                "writer-seconds are summed over the writer processes, which run beside the driver; ntype's press-stroke "
+                "physics runs in the driver, inside its sensor stage):\n",
+                table(["family", "episodes", "file", "wall s", "CLI start s", "wait for physics s", "sensor stage s",
+                       "pack s", "wait for writers s", "writer-seconds", "summary s", "exit s", "stepping alone s"], split)]
     return "\n".join(out)
 
 
