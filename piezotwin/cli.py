@@ -96,6 +96,10 @@ def generate(
         fail(f"--backend must be one of: warp, numpy (got '{backend}')")
     if device not in ("cpu", "cuda", "auto") and not device.startswith("cuda:"):
         fail(f"--device must be one of: cpu, cuda, cuda:N, auto (got '{device}')")
+    from simulate.generation import feed as gpu_feed
+
+    if gpu_feed.feed_likely(cfg, physics, device, backend, executor):
+        gpu_feed.prestart_physics()  # their spawn and imports overlap the engine choice and Warp init below
     from simulate.generation.choice import choose
 
     try:

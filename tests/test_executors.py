@@ -408,3 +408,62 @@ def test_feed_schedules_mixed_lengths_short_first_and_writes_the_serial_files(tm
     ma, mb = read_manifest(ref), read_manifest(out)
     assert [s["episode_seeds"] for s in mb["shards"]] == [s["episode_seeds"] for s in ma["shards"]]
     assert ma["splits"] == mb["splits"] and ma["config_sha256"] == mb["config_sha256"]
+
+
+def test_physics_processes_started_ahead_are_taken_by_the_feed_or_stopped(cfg, serial, tmp_path, monkeypatch):
+    """The CLI starts the feed's physics processes before its engine choice where the feed is likely
+    (`feed.feed_likely`: one NVIDIA GPU, mujoco_warp, a worlds protocol, no CPU flag); `generate_feed` takes them and
+    writes the same files; a run that does not use the feed stops them (terminated, not waited for)."""
+    import os as _os
+
+    from simulate.contact import mujoco_warp as contact_mjw
+    from simulate.generation import feed
+
+    # the judgement, without CUDA: no /proc/driver/nvidia here, then one GPU faked
+    assert not feed.feed_likely(cfg, "auto", "auto", "warp", "local") or _os.path.isdir("/proc/driver/nvidia/gpus")
+    real_listdir = _os.listdir
+    monkeypatch.setattr(feed.os, "listdir", lambda p: ["0000:01:00.0"] if p == "/proc/driver/nvidia/gpus" else real_listdir(p))
+    monkeypatch.setattr(contact_mjw, "available", lambda: True)
+    assert feed.feed_likely(cfg, "auto", "auto", "warp", "local")
+    for args in (("mujoco", "auto", "warp", "local"), ("auto", "cpu", "warp", "local"), ("auto", "auto", "numpy", "local"),
+                 ("auto", "auto", "warp", "ray")):
+        assert not feed.feed_likely(cfg, *args), args
+    ntype = load_scene("ntype")  # press_stroke: its contact stage runs in the driver, no physics processes
+    assert not feed.feed_likely(ntype, "auto", "auto", "warp", "local")
+    # taken by the feed: the same files as the serial loop
+    feed.prestart_physics()
+    pool = feed._PRESTARTED
+    assert pool is not None
+    out = tmp_path / "ahead"
+    executors.generate(cfg, out, workers=2, feed=True)
+    assert feed._PRESTARTED is None
+    _assert_same_dataset(serial, out, 4)
+    # not taken (a per-shard pool runs instead): stopped
+    feed.prestart_physics()
+    procs = list(feed._PRESTARTED._processes.values())
+    assert procs
+    executors.generate(cfg, tmp_path / "pool", workers=2, feed=False)
+    assert feed._PRESTARTED is None and all(not p.is_alive() for p in procs)
+
+
+def test_cli_failure_after_the_physics_started_ahead_stops_them(monkeypatch, tmp_path):
+    # `generate` starts the physics processes before its engine choice; an error after that (here: mujoco_warp asked
+    # for where it is not installed, or a device that does not exist) stops them on the way out
+    from typer.testing import CliRunner
+
+    from piezotwin.cli import app
+    from simulate.generation import feed
+
+    started = []
+    real = feed.prestart_physics
+
+    def prestart():
+        real()
+        started.extend(feed._PRESTARTED._processes.values())
+
+    monkeypatch.setattr(feed, "feed_likely", lambda *a: True)
+    monkeypatch.setattr(feed, "prestart_physics", prestart)
+    res = CliRunner().invoke(app, ["generate", "cnt_pdms", "-o", str(tmp_path / "x"), "--episodes", "2",
+                                   "--physics", "mujoco_warp", "--device", "cuda:7"])
+    assert res.exit_code == 2, res.output
+    assert started and feed._PRESTARTED is None and all(not p.is_alive() for p in started)

@@ -149,6 +149,90 @@ def step_worlds(cfg: SceneConfig, gids: list[int], threads: int = 1, submitted: 
     return protos, out, spent
 
 
+# ---------------------------------------------------------------- physics processes started ahead of the feed
+
+_PRESTARTED = None  # the physics processes `prestart_physics` started, until `generate_feed` takes them
+
+
+def _warm_physics() -> float:
+    """In a physics process started ahead (`prestart_physics`): the imports `step_worlds` needs, mujoco_warp's
+    among them (it defines hundreds of Warp kernels: ~2 s of CPU; in the plain CLI it was paid inside the first
+    batch's "worlds", which MuJoCo Warp stepping alone does not pay); returns the seconds they took."""
+    import time
+
+    t0 = time.perf_counter()
+    try:
+        import mujoco_warp  # noqa: F401
+    except ImportError:  # a CPU engine's feed (tests): nothing to load ahead
+        pass
+    import sensors.data.manifest  # noqa: F401
+    import simulate.contact.load_field  # noqa: F401
+    import simulate.contact.mujoco_warp  # noqa: F401
+    import simulate.generation.run  # noqa: F401
+
+    return time.perf_counter() - t0
+
+
+def feed_likely(cfg: SceneConfig, physics: str, device: str, backend: str, executor: str) -> bool:
+    """Whether a `piezotwin generate` with these flags will likely run the GPU feed with its physics processes, judged
+    without starting CUDA or importing mujoco_warp (the caller then starts them early): the local executor, Warp
+    kernels, no CPU device or C MuJoCo asked for, a scene whose contact stage steps as worlds in those processes,
+    mujoco_warp installed, and exactly one NVIDIA GPU in /proc/driver/nvidia/gpus."""
+    from simulate.contact.load_field import CONTACT_STAGES
+    from simulate.contact.mujoco_warp import available
+
+    g = cfg.generation
+    asked = g.physics if physics == "auto" and "physics" in g.model_fields_set else physics
+    if executor != "local" or backend != "warp" or device == "cpu" or asked == "mujoco":
+        return False
+    if cfg.protocol.kind in CONTACT_STAGES or not available():
+        return False
+    try:
+        return len(os.listdir("/proc/driver/nvidia/gpus")) == 1
+    except OSError:
+        return False
+
+
+def prestart_physics() -> None:
+    """Start the feed's PHYSICS_PROCESSES physics processes now, each importing what `step_worlds` needs
+    (`_warm_physics`), for a caller with start-up of its own before `generate_feed` (the CLI: engine choice and Warp
+    init, 2-3 s on a GPU machine), which their start-up then overlaps; `generate_feed` takes them. Where it does not
+    run, `release_prestarted`."""
+    global _PRESTARTED
+    if _PRESTARTED is not None:
+        return
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    _PRESTARTED = ProcessPoolExecutor(PHYSICS_PROCESSES, mp_context=mp.get_context("spawn"))
+    for _ in range(PHYSICS_PROCESSES):
+        _PRESTARTED.submit(_warm_physics)
+
+
+def _take_prestarted():
+    global _PRESTARTED
+    pool, _PRESTARTED = _PRESTARTED, None
+    return pool
+
+
+def release_prestarted() -> None:
+    """Stop physics processes started ahead that no feed took (the run went another way, or failed first): their
+    imports are cut short, not waited for."""
+    pool = _take_prestarted()
+    if pool is None:
+        return
+    import time
+
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in procs:
+        p.terminate()
+    deadline = time.monotonic() + 5.0  # the pool's own thread may reap them first: poll, not join
+    for p in procs:
+        while p.is_alive() and time.monotonic() < deadline:
+            time.sleep(0.01)
+
+
 PACK_THREADS = 4  # threads copying a piece into its shared block (numpy copies release the GIL)
 _PACKERS = None
 
@@ -602,7 +686,12 @@ def generate_feed(
     ctx = mp.get_context("spawn")
     # the worlds step in their own processes, batches ahead of the load field + sensor chain here (kinds with
     # their own contact stage run it here); they start first, so their start-up overlaps the driver's
-    physics = None if cfg.protocol.kind in CONTACT_STAGES else ProcessPoolExecutor(PHYSICS_PROCESSES, mp_context=ctx)
+    # (or were started ahead by the caller: prestart_physics)
+    if cfg.protocol.kind in CONTACT_STAGES:
+        release_prestarted()
+        physics = None
+    else:
+        physics = _take_prestarted() or ProcessPoolExecutor(PHYSICS_PROCESSES, mp_context=ctx)
     batches = (_schedule(cfg, todo, worlds or feed_worlds(cfg)) if physics
                else [(g, None) for g in _groups(cfg, todo, worlds or feed_worlds(cfg))])
     groups = [g for g, _ in batches]
