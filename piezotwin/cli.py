@@ -98,7 +98,7 @@ def generate(
         fail(f"--device must be one of: cpu, cuda, cuda:N, auto (got '{device}')")
     from simulate.generation import feed as gpu_feed
 
-    if gpu_feed.feed_likely(cfg, physics, device, backend, executor):
+    if gpu_feed.feed_likely(cfg, physics, device, backend, executor, workers):
         gpu_feed.prestart_physics()  # their spawn and imports overlap the engine choice and Warp init below
     from simulate.generation.choice import choose
 

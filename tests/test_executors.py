@@ -425,6 +425,7 @@ def test_physics_processes_started_ahead_are_taken_by_the_feed_or_stopped(cfg, s
     monkeypatch.setattr(feed.os, "listdir", lambda p: ["0000:01:00.0"] if p == "/proc/driver/nvidia/gpus" else real_listdir(p))
     monkeypatch.setattr(contact_mjw, "available", lambda: True)
     assert feed.feed_likely(cfg, "auto", "auto", "warp", "local")
+    assert not feed.feed_likely(cfg, "auto", "auto", "warp", "local", 1)  # one worker: the serial loop
     for args in (("mujoco", "auto", "warp", "local"), ("auto", "cpu", "warp", "local"), ("auto", "auto", "numpy", "local"),
                  ("auto", "auto", "warp", "ray")):
         assert not feed.feed_likely(cfg, *args), args

@@ -173,17 +173,18 @@ def _warm_physics() -> float:
     return time.perf_counter() - t0
 
 
-def feed_likely(cfg: SceneConfig, physics: str, device: str, backend: str, executor: str) -> bool:
+def feed_likely(cfg: SceneConfig, physics: str, device: str, backend: str, executor: str,
+                workers: int | None = None) -> bool:
     """Whether a `piezotwin generate` with these flags will likely run the GPU feed with its physics processes, judged
-    without starting CUDA or importing mujoco_warp (the caller then starts them early): the local executor, Warp
-    kernels, no CPU device or C MuJoCo asked for, a scene whose contact stage steps as worlds in those processes,
-    mujoco_warp installed, and exactly one NVIDIA GPU in /proc/driver/nvidia/gpus."""
+    without starting CUDA or importing mujoco_warp (the caller then starts them early): the local executor with more
+    than one worker (None: chosen), Warp kernels, no CPU device or C MuJoCo asked for, a scene whose contact stage
+    steps as worlds in those processes, mujoco_warp installed, and exactly one NVIDIA GPU in /proc/driver/nvidia/gpus."""
     from simulate.contact.load_field import CONTACT_STAGES
     from simulate.contact.mujoco_warp import available
 
     g = cfg.generation
     asked = g.physics if physics == "auto" and "physics" in g.model_fields_set else physics
-    if executor != "local" or backend != "warp" or device == "cpu" or asked == "mujoco":
+    if executor != "local" or workers == 1 or backend != "warp" or device == "cpu" or asked == "mujoco":
         return False
     if cfg.protocol.kind in CONTACT_STAGES or not available():
         return False
