@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The device calls of session 15 (issue 16: the dataset summary merged into the manifest, no shard reopened; the
 # feed's slices per length group as an A/B), run from the worktree copy on the H200 machine with the packages
-# unpacked in /root/site: `bash bench/h200_s15.sh A|B`. Logs and result files go to $OUT as one tar per mode.
+# unpacked in /root/site: `bash bench/h200_s15.sh A|B|R|T|N`. Logs and result files go to $OUT as one tar per mode.
 source "$(dirname "$0")/h100_lib.sh"  # environment, cli (plain CLI + MuJoCo Warp alone), pack
 warm() {  # a small run that compiles / loads the family's kernels (not timed)
     timeout 200 python3 bench/bench_user_cli.py --families $1 --episodes 256 --tag warm-$1 2>&1 | grep -v "^Module" | tail -1 | cut -c1-300
@@ -34,4 +34,16 @@ T)  # fabric_1 and velostat, each after a warm-up run, with stepping alone (sess
     warm velostat
     cli velostat 8192 h200-s15-velostat-${2:-trim}
     pack T ;;
+N)  # every family's plain CLI as the README's rows measure them (fabric_1 and velostat with stepping alone), each
+    # after a warm-up run, tagged h200-<$2>-<family>: the first GPU run of session 15's last changes (the read
+    # columns, the physics processes started ahead); two calls (fabric_1 takes ~3.5 min with its alone run)
+    for f in ${3:-fabric_1 velostat cnt_pdms ntype}; do
+        warm $f
+        case $f in
+            fabric_1|velostat) cli $f 8192 h200-$2-$f ;;
+            cnt_pdms) cli $f 4096 h200-$2-$f noalone ;;
+            ntype) cli $f 8192 h200-$2-$f noalone ;;
+        esac
+    done
+    pack N ;;
 esac
