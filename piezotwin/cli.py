@@ -100,31 +100,35 @@ def generate(
 
     if gpu_feed.feed_likely(cfg, physics, device, backend, executor, workers):
         gpu_feed.prestart_physics()  # their spawn and imports overlap the engine choice and Warp init below
-    from simulate.generation.choice import choose
-
-    try:
-        chosen = choose(cfg, physics, device, workers, backend,
-                        step_asked=any(str(x).strip().startswith("sampling.physics_timestep_s") for x in (set_ or [])))
-    except ValueError as exc:
-        fail(str(exc))
-    if chosen.overrides:
-        cfg = _load(scene, set_, extra + chosen.overrides)
-    device, workers = chosen.device, chosen.workers
-    if backend == "warp":
-        from sensors.warp_setup import resolve_device
+    try:  # an error before the feed takes the physics processes started ahead stops them (not waited for)
+        from simulate.generation.choice import choose
 
         try:
-            device = resolve_device(device)
+            chosen = choose(cfg, physics, device, workers, backend,
+                            step_asked=any(str(x).strip().startswith("sampling.physics_timestep_s") for x in (set_ or [])))
         except ValueError as exc:
             fail(str(exc))
-    _check_writable(out)
-    _quiet_warp()
-    from simulate.generation.run import check_record
+        if chosen.overrides:
+            cfg = _load(scene, set_, extra + chosen.overrides)
+        device, workers = chosen.device, chosen.workers
+        if backend == "warp":
+            from sensors.warp_setup import resolve_device
 
-    try:
-        check_record(cfg)
-    except ValueError as exc:
-        fail(str(exc))
+            try:
+                device = resolve_device(device)
+            except ValueError as exc:
+                fail(str(exc))
+        _check_writable(out)
+        _quiet_warp()
+        from simulate.generation.run import check_record
+
+        try:
+            check_record(cfg)
+        except ValueError as exc:
+            fail(str(exc))
+    except typer.Exit:
+        gpu_feed.release_prestarted()
+        raise
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
     from simulate.generation.executors import ShardFailedError

@@ -7,7 +7,6 @@ graph has no circle.
 from __future__ import annotations
 
 import os
-import sys
 from pathlib import Path
 from typing import Annotated
 
@@ -40,9 +39,6 @@ err = _Console(stderr=True)
 
 def fail(msg: str) -> None:
     err.print(f"[bold red]error:[/] {msg}", highlight=False, soft_wrap=True)
-    feed = sys.modules.get("simulate.generation.feed")
-    if feed is not None:  # physics processes `generate` started ahead: stopped, not waited for
-        feed.release_prestarted()
     raise typer.Exit(2)
 
 

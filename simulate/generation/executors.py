@@ -42,6 +42,7 @@ from typing import Callable
 
 from scenes import SceneConfig
 from sensors.data.manifest import first_missing_shards
+from simulate.generation.feed import release_prestarted
 from simulate.generation.shards import ShardFailedError, check_written, maybe_inject_fault
 
 EXECUTORS = ("local", "ray")
@@ -118,7 +119,7 @@ def generate(
         raise ValueError(f"max_retries must be >= 0 (got {max_retries})")
     run.check_record(cfg)
     if executor == "local" and workers == 1:
-        _release_prestarted()
+        release_prestarted()
         return run.generate(cfg, out_dir, backend=backend, device=device, on_shard=on_shard)
 
     out = Path(out_dir)
@@ -142,7 +143,7 @@ def generate(
 
             described = generate_feed(cfg, out, todo, workers, max_retries=max_retries, on_shard=on_shard, **kw)
         else:
-            _release_prestarted()
+            release_prestarted()
             if executor == "local":
                 _run_local(cfg, out, todo, workers, max_retries, on_shard, kw)
             else:
@@ -150,7 +151,7 @@ def generate(
         t0 = time.perf_counter()
         LAST_GENERATE_SECONDS["shards"] = t0 - t1
     else:
-        _release_prestarted()
+        release_prestarted()
     path = run.write_dataset_manifest(cfg, out, described)
     LAST_GENERATE_SECONDS["manifest"] = time.perf_counter() - t0
     return path
@@ -159,16 +160,6 @@ def generate(
 # where the last multi-worker `generate` of this process spent its time (for bench/): "checks, imports" (config,
 # finished shards, the executor's choice), "shards", "manifest"
 LAST_GENERATE_SECONDS: dict[str, float] = {}
-
-
-def _release_prestarted() -> None:
-    """Stop the feed's physics processes where the caller started them ahead (`feed.prestart_physics`) and this run
-    does not take them (the module is imported only where they can exist)."""
-    import sys
-
-    feed = sys.modules.get("simulate.generation.feed")
-    if feed is not None:
-        feed.release_prestarted()
 
 
 def _feed_by_default(cfg: SceneConfig) -> bool:
