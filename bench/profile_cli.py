@@ -33,6 +33,9 @@ def main() -> None:
     wall = time.perf_counter() - t0
     buf = io.StringIO()
     buf.write(f"wall {wall:.2f} s; {' '.join(rest)}\n")
+    from simulate.generation.feed import LAST_RUN_SECONDS
+
+    buf.write("feed: " + "; ".join(f"{k} {v:.2f} s" for k, v in LAST_RUN_SECONDS.items()) + "\n")
     for key in ("cumulative", "tottime"):
         pstats.Stats(prof, stream=buf).sort_stats(key).print_stats(60)
     open(out, "w").write(buf.getvalue())
