@@ -37,9 +37,9 @@ def _episodes(directory, n_shards):
     return eps
 
 
-def _assert_same_dataset(a, b, n_shards):
+def _assert_same_dataset(a, b, n_shards, n_episodes=4):
     ea, eb = _episodes(a, n_shards), _episodes(b, n_shards)
-    assert list(ea) == list(eb) and len(ea) == 4
+    assert list(ea) == list(eb) and len(ea) == n_episodes
     for ep in ea:
         assert list(ea[ep]) == list(eb[ep])
         for ch in ea[ep]:
@@ -215,6 +215,31 @@ def test_gpu_feed_equals_serial_and_retries_a_killed_writer(tmp_path, monkeypatc
     assert mb["shards"] == [{k: v for k, v in d.items() if k != "summary"} for d in described]
     # the dataset's summary: the writers' merged in the feed's driver, the files' in the serial loop's, the same
     assert mb["summary"] == ma["summary"] and mb["summary"]["n_samples"] == sum(d["summary"]["n_samples"] for d in described)
+
+
+def test_feed_steps_a_driver_contact_stage_in_full_batches_and_writes_what_the_serial_loop_writes(tmp_path, monkeypatch):
+    """ntype's press_stroke runs its contact stage in the feed's driver: its latency-bound batches cost about the same
+    whatever their size, so the feed makes them full from the first (no ramp of worlds / 4, worlds / 2), and the files
+    are those of the serial loop."""
+    from simulate.generation import feed
+
+    ntype = load_scene("ntype", ["generation.episodes=6", "generation.episodes_per_shard=1", "generation.root_seed=3"])
+    ref = tmp_path / "serial"
+    run.generate(ntype, ref)
+    monkeypatch.setattr(feed, "FEED_WORLDS", 12)  # worlds // 4 = 3 episodes a batch
+    made = []
+    real = feed._groups
+
+    def spy(*a, **k):
+        made.append(real(*a, **k))
+        return made[-1]
+
+    monkeypatch.setattr(feed, "_groups", spy)
+    out = tmp_path / "feed"
+    executors.generate(ntype, out, workers=2, feed=True)
+    assert made == [[[0, 1, 2], [3, 4, 5]]]
+    assert real(ntype, list(range(6)), 3) == [[0], [1, 2, 3], [4, 5]]  # what the ramp would have made
+    _assert_same_dataset(ref, out, 6, 6)
 
 
 def test_gpu_feed_resubmits_when_the_writer_pool_refuses_a_shard(cfg, serial, tmp_path, monkeypatch):

@@ -426,16 +426,17 @@ def feed_worlds(cfg: SceneConfig) -> int:
     return max(FEED_WORLDS, min(FEED_WORLDS * len(freqs), int(BATCH_RAM_FRACTION * ram / per_episode)))
 
 
-def _groups(cfg: SceneConfig, todo: list[int], worlds: int) -> list[list[int]]:
+def _groups(cfg: SceneConfig, todo: list[int], worlds: int, ramp: int | None = None) -> list[list[int]]:
     """Consecutive runs of the shards to make, each with >= `worlds` episodes where the shards allow, after a
-    ramp (worlds / 4, then worlds / 2): the driver and the writers start on a small first batch instead of
-    idling while the first full one steps."""
+    ramp of `ramp` (default RAMP_BATCHES) smaller batches (worlds / 4, then worlds / 2): the driver and the writers
+    start on a small first batch instead of idling while the first full one steps in the physics processes."""
     from simulate.generation.run import episode_ids_of_shard
 
+    ramp = RAMP_BATCHES if ramp is None else ramp
     groups: list[list[int]] = [[]]
     n = 0
     for s in todo:
-        if n >= worlds >> max(0, RAMP_BATCHES - len(groups) + 1):
+        if n >= worlds >> max(0, ramp - len(groups) + 1):
             groups.append([])
             n = 0
         groups[-1].append(s)
@@ -693,8 +694,12 @@ def generate_feed(
         physics = None
     else:
         physics = _take_prestarted() or ProcessPoolExecutor(PHYSICS_PROCESSES, mp_context=ctx)
+    # a kind with its own contact stage steps its worlds here, in the driver: no ramp, since its latency-bound
+    # batches cost about the same whatever their size (STEP_S_FLOOR), so a ramp's small batches each cost a full
+    # one's time and overlap nothing (ntype 8192 episodes on an H200: ramp of 2048, 4096 then 2048 against one
+    # batch, bench/results/logs/profile-ntype-ramp*-h200-s16.txt)
     batches = (_schedule(cfg, todo, worlds or feed_worlds(cfg)) if physics
-               else [(g, None) for g in _groups(cfg, todo, worlds or feed_worlds(cfg))])
+               else [(g, None) for g in _groups(cfg, todo, worlds or feed_worlds(cfg), ramp=0)])
     groups = [g for g, _ in batches]
 
     def step(b: int):
