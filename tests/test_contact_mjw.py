@@ -212,3 +212,23 @@ def test_sensors_only_in_the_recorded_step_and_reused_worlds_cuda(gpu_device):
     for b in (first, again):
         assert np.abs(b[..., 4:7] - every[..., 4:7]).max() < 1e-4 * scale
         np.testing.assert_allclose(b[..., 0:3], every[..., 0:3], atol=1e-8)
+
+
+@needs_mjw
+@pytest.mark.slow
+def test_worlds_are_reused_per_shape_until_released():
+    """`worlds_for` keeps one set of worlds per process for the next batch of the same scene and size; the GPU feed's
+    driver frees them with `release_worlds` once it has stepped its last batch (not at the process's exit)."""
+    from simulate.contact.load_field import build_model
+    from simulate.contact.mjcf import build_mjcf
+    from simulate.contact.mujoco_warp import release_worlds, worlds_for
+
+    cfg = load_scene("cnt_pdms", SHORT)
+    m, mjcf = build_model(cfg), build_mjcf(cfg)
+    first = worlds_for(m, mjcf, 3, "cpu")
+    assert worlds_for(m, mjcf, 3, "cpu") is first
+    other = worlds_for(m, mjcf, 2, "cpu")  # another size replaces them
+    assert other is not first and worlds_for(m, mjcf, 2, "cpu") is other
+    release_worlds()
+    assert worlds_for(m, mjcf, 2, "cpu") is not other
+    release_worlds()

@@ -261,6 +261,13 @@ class StickSlipWorlds(WarpWorlds):
 _CACHED: dict = {}  # (MJCF, n_worlds, device, stick_slip, box_primitive) -> WarpWorlds: one set per process
 
 
+def release_worlds() -> None:
+    """Drop the process's cached worlds (`worlds_for`): their device arrays, CUDA graph and page-locked sensor buffer
+    are freed now, for a caller done stepping that still has other work to wait for (the GPU feed's driver while its
+    writers finish), instead of at the process's exit."""
+    _CACHED.clear()
+
+
 def box_primitive_for(control: str) -> bool:
     """Whether a protocol's presses need MuJoCo Warp's box-box primitive (see WarpWorlds): force control holds
     contacts of a few micrometres; displacement control presses millimetres deep."""

@@ -45,7 +45,7 @@ PHYSICS_PROCESSES = 2  # each steps its own batch: one's host work (protocols, c
 # where the driver's time went in the last generate_feed of this process (for bench/): "start-up" (Warp, the
 # sensor), "simulate" (load field, sensor chain, channel arrays; protocols and physics too for kinds with their
 # own contact stage), "pack", "wait for physics", "wait for writers", "release staging" (the page-locked buffers,
-# freed while the writers finish), "shut down" (the process pools); and,
+# and the worlds a driver stepped itself, freed while the writers finish), "shut down" (the process pools); and,
 # summed over the writer processes, "writers: episodes" (HDF5), "writers: close, fsync", "writers: sha256"; and
 # summed over the physics tasks, "physics: ..." (see step_worlds; the first batch's apart)
 LAST_RUN_SECONDS: dict[str, float] = {}
@@ -826,6 +826,10 @@ def generate_feed(
             from sensors.warp_setup import release_staging
 
             release_staging()
+            if physics is None:  # the driver stepped the worlds itself (a kind with its own contact stage): free them
+                from simulate.contact.mujoco_warp import release_worlds
+
+                release_worlds()
             add("release staging", t0)
             t0 = time.perf_counter()
         collect(None)
