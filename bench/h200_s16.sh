@@ -20,3 +20,11 @@ P)  # ntype 8192: where the driver's "simulate" (press_stroke on MuJoCo Warp, in
     prof ntype-ramp2-b -- generate ntype -o /tmp/prof-out --episodes 8192
     pack P ;;
 esac
+case "$1" in
+Q)  # ntype's plain CLI with full driver batches and its worlds freed early (then stepping nothing alone: its physics
+    # is the driver's); the pack's cost per byte into fresh, populated and reused shared blocks on this host
+    warm ntype
+    cli ntype 8192 h200-s16-ntype-b noalone
+    timeout 200 python3 bench/bench_pack_copy.py --gb 8 --out $OUT/r/pack-copy-h200-s16.json 2>&1 | tee $OUT/r/logs/pack-copy-h200-s16.log
+    pack Q ;;
+esac
