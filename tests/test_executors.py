@@ -363,6 +363,56 @@ def test_feed_hands_each_shard_on_as_its_last_slice_is_packed(monkeypatch):
                 np.testing.assert_array_equal(got[r.ep_id][n], c.data, err_msg=f"{r.ep_id} {n}")
 
 
+def test_pack_into_blocks_populated_ahead_from_the_estimate(monkeypatch):
+    """While a batch's physics steps, the feed populates shared blocks (arenas) for its pack from an estimate made
+    on zero sensordata (`batch_pack_bytes`): the estimate equals the bytes packed (one episode length), the pieces
+    are carved from the arenas at aligned offsets (several per arena), the channels are the plain path's, and an
+    arena is carved from its start again once every piece has come back."""
+    from sensors.data.manifest import episode_seed
+    from simulate.contact import load_field as contact
+    from simulate.generation import feed
+
+    cfg = load_scene("cnt_pdms", FAST[:-3] + ["sensor.readout=taxel", "generation.record=[time,position,force_taxel,adc]",
+                                              "generation.episodes=7", "generation.episodes_per_shard=2", "generation.root_seed=3"])
+    sensor = run.make_sensor(cfg, "warp", "cpu")
+    monkeypatch.setattr(run, "physics_engine", lambda cfg: ("mujoco_warp", "elsewhere"))  # GPU slicing, host load field
+    physics, real = [], contact.simulate_sensors  # one physics run for both paths
+    monkeypatch.setattr(contact, "simulate_sensors", lambda *a: physics[0] if physics else physics.append(real(*a)) or physics[0])
+    need = feed.batch_pack_bytes(cfg, sensor, list(range(7)))
+    monkeypatch.setattr(feed, "ARENA_BYTES", 3 * need // 7 + 4096)  # three episodes' pieces at most per arena
+    pool = feed.BlockPool()
+    try:
+        pool.populate_ahead(3 * feed.ARENA_BYTES)
+        pool._filler.join()
+        arenas = list(pool.arenas)
+        assert len(arenas) == 3 and pool.stop_populating(wait=True) >= need
+        packs = feed.produce(cfg, [0, 1, 2, 3], sensor, pool=pool)
+        in_blocks = sum(int(np.prod(shape)) * np.dtype(dt).itemsize for p in packs for b in p.blocks for _, dt, shape in b[1].values())
+        assert in_blocks == need  # (the time axis, shared by a piece's episodes, stays in process memory)
+        assert set(pool.blocks) == set(arenas)  # every piece went into an arena, no block of its own
+        offsets = [off for p in packs for b in p.blocks for off, _, _ in b[1].values()]
+        assert all(o % feed.ARENA_ALIGN == 0 for o in offsets) and any(o > 0 for o in offsets)
+        assert [pool.arenas[a][1] for a in arenas] == [2, 1, 1]  # pieces lent per arena (2 + 2 + 2 + 1 episodes)
+        seeds = [episode_seed(cfg.generation.root_seed, k) for k in range(7)]
+        ref = run.simulate_episodes(cfg, seeds, [f"ep-{k:06d}" for k in range(7)], sensor, indices=list(range(7)))
+        for p in packs:
+            pieces = p.arrays({n: pool.blocks[n].buf for n in p.block_names})
+            for ep_id, _, piece, row in p.episodes:
+                r = next(r for r in ref if r.ep_id == ep_id)
+                for n, c in r.channels.items():
+                    got = pieces[piece][n][row] if p.specs[n][3] else pieces[piece][n]
+                    np.testing.assert_array_equal(got, c.data, err_msg=f"{ep_id} {n}")
+            pieces = None
+        for p in packs:  # the shards are written: their pieces come back
+            for name in p.block_names:
+                pool.put(name)
+        assert all(pool.arenas[a] == [0, 0] for a in arenas)
+        assert pool.get(need // 7)[0].name == arenas[0]
+    finally:
+        pool.close()
+    assert not pool.blocks and not pool.arenas
+
+
 # fabric_1's staircase, shortened (the same kind, controls and sensor; two levels, 1 s dwells)
 FABRIC_SHORT = ["protocol.stair_return_points_n=[1.0, 2.0]", "protocol.stair_dwell_s=1 s", "generation.episodes=3",
                 "generation.episodes_per_shard=2", "generation.root_seed=7"]

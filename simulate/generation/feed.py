@@ -27,6 +27,7 @@ rerun resumes at the missing ones. Where /dev/shm has no room, the arrays travel
 
 from __future__ import annotations
 
+import mmap
 import os
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -247,36 +248,121 @@ def _pack_pool():
     return _PACKERS
 
 
+MADV_POPULATE_WRITE = 23  # Linux >= 5.14: fault a mapping's pages in writable in one call
+ARENA_BYTES = 512 * 2**20  # blocks populated ahead are this size; pieces are carved from them one after another
+ARENA_ALIGN = 64  # bytes: a carved piece starts on this boundary (every dtype's alignment)
+POPULATE_MARGIN = 1.05  # populated ahead: the estimate (`batch_pack_bytes`) and this share more (alignment, lengths)
+POPULATE_AHEAD = os.environ.get("PIEZOTWIN_POPULATE_AHEAD", "1") == "1"  # the GPU feed populates its first batch's
+# blocks while that batch steps (`BlockPool.populate_ahead`); "0": off (the bench's A/B)
+
+
+def _populate(shm) -> None:
+    """Fault every page of a shared block in, writable: `madvise(MADV_POPULATE_WRITE)` through ctypes (the GIL is
+    released meanwhile), else (an older kernel) one write per page."""
+    import ctypes
+
+    view = np.frombuffer(shm.buf, np.uint8)
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        if libc.madvise(ctypes.c_void_p(view.ctypes.data), ctypes.c_size_t(view.size), MADV_POPULATE_WRITE) == 0:
+            return
+    except (OSError, AttributeError):
+        pass
+    view[:: mmap.PAGESIZE] = 0
+    view = None
+
+
 class BlockPool:
     """The driver's shared-memory blocks, reused batch after batch: a fresh tmpfs page costs a page fault on first
-    touch (copies into new blocks ran at ~1 GB/s, into reused ones at ~5 GB/s on a 2-core host). A block is lent
-    to one packed piece until its shard is written, then returned; close() unlinks them all."""
+    touch (copies into new blocks ran at ~1 GB/s, into reused ones at ~5 GB/s on a 2-core host; 3.1 against
+    15 GB/s on the 16-core H200 host, bench/results/pack-copy-h200-s16.json). A block is lent to one packed piece
+    until its shard is written, then returned; close() unlinks them all.
+
+    `populate_ahead` fills ARENA_BYTES blocks (arenas) in a background thread while the driver has nothing else to
+    do (it waits for its first batch of worlds); `get` then carves pieces from them one after another, and an arena
+    is free again once every piece carved from it has come back."""
 
     def __init__(self) -> None:
+        import threading
         from multiprocessing import shared_memory
 
         self._new = shared_memory.SharedMemory
         self.blocks: dict = {}  # name -> SharedMemory
         self.free: set[str] = set()
+        self.arenas: dict[str, list[int]] = {}  # arena name -> [bytes carved, pieces lent], in the order populated
         self.draining = False
+        self._lock = threading.Lock()  # arenas are added by the populating thread
+        self._stop = threading.Event()
+        self._filler = None
 
-    def get(self, nbytes: int):
-        """A block of at least nbytes (the smallest free one that fits, else a new one), or None where /dev/shm
-        has no room even after dropping the free blocks (the caller then keeps its arrays in process memory)."""
+    def populate_ahead(self, nbytes: int) -> None:
+        """Start populating arenas of ARENA_BYTES, up to nbytes in all, in a background thread (`stop_populating`
+        ends it; the arenas populated by then are used first)."""
+        import threading
+
+        def fill() -> None:
+            made = 0
+            while made < nbytes and not self._stop.is_set():
+                size = min(ARENA_BYTES, -(-(nbytes - made) // mmap.PAGESIZE) * mmap.PAGESIZE)
+                if not _shm_room(size):
+                    break
+                shm = self._new(create=True, size=size)
+                _populate(shm)
+                with self._lock:
+                    self.blocks[shm.name] = shm
+                    self.arenas[shm.name] = [0, 0]
+                made += size
+
+        self._stop.clear()
+        self._filler = threading.Thread(target=fill, name="populate-blocks", daemon=True)
+        self._filler.start()
+
+    def stop_populating(self, wait: bool = False) -> int:
+        """End `populate_ahead` (the arena being populated is finished first, in its thread unless `wait`); returns
+        the bytes of arenas populated so far."""
+        if self._filler is not None:
+            self._stop.set()
+            if wait:
+                self._filler.join()
+                self._filler = None
+        with self._lock:
+            return sum(self.blocks[n].size for n in self.arenas)
+
+    def get(self, nbytes: int) -> tuple:
+        """Room for nbytes: (block, offset), carved from an arena with room where one was populated ahead, else
+        the smallest free block that fits (offset 0), else a new block; (None, 0) where /dev/shm has no room even
+        after dropping the free blocks (the caller then keeps its arrays in process memory)."""
+        with self._lock:
+            for name, (used, lent) in self.arenas.items():
+                start = -(-used // ARENA_ALIGN) * ARENA_ALIGN
+                if start + nbytes <= self.blocks[name].size:
+                    self.arenas[name] = [start + nbytes, lent + 1]
+                    return self.blocks[name], start
         fits = sorted((self.blocks[n].size, n) for n in self.free if self.blocks[n].size >= nbytes)
         if fits:
             self.free.discard(fits[0][1])
-            return self.blocks[fits[0][1]]
+            return self.blocks[fits[0][1]], 0
         if not _shm_room(nbytes):
             for name in list(self.free):
                 self._drop(name)
             if not _shm_room(nbytes):
-                return None
+                return None, 0
         shm = self._new(create=True, size=max(1, nbytes))
         self.blocks[shm.name] = shm
-        return shm
+        return shm, 0
 
     def put(self, name: str) -> None:
+        """A piece of block `name` came back (its shard is written)."""
+        with self._lock:
+            if name in self.arenas:
+                arena = self.arenas[name]
+                arena[1] -= 1
+                if arena[1] == 0:  # every piece carved from it is back: carve from the start again
+                    arena[0] = 0
+                    if self.draining:
+                        del self.arenas[name]
+                        self._drop(name)
+                return
         if name in self.blocks:
             self.free.add(name)
             if self.draining:
@@ -285,9 +371,14 @@ class BlockPool:
     def drain(self) -> None:
         """No more gets: unlink the free blocks now and every block as it comes back (freeing the pages of a
         large pool takes seconds; done while the last shards are written, not after)."""
+        self.stop_populating(wait=True)
         self.draining = True
         for name in list(self.free):
             self._drop(name)
+        with self._lock:
+            for name in [n for n, (_, lent) in self.arenas.items() if lent == 0]:
+                del self.arenas[name]
+                self._drop(name)
 
     def _drop(self, name: str) -> None:
         self.free.discard(name)
@@ -299,6 +390,8 @@ class BlockPool:
         shm.unlink()
 
     def close(self) -> None:
+        self.stop_populating(wait=True)
+        self.arenas.clear()
         for name in list(self.blocks):
             self._drop(name)
 
@@ -334,19 +427,20 @@ class PackedShard:
         """Append a piece, copying its per-episode arrays into a block of `pool` (or into process memory: the
         arrays given may be views of buffers the next slice overwrites)."""
         per_ep = [n for n, spec in self.specs.items() if spec[3]]
-        shm = pool.get(sum(arrays[n].nbytes for n in per_ep)) if pool is not None else None
+        padded = lambda nbytes: -(-nbytes // ARENA_ALIGN) * ARENA_ALIGN  # every array on an aligned offset
+        shm, offset = pool.get(sum(padded(arrays[n].nbytes) for n in per_ep)) if pool is not None else (None, 0)
         if shm is None:
             self.pieces.append({n: np.array(a) for n, a in arrays.items()})
             self.blocks.append(None)
             return
-        layout, offset, copies = {}, 0, []
+        layout, copies = {}, []
         for n in per_ep:
             a = arrays[n]
             dst = np.ndarray(a.shape, a.dtype, buffer=shm.buf, offset=offset)
             step = -(-len(a) // PACK_THREADS)  # rows per thread: the first touch of a block's pages is the cost
             copies += [(dst[r : r + step], a[r : r + step]) for r in range(0, len(a), step)]
             layout[n] = (offset, a.dtype.str, a.shape)
-            offset += a.nbytes
+            offset += padded(a.nbytes)
         list(_pack_pool().map(lambda c: np.copyto(*c), copies))
         copies = dst = None
         self.pieces.append({n: np.array(a) for n, a in arrays.items() if n not in layout})
@@ -530,6 +624,29 @@ def _pack_stage():
 SLICES_PER_LENGTH = int(os.environ.get("PIEZOTWIN_FEED_SLICES", "4"))  # slices (at most SENSOR_SLICE episodes each)
 # per length group of a batch: a modest run's shards are handed to the writers as the last length group's slices
 # finish, not after the whole batch. The variable: the bench's A/B (the writes left after the last slice, its share)
+
+
+PROBE_EPISODES = 64  # protocols drawn to estimate a batch's mean episode length (`batch_pack_bytes`; ~30 us each)
+
+
+def batch_pack_bytes(cfg: SceneConfig, sensor, gids: list[int], threads: int = 1) -> int:
+    """The bytes the pack of episodes `gids` (a batch of the worlds path) will need, estimated before their physics
+    is back: one of them through the load field and the sensor chain on zero sensordata (its channels' shapes and
+    dtypes do not depend on the load; on a GPU it also loads the sensor's kernels, ahead of the first slice), per
+    sample, times the mean length of up to PROBE_EPISODES of their protocols, times their count."""
+    from sensors.data.manifest import episode_seed
+    from simulate.contact.load_field import build_model, read_columns
+    from simulate.generation.run import episode_protocols, simulate_slices
+
+    probe = gids[:: max(1, len(gids) // PROBE_EPISODES)][:PROBE_EPISODES]
+    seeds = [episode_seed(cfg.generation.root_seed, k) for k in probe]
+    protos = episode_protocols(cfg, seeds, probe)
+    n = protos[0].n_samples
+    zero = {n: (np.zeros((1, n, len(read_columns(build_model(cfg))))), np.zeros((1, n)))}
+    per_episode = sum(c.data[0].nbytes for _, _, arrays in simulate_slices(cfg, seeds[:1], sensor, threads, probe[:1],
+                                                                           protos[:1], zero)
+                      for c in arrays.values() if c.per_episode)
+    return int(per_episode / n * np.mean([p.n_samples for p in protos]) * len(gids))
 
 
 def iter_produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, seconds: dict | None = None,
@@ -788,6 +905,12 @@ def generate_feed(
 
     produce = Producer(cfg, sensor, threads, seconds, shared)
     add("start-up", t_start)
+    if physics and POPULATE_AHEAD:  # while the first batch steps: the blocks its pack will fill, populated ahead
+        t0 = time.perf_counter()
+        first = [k for s in groups[0] for k in episode_ids_of_shard(cfg, s)]
+        need = batch_pack_bytes(cfg, sensor, first, threads)
+        shared.populate_ahead(min(int(need * POPULATE_MARGIN) + 2**20, int(ram_budget)))
+        add("populate ahead: estimate", t0)
     try:
         for b, group in enumerate(groups):
             t0 = time.perf_counter()
@@ -805,6 +928,8 @@ def generate_feed(
                     raise RuntimeError(f"the physics process died stepping shards {group} (complete shards are kept: "
                                        "rerun to resume)") from None
                 add("wait for physics (first batch)" if b == 0 else "wait for physics", t0)
+                if b == 0:  # the driver has work now: no more populating (the arenas made so far are used first)
+                    seconds["populate ahead: GB populated (a size, not seconds)"] = shared.stop_populating() / 1e9
                 for k, v in stepped[2].items():  # the physics processes' own split (summed over batches)
                     key = f"physics{' (first batch)' if b == 0 else ''}: {k}"
                     seconds[key] = seconds.get(key, 0.0) + v
