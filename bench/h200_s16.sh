@@ -28,3 +28,15 @@ Q)  # ntype's plain CLI with full driver batches and its worlds freed early (the
     timeout 200 python3 bench/bench_pack_copy.py --gb 8 --out $OUT/r/pack-copy-h200-s16.json 2>&1 | tee $OUT/r/logs/pack-copy-h200-s16.log
     pack Q ;;
 esac
+case "$1" in
+R)  # the first batch's pack blocks populated ahead (feed.BlockPool.populate_ahead): velostat with it (then stepping
+    # alone) and without (PIEZOTWIN_POPULATE_AHEAD=0) on one machine, then cnt_pdms and fabric_1 (then stepping alone)
+    # with it; each family after a 256-episode warm-up run; one tar per step (a limit cuts only the last)
+    warm velostat
+    cli velostat 8192 h200-s16-velostat-pop; pack R1
+    PIEZOTWIN_POPULATE_AHEAD=0 cli velostat 8192 h200-s16-velostat-nopop noalone; pack R2
+    warm cnt_pdms
+    cli cnt_pdms 4096 h200-s16-cnt_pdms-pop noalone; pack R3
+    warm fabric_1
+    cli fabric_1 8192 h200-s16-fabric_1-pop; pack R4 ;;
+esac
