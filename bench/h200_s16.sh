@@ -5,6 +5,7 @@ source "$(dirname "$0")/h100_lib.sh"  # environment, cli (plain CLI + MuJoCo War
 warm() {  # a small run that compiles / loads the family's kernels (not timed)
     timeout 200 python3 bench/bench_user_cli.py --families $1 --episodes 256 --tag warm-$1 2>&1 | grep -v "^Module" | tail -1 | cut -c1-300
 }
+repack() { pack $1; mkdir -p $OUT/r/logs; }  # one tar per step, then go on
 prof() {  # tag, [MODULE.NAME=VALUE ...] -- piezotwin args: the CLI's driver under cProfile
     local tag=$1; shift
     rm -rf /tmp/prof-out
@@ -33,10 +34,10 @@ R)  # the first batch's pack blocks populated ahead (feed.BlockPool.populate_ahe
     # alone) and without (PIEZOTWIN_POPULATE_AHEAD=0) on one machine, then cnt_pdms and fabric_1 (then stepping alone)
     # with it; each family after a 256-episode warm-up run; one tar per step (a limit cuts only the last)
     warm velostat
-    cli velostat 8192 h200-s16-velostat-pop; pack R1
-    PIEZOTWIN_POPULATE_AHEAD=0 cli velostat 8192 h200-s16-velostat-nopop noalone; pack R2
+    cli velostat 8192 h200-s16-velostat-pop; repack R1
+    PIEZOTWIN_POPULATE_AHEAD=0 cli velostat 8192 h200-s16-velostat-nopop noalone; repack R2
     warm cnt_pdms
-    cli cnt_pdms 4096 h200-s16-cnt_pdms-pop noalone; pack R3
+    cli cnt_pdms 4096 h200-s16-cnt_pdms-pop noalone; repack R3
     warm fabric_1
     cli fabric_1 8192 h200-s16-fabric_1-pop; pack R4 ;;
 esac
