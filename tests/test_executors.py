@@ -318,14 +318,10 @@ def test_gpu_feed_bounded_by_host_memory_still_finishes(cfg, serial, tmp_path, m
     _assert_same_dataset(serial, out, 4)
 
 
-def test_feed_hands_each_shard_on_as_its_last_slice_is_packed(monkeypatch):
-    """A modest batch as on MuJoCo Warp (the slicing of the GPU path, here over C MuJoCo's physics: the engine
-    name is patched): its one length group goes in SLICES_PER_LENGTH slices, and `iter_produce` yields each
-    shard right after the slice that completes it (the writers start while the batch's later slices run),
-    with the channels the plain path makes."""
-    from sensors.data.manifest import episode_seed
+def _gpu_slicing_on_cpu(monkeypatch):
+    """A 7-episode cnt_pdms scene (2-episode shards) whose sensor stage is sliced as on MuJoCo Warp, over C MuJoCo's
+    physics run once (the engine name patched; the load field on the host): (cfg, sensor)."""
     from simulate.contact import load_field as contact
-    from simulate.generation import feed
 
     cfg = load_scene("cnt_pdms", FAST[:-3] + ["sensor.readout=taxel", "generation.record=[time,position,force_taxel,adc]",
                                               "generation.episodes=7", "generation.episodes_per_shard=2", "generation.root_seed=3"])
@@ -333,6 +329,18 @@ def test_feed_hands_each_shard_on_as_its_last_slice_is_packed(monkeypatch):
     monkeypatch.setattr(run, "physics_engine", lambda cfg: ("mujoco_warp", "elsewhere"))  # GPU slicing, host load field
     physics, real = [], contact.simulate_sensors  # one physics run for both paths
     monkeypatch.setattr(contact, "simulate_sensors", lambda *a: physics[0] if physics else physics.append(real(*a)) or physics[0])
+    return cfg, sensor
+
+
+def test_feed_hands_each_shard_on_as_its_last_slice_is_packed(monkeypatch):
+    """A modest batch as on MuJoCo Warp (the slicing of the GPU path, here over C MuJoCo's physics: the engine
+    name is patched): its one length group goes in SLICES_PER_LENGTH slices, and `iter_produce` yields each
+    shard right after the slice that completes it (the writers start while the batch's later slices run),
+    with the channels the plain path makes."""
+    from sensors.data.manifest import episode_seed
+    from simulate.generation import feed
+
+    cfg, sensor = _gpu_slicing_on_cpu(monkeypatch)
     events, plain = [], run.simulate_slices
 
     def slices(*a, **k):
@@ -369,15 +377,9 @@ def test_pack_into_blocks_populated_ahead_from_the_estimate(monkeypatch):
     are carved from the arenas at aligned offsets (several per arena), the channels are the plain path's, and an
     arena is carved from its start again once every piece has come back."""
     from sensors.data.manifest import episode_seed
-    from simulate.contact import load_field as contact
     from simulate.generation import feed
 
-    cfg = load_scene("cnt_pdms", FAST[:-3] + ["sensor.readout=taxel", "generation.record=[time,position,force_taxel,adc]",
-                                              "generation.episodes=7", "generation.episodes_per_shard=2", "generation.root_seed=3"])
-    sensor = run.make_sensor(cfg, "warp", "cpu")
-    monkeypatch.setattr(run, "physics_engine", lambda cfg: ("mujoco_warp", "elsewhere"))  # GPU slicing, host load field
-    physics, real = [], contact.simulate_sensors  # one physics run for both paths
-    monkeypatch.setattr(contact, "simulate_sensors", lambda *a: physics[0] if physics else physics.append(real(*a)) or physics[0])
+    cfg, sensor = _gpu_slicing_on_cpu(monkeypatch)
     need = feed.batch_pack_bytes(cfg, sensor, list(range(7)))
     monkeypatch.setattr(feed, "ARENA_BYTES", 3 * need // 7 + 4096)  # three episodes' pieces at most per arena
     pool = feed.BlockPool()
