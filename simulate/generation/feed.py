@@ -908,8 +908,13 @@ def generate_feed(
     if physics and POPULATE_AHEAD:  # while the first batch steps: the blocks its pack will fill, populated ahead
         t0 = time.perf_counter()
         first = [k for s in groups[0] for k in episode_ids_of_shard(cfg, s)]
-        need = batch_pack_bytes(cfg, sensor, first, threads)
-        shared.populate_ahead(min(int(need * POPULATE_MARGIN) + 2**20, int(ram_budget)))
+        try:
+            need = batch_pack_bytes(cfg, sensor, first, threads)
+        except Exception:  # noqa: BLE001 - an estimate only: the batch itself raises whatever is wrong
+            need = None
+            seconds["populate ahead: skipped, the estimate failed"] = 0.0
+        if need is not None:
+            shared.populate_ahead(min(int(need * POPULATE_MARGIN) + 2**20, int(ram_budget)))
         add("populate ahead: estimate", t0)
     try:
         for b, group in enumerate(groups):
