@@ -109,7 +109,8 @@ def main() -> None:
             print(f"{fam}: {n} episodes in {wall:.1f} s, {r.get('samples_per_s', 0):.3g} samples/s, {r['MB_per_s']:.0f} MB/s "
                   f"({r['of_raw']:.0%} of raw {raw:.0f} MB/s)\n  {line}")
             if "timings" in r:
-                print("  " + "; ".join(f"{k} {v:.1f} s" for part in r["timings"].values() for k, v in part.items()))
+                print("  " + "; ".join(f"{k} {v:.1f}{'' if '(a size' in k else ' s'}" for part in r["timings"].values()
+                                       for k, v in part.items()))
             _save(res, a)
     print(f"wrote {_save(res, a)}")
 
