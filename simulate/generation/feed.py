@@ -12,7 +12,10 @@ batches. Here a three-stage pipeline runs over batches of several shards' episod
    while it runs) into shared blocks that a `BlockPool`
    lends until their shard is written (`iter_produce`); each length group goes in SLICES_PER_LENGTH slices and
    a shard goes to the writers as soon as its episodes are packed, and the first batches are smaller
-   (RAMP_BATCHES), so the writers start early (a modest run is one batch);
+   (RAMP_BATCHES), so the writers start early (a modest run is one batch); while the driver waits for the first
+   batch, the blocks its pack will fill are populated ahead (`BlockPool.populate_ahead`, sized by
+   `batch_pack_bytes`). Kinds with their own contact stage (ntype's press_stroke) step their worlds here in the
+   driver instead, in full batches from the first (no processes to overlap, no ramp);
 3. writer processes (spawned; one shard per task, at most PENDING_PER_WRITER queued each) write the shards and
    make their manifest entries.
 
