@@ -29,6 +29,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--data", type=Path, required=True, help="folder holding <task>/ (made or reused)")
     ap.add_argument("--train-device", default="cpu", help="cpu | cuda | auto: where elem_mlp and map_cnn train")
+    ap.add_argument("--centres-win", type=int, default=None, help="the window networks' k-means centres (default: the mode's)")
     a = ap.parse_args()
 
     import torch
@@ -39,11 +40,13 @@ def main() -> None:
     torch.set_num_threads(int(os.environ.get("OMP_NUM_THREADS", "1")))
     alts = tuple(x for x in a.alts.split(",") if x)
     wins = tuple(int(w) for w in a.windows.split(",") if w)
-    NT.MODES[a.mode] = dataclasses.replace(NT.MODES[a.mode], tasks=("paper",), alt_kernels=alts, windows=wins)
+    NT.MODES[a.mode] = dataclasses.replace(NT.MODES[a.mode], tasks=("paper",), alt_kernels=alts, windows=wins,
+                                           **({} if a.centres_win is None else {"centres_win": a.centres_win}))
     dev = resolve_device(a.train_device)
     t0, c0 = time.perf_counter(), time.process_time()
     a.out.mkdir(parents=True, exist_ok=True)
     info = {"seed": a.seed, "models": a.models.split(","), "windows": list(wins), "alt_kernels": list(alts),
+            "centres_win": NT.MODES[a.mode].centres_win,
             "mode": a.mode, "train_device": dev, "threads": torch.get_num_threads(),
             "omp_num_threads": os.environ.get("OMP_NUM_THREADS"), "host": platform.node(), "cpus": os.cpu_count(),
             "torch": torch.__version__, "gpu": torch.cuda.get_device_name(0) if dev.startswith("cuda") else None,
