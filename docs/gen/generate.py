@@ -1390,6 +1390,10 @@ def experiment(family: str) -> str:
                                                                 if re.fullmatch(rf"{o}(-seed\d+)?", kv[0])), 9), kv[0])))
         if runs:
             out.append("### Issue 14 targets by run (the paper's task)\n\n"
+                       "`full-paper*`: Table 1 (session 9) and window 5, the latter re-run in session 16 with the paper's "
+                       "N = 2700 hidden units (today's full mode); `full*`: the device's full runs of session 10 (the "
+                       "element MLP, windows 3 and 7 with the 1000 k-means centres of the full mode then), with Table 1 "
+                       "and window 5 from `full-paper*` (same data and folds).\n\n"
                        + importlib.import_module("learn.experiments.ntype").targets_table(runs) + "\n")
         out += _ntype_linear()
     for p in files:
