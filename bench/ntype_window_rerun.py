@@ -26,7 +26,7 @@ def main() -> None:
     rec = json.loads(a.record.read_text())
     part = json.loads((a.part / "metrics.json").read_text())
     info = json.loads((a.part / "run_info.json").read_text())
-    kept = {**rec, "models": {k: v for k, v in rec["models"].items()},
+    kept = {**rec, "models": dict(rec["models"]),
             "protocol": {**rec["protocol"], "windows": []},
             "timing_s": {k: v for k, v in rec.get("timing_s", {}).items() if k != "rbf_win"}}
     new_w = set(part["models"]["rbf_win"])

@@ -908,18 +908,18 @@ def generate_feed(
 
     produce = Producer(cfg, sensor, threads, seconds, shared)
     add("start-up", t_start)
-    if physics and POPULATE_AHEAD:  # while the first batch steps: the blocks its pack will fill, populated ahead
-        t0 = time.perf_counter()
-        first = [k for s in groups[0] for k in episode_ids_of_shard(cfg, s)]
-        try:
-            need = batch_pack_bytes(cfg, sensor, first, threads)
-        except Exception:  # noqa: BLE001 - an estimate only: the batch itself raises whatever is wrong
-            need = None
-            seconds["populate ahead: skipped, the estimate failed"] = 0.0
-        if need is not None:
-            shared.populate_ahead(min(int(need * POPULATE_MARGIN) + 2**20, int(ram_budget)))
-        add("populate ahead: estimate", t0)
-    try:
+    try:  # (the populating inside: an interrupt there still stops the pools and unlinks the blocks below)
+        if physics and POPULATE_AHEAD:  # while the first batch steps: the blocks its pack will fill, populated ahead
+            t0 = time.perf_counter()
+            first = [k for s in groups[0] for k in episode_ids_of_shard(cfg, s)]
+            try:
+                need = batch_pack_bytes(cfg, sensor, first, threads)
+            except Exception:  # noqa: BLE001 - an estimate only: the batch itself raises whatever is wrong
+                need = None
+                seconds["populate ahead: skipped, the estimate failed"] = 0.0
+            if need is not None:
+                shared.populate_ahead(min(int(need * POPULATE_MARGIN) + 2**20, int(ram_budget)))
+            add("populate ahead: estimate", t0)
         for b, group in enumerate(groups):
             t0 = time.perf_counter()
             select = batches[b][1]
