@@ -371,15 +371,19 @@ def test_feed_hands_each_shard_on_as_its_last_slice_is_packed(monkeypatch):
                 np.testing.assert_array_equal(got[r.ep_id][n], c.data, err_msg=f"{r.ep_id} {n}")
 
 
-def test_pack_into_blocks_populated_ahead_from_the_estimate(monkeypatch):
+@pytest.mark.parametrize("split", [False, True])
+def test_pack_into_blocks_populated_ahead_from_the_estimate(monkeypatch, split):
     """While a batch's physics steps, the feed populates shared blocks (arenas) for its pack from an estimate made
     on zero sensordata (`batch_pack_bytes`): the estimate equals the bytes packed (one episode length), the pieces
-    are carved from the arenas at aligned offsets (several per arena), the channels are the plain path's, and an
-    arena is carved from its start again once every piece has come back."""
+    are carved from the arenas at aligned offsets (several per arena), the channels are the plain path's (each
+    piece copied in the driver's thread, or split over the pack threads: split), and an arena is carved from its
+    start again once every piece has come back."""
     from sensors.data.manifest import episode_seed
     from simulate.generation import feed
 
     cfg, sensor = _gpu_slicing_on_cpu(monkeypatch)
+    monkeypatch.setattr(feed, "PACK_SPLIT_BYTES", 0 if split else 1 << 62)
+    monkeypatch.setattr(feed, "PACK_THREADS", 3)  # more threads than some pieces have rows: empty shares too
     need = feed.batch_pack_bytes(cfg, sensor, list(range(7)))
     monkeypatch.setattr(feed, "ARENA_BYTES", 3 * need // 7 + 4096)  # three episodes' pieces at most per arena
     pool = feed.BlockPool()

@@ -28,3 +28,19 @@ def test_threaded_host_passes_equal_the_one_thread_expressions(monkeypatch):
         assert a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes(), name
     assert float(np.abs(one.pressure_pa).max()) > 0.0  # the field saw the pressed frames
     assert np.signbit(many.contact_force_n[0, 0, 2])  # -(+0.0)
+
+
+def test_threaded_float32_cast_equals_astype(monkeypatch):
+    """The recorded load channels' cast to float32 (`as_float32`, split over threads for a large slice) gives
+    astype's values bit for bit, for a strided view too; a float32 array comes back as it is."""
+    rng = np.random.default_rng(5)
+    a = rng.normal(0.0, 1e3, (29, 13, 6))[:, ::2, 1:4]  # a strided view, as a column of the sensordata
+    a[0, 0, 0], a[1, 1, 1] = np.nan, -np.inf
+    monkeypatch.setattr(lf, "HOST_PASS_MIN_BYTES", 0)
+    monkeypatch.setattr(lf, "HOST_PASS_THREADS", 3)
+    monkeypatch.setattr(lf, "_HOST_PASSES", None)
+    got, ref = lf.as_float32(a), a.astype(np.float32)
+    assert lf._HOST_PASSES is not None
+    assert got.dtype == np.float32 and got.shape == ref.shape and got.tobytes() == ref.tobytes()
+    f = ref.copy()
+    assert lf.as_float32(f) is f

@@ -901,7 +901,16 @@ class Recording:
 
     @property
     def config_sha256(self) -> str:
-        return self.attrs["config_sha256"]
+        if "attrs" in self.__dict__:
+            return self.attrs["config_sha256"]
+        # this attribute alone (a shard check reads nothing else: decoding every attribute of each shard cost the
+        # GPU feed's driver 2.4 s over fabric_1's 1024 shards, bench/results/logs/profile-fabric_1-h200-s17.txt)
+        return self._attrs_named("config_sha256")["config_sha256"]
+
+    @_damage_is_error
+    def _attrs_named(self, *keys: str) -> dict[str, Any]:
+        """Only these attributes, decoded (those present)."""
+        return _get_attrs(self._f, keys)
 
     @property
     def content_sha256(self) -> str:

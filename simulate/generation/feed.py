@@ -238,7 +238,10 @@ def release_prestarted() -> None:
             time.sleep(0.01)
 
 
-PACK_THREADS = 4  # threads copying a piece into its shared block (numpy copies release the GIL)
+PACK_THREADS = 4  # threads copying a piece into its shared block (numpy copies release the GIL) ...
+PACK_SPLIT_BYTES = 8 * 2**20  # ... where it has at least this many bytes; a smaller piece is copied in the driver's
+# thread (a task per array and thread cost more than the copy: fabric_1's 8 KB-per-episode pieces, 53248 tasks and
+# 5.2 s of "pack" for 8192 episodes under cProfile on the H200 host, bench/results/logs/profile-fabric_1-h200-s17.txt)
 _PACKERS = None
 
 
@@ -439,13 +442,21 @@ class PackedShard:
         layout, copies = {}, []
         for n in per_ep:
             a = arrays[n]
-            dst = np.ndarray(a.shape, a.dtype, buffer=shm.buf, offset=offset)
-            step = -(-len(a) // PACK_THREADS)  # rows per thread: the first touch of a block's pages is the cost
-            copies += [(dst[r : r + step], a[r : r + step]) for r in range(0, len(a), step)]
+            copies.append((np.ndarray(a.shape, a.dtype, buffer=shm.buf, offset=offset), a))
             layout[n] = (offset, a.dtype.str, a.shape)
             offset += padded(a.nbytes)
-        list(_pack_pool().map(lambda c: np.copyto(*c), copies))
-        copies = dst = None
+        if sum(a.nbytes for _, a in copies) < PACK_SPLIT_BYTES:  # a small piece: copied here
+            for dst, a in copies:
+                np.copyto(dst, a)
+        else:  # one task per thread, each copying its share of every array's rows (the first touch of a block's
+            # pages is the cost)
+            def share(k: int) -> None:
+                for dst, a in copies:
+                    step = -(-len(a) // PACK_THREADS)
+                    np.copyto(dst[k * step : (k + 1) * step], a[k * step : (k + 1) * step])
+
+            list(_pack_pool().map(share, range(PACK_THREADS)))
+        copies = None
         self.pieces.append({n: np.array(a) for n, a in arrays.items() if n not in layout})
         self.blocks.append((shm.name, layout))
 

@@ -206,15 +206,16 @@ def _records_fields(cfg: SceneConfig) -> bool:
 def channel_arrays(batch: LoadBatch, out: dict[str, np.ndarray], cfg: SceneConfig, sensor: SensorModel) -> dict[str, ChannelArray]:
     """The recorded channels of a batch (generation.record, default all), in file order: load channels, then
     the sensor's outputs; float32 except time (float64) and the sensor's own dtypes."""
-    f32 = np.float32
+    from simulate.contact.load_field import as_float32  # the cast of a large slice split over threads
+
     arrays = {  # made only for the channels kept (the taxel fields may still be on the device otherwise)
         "time": lambda: batch.time_s.astype(np.float64),
-        "target": lambda: batch.target.astype(f32),
-        "position": lambda: batch.indenter_pos_m.astype(f32),
-        "contact_force": lambda: batch.contact_force_n.astype(f32),
-        "deformation": lambda: batch.deformation_m.astype(f32, copy=False),  # float32 already on the GPU path
-        "pressure": lambda: batch.pressure_pa.astype(f32, copy=False),
-        "shear": lambda: batch.shear_pa.astype(f32, copy=False),
+        "target": lambda: as_float32(batch.target),
+        "position": lambda: as_float32(batch.indenter_pos_m),
+        "contact_force": lambda: as_float32(batch.contact_force_n),
+        "deformation": lambda: as_float32(batch.deformation_m),  # float32 already on the GPU path
+        "pressure": lambda: as_float32(batch.pressure_pa),
+        "shear": lambda: as_float32(batch.shear_pa),
     }
     keep = cfg.generation.record
     ch = {}
