@@ -68,7 +68,9 @@ USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w
             "user-cli-h200-s15-cnt-rel.json", "user-cli-h200-s15-fabric-trim.json", "user-cli-h200-s16-fabric_1.json",
             "user-cli-h200-s16-velostat.json", "user-cli-h200-s16-cnt_pdms.json", "user-cli-h200-s16-ntype.json",
             "user-cli-h200-s16-ntype-b.json", "user-cli-h200-s16-velostat-pop.json", "user-cli-h200-s16-velostat-nopop.json",
-            "user-cli-h200-s16-cnt_pdms-pop.json"]
+            "user-cli-h200-s16-cnt_pdms-pop.json", "user-cli-h200-s17-fabric_1.json", "user-cli-h200-s17-fabric_1-old.json",
+            "user-cli-h200-s17-velostat.json", "user-cli-h200-s17-velostat-old.json", "user-cli-h200-s17-velostat-old2.json",
+            "user-cli-h200-s17-velostat-2.json", "user-cli-h200-s17-fabric_1-old2.json", "user-cli-h200-s17-fabric_1-2.json"]
 USER_CLI_STARTUP = [  # session 12: start-up and exit of small runs, the base tree (b833838) against the branch, one machine per pair
     ("user-cli-h100-s12-startup-base-ntype-1.json", "user-cli-h100-s12-startup-ntype-1.json"),
     ("user-cli-h100-s12-startup-base-cnt_pdms-1.json", "user-cli-h100-s12-startup-cnt_pdms-1.json"),
@@ -82,10 +84,11 @@ PHYSICS_PROFILE = "physics-profile-h100-s4.json"
 MULTI_GPU = "gpu-pipeline-h200x2.json"
 # the latest plain-CLI run of each family (issue 16's README table): `piezotwin generate FAMILY -o X --episodes N` with
 # defaults, one GPU machine, after a warm-up run (bench/bench_user_cli.py, bench/bench_mjw_alone.py)
-# (file, family): session 16's final code for cnt_pdms, velostat and ntype; fabric_1's run with stepping alone before
-# the populated blocks (its run with them, 95.6 s against 95.9 s, lost its alone run to the device time)
-USER_CLI_LATEST = [("user-cli-h200-s16-cnt_pdms-pop.json", "cnt_pdms"), ("user-cli-h200-s16-velostat-pop.json", "velostat"),
-                   ("user-cli-h200-s16-ntype-b.json", "ntype"), ("user-cli-h200-s16-fabric_1.json", "fabric_1")]
+# (file, family): session 17's final code for velostat and fabric_1 (each with stepping alone, on a machine whose
+# stepping was slower: fabric_1 75-90 s); session 16's final code for cnt_pdms and ntype (the tail cut of session 17
+# changes no step of theirs that its profile showed as large)
+USER_CLI_LATEST = [("user-cli-h200-s16-cnt_pdms-pop.json", "cnt_pdms"), ("user-cli-h200-s17-velostat.json", "velostat"),
+                   ("user-cli-h200-s16-ntype-b.json", "ntype"), ("user-cli-h200-s17-fabric_1.json", "fabric_1")]
 
 
 # ----------------------------------------------------------------------------------------------- formatting
@@ -271,7 +274,12 @@ def bench_user_cli() -> str:
            "machine after a 256-episode warm-up run; `-s16-*-pop`: the first batch's pack blocks populated while its "
            "worlds step (`BlockPool.populate_ahead`), on a third H200 machine after a 256-episode warm-up run per "
            "family, velostat then stepping alone, then `-s16-velostat-nopop` the same code with it off "
-           "(`PIEZOTWIN_POPULATE_AHEAD=0`: the A/B on one machine); "
+           "(`PIEZOTWIN_POPULATE_AHEAD=0`: the A/B on one machine); `user-cli-h200-s17-*.json`: session 17's A/B on one "
+           "H200 machine of 16 cores, this code (small pieces packed in the driver's thread, one task per pack thread for "
+           "large ones, the load channels' float32 cast over threads, the shard check reading one attribute) against "
+           "session 16's last (c1bcb31, `-old`): `-fabric_1` after a 256-episode warm-up run, `-fabric_1-old`, then "
+           "stepping alone; `-velostat` after a warm-up run, then stepping alone, `-velostat-old`; then in the other order "
+           "without warm-up runs `-velostat-old2`, `-velostat-2`, `-fabric_1-old2`, `-fabric_1-2`; "
            "raw = a plain file of the same bytes "
            "on the same disk right after (issue 16's target: >= 50 % of it, or >= 1e6 samples/s):\n",
            table(["family", "episodes", "file", "engine (the CLI's line)", "s", "samples/s", "MB/s", "of raw MB/s"], rows)]
