@@ -2,10 +2,7 @@
 # The device calls of session 15 (issue 16: the dataset summary merged into the manifest, no shard reopened; the
 # feed's slices per length group as an A/B), run from the worktree copy on the H200 machine with the packages
 # unpacked in /root/site: `bash bench/h200_s15.sh A|B|R|T|N`. Logs and result files go to $OUT as one tar per mode.
-source "$(dirname "$0")/h100_lib.sh"  # environment, cli (plain CLI + MuJoCo Warp alone), pack
-warm() {  # a small run that compiles / loads the family's kernels (not timed)
-    timeout 200 python3 bench/bench_user_cli.py --families $1 --episodes 256 --tag warm-$1 2>&1 | grep -v "^Module" | tail -1 | cut -c1-300
-}
+source "$(dirname "$0")/h100_lib.sh"  # environment, cli (plain CLI + MuJoCo Warp alone), pack, warm
 case "$1" in
 A)  # fabric_1: warm-up, then the plain CLI (default slices) + stepping alone
     warm fabric_1

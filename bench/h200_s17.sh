@@ -1,17 +1,7 @@
 #!/usr/bin/env bash
 # The device calls of session 17 (issue 16), run from the worktree copy on the H200 machine with the packages
 # unpacked in /root/site: `bash bench/h200_s17.sh A|...`. Logs and result files go to $OUT as one tar per step.
-source "$(dirname "$0")/h100_lib.sh"  # environment, cli (plain CLI + MuJoCo Warp alone), pack
-warm() {  # a small run that compiles / loads the family's kernels (not timed)
-    timeout 200 python3 bench/bench_user_cli.py --families $1 --episodes 256 --tag warm-$1 2>&1 | grep -v "^Module" | tail -1 | cut -c1-300
-}
-repack() { pack $1; mkdir -p $OUT/r/logs; }  # one tar per step, then go on
-prof() {  # tag, [MODULE.NAME=VALUE ...] -- piezotwin args: the CLI's driver under cProfile
-    local tag=$1; shift
-    rm -rf /tmp/prof-out
-    timeout 280 python3 bench/profile_cli.py $OUT/r/logs/profile-$tag.txt "$@" 2>&1 | grep -v "^Module" | tail -3
-    rm -rf /tmp/prof-out
-}
+source "$(dirname "$0")/h100_lib.sh"  # environment, cli (plain CLI + MuJoCo Warp alone), pack, warm, repack, prof
 case "$1" in
 A)  # where the driver's serial tail goes (its "simulate": load field, sensor chain, copies back; "pack"): the plain
     # CLI under cProfile for velostat 8192, fabric_1 8192 and cnt_pdms 4096, each after a 256-episode warm-up run
