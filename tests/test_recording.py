@@ -70,8 +70,11 @@ def test_round_trip(tmp_path, compression):
         compression=compression,
     )
     assert p == tmp_path / "r.h5" and not (tmp_path / "r.h5.tmp").exists()
+    with Recording(p) as r:  # the config hash alone (a shard check), before and after every attribute is read
+        assert r.config_sha256 == CONFIG_SHA and "attrs" not in r.__dict__
     with Recording(p) as r:
         a = r.attrs
+        assert r.config_sha256 == CONFIG_SHA
         assert a["format"] == FORMAT and a["format_version"] == rc.FORMAT_VERSION
         assert a["source"] == "real" and a["root_seed"] == 2**64 - 1 and a["shard_index"] == 3
         assert a["config_json"] == CONFIG and a["config_sha256"] == CONFIG_SHA
