@@ -435,6 +435,7 @@ def test_feed_on_fabric_writes_the_serial_files(tmp_path):
     run.generate(cfg, ref)
     executors.generate(cfg, out, workers=2, feed=True)
     assert feed.LAST_RUN_SECONDS["simulate"] > 0
+    assert "protocols (first batch, in the driver)" in feed.LAST_RUN_SECONDS  # handed to the physics process
     for i in range(2):
         with Recording(ref / f"shard-{i:05d}.h5") as ra, Recording(out / f"shard-{i:05d}.h5") as rb:
             assert ra.episode_ids == rb.episode_ids

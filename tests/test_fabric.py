@@ -20,8 +20,10 @@ from sensors.fabric.reference import (
     stack_resistance,
 )
 from simulate.protocols.indenter import (
+    _staircase_draw,
     make_episode_protocol,
     staircase_levels,
+    staircase_turning_points,
     target_waveform,
 )
 
@@ -294,3 +296,55 @@ def test_stream_in_time_chunks_equals_whole_run(cfgs, backend):
     assert np.ptp(whole["dmm_counts"]) > 100 and np.ptp(whole["load_effective"]) > 0.1  # loads move the readings
     for k in whole:
         np.testing.assert_array_equal(got[k], whole[k], err_msg=k)
+
+
+def _staircase_levels_numpy(turning_points, step):
+    """The numpy form staircase_levels had until session 17 (its reference here)."""
+    levels = [float(turning_points[0])]
+    eps = 1e-6 * step
+    for a, b in zip(turning_points[:-1], turning_points[1:]):
+        lo, hi = min(a, b), max(a, b)
+        grid = step * np.arange(np.floor(lo / step) - 1, np.ceil(hi / step) + 2)
+        inner = grid[(grid > lo + eps) & (grid < hi - eps)]
+        levels += list(inner if b > a else inner[::-1]) + [float(b)]
+    return np.round(np.asarray(levels), 9)
+
+
+def _turning_points_numpy(cfg, rng):
+    """staircase_turning_points' draws as they were until session 17 (numpy's round; its reference here)."""
+    p, step = cfg.protocol, cfg.protocol.stair_step_n
+    n = int(rng.integers(p.stair_cycles_min, p.stair_cycles_max + 1))
+    pts = [0.0, float(p.amplitude_max), 0.0]
+    for i in range(1, n):
+        peak = float(np.round(rng.uniform(p.amplitude_min, p.amplitude_max) / step * 10) * step / 10)
+        valley = 0.0 if (i == n - 1 or rng.random() < 0.5) else float(np.round(rng.uniform(0, peak / 2) / step) * step)
+        pts += [max(peak, pts[-1] + step), valley]
+    return pts
+
+
+def test_staircase_levels_equal_the_numpy_form_bit_for_bit(cfgs):
+    """The staircase's levels (Python floats since session 17, for the cost per protocol) are the numpy form's bit for
+    bit: on the paper's series, on every preset's drawn staircases, on points on and next to the step grid, and on
+    other steps."""
+    rng = np.random.default_rng(3)
+    cases = [([0.0, 2.0, 0.0, 1.27, 0.0, 1.0, 0.0, 1.96, 0.0, 0.5, 0.0, 1.7, 0.0], 0.1), ([0.0, 1.0, 1.0, 0.0], 0.1),
+             ([0.7], 0.1), ([0.0, 0.05, 0.0], 0.1)]
+    cases += [(_staircase_draw(cfg, np.random.default_rng(k))["turning_points_n"], cfg.protocol.stair_step_n)
+              for cfg in cfgs.values() for k in range(50)]
+    for _ in range(300):
+        step = float(rng.choice([0.1, 0.05, 0.25, 0.3, 1.0 / 3.0]))
+        pts = [0.0]
+        for _ in range(int(rng.integers(1, 8))):
+            v = float(rng.uniform(0.0, 5.0))
+            v = [v, round(v / step) * step, round(v / step) * step + step * 1e-6, round(v / step) * step - 1e-7][int(rng.integers(4))]
+            pts.append(max(0.0, v))
+        cases.append((pts + [0.0], step))
+    for cfg in cfgs.values():  # the drawn turning points too, over the presets' ranges and other steps
+        for step in (cfg.protocol.stair_step_n, 0.05, 0.3):
+            c = cfg.model_copy(update={"protocol": cfg.protocol.model_copy(update={"stair_step_n": step})})
+            for k in range(100):
+                got, ref = staircase_turning_points(c, np.random.default_rng(k)), _turning_points_numpy(c, np.random.default_rng(k))
+                assert np.asarray(got, np.float64).tobytes() == np.asarray(ref, np.float64).tobytes(), (k, step)
+    for pts, step in cases:
+        got, ref = staircase_levels(pts, step), _staircase_levels_numpy(pts, step)
+        assert got.dtype == ref.dtype and got.tobytes() == ref.tobytes(), (pts, step)

@@ -6,7 +6,7 @@ batches. Here a three-stage pipeline runs over batches of several shards' episod
 
 1. PHYSICS_PROCESSES processes step the next batches (`step_worlds`: protocols, controls, MuJoCo Warp; the
    GPU time-slices between them, so one's host work overlaps the other's physics) and write the sensordata
-   straight into shared memory;
+   straight into shared memory; the first batch's protocols are made by the driver while they import;
 2. the driver runs the load field and the sensor chain of batch b on the same GPU, slice by slice; each slice's
    outputs come back into reused page-locked buffers and are packed (before the next slice runs; PACK_OVERLAP:
    while it runs) into shared blocks that a `BlockPool`
@@ -46,7 +46,8 @@ PENDING_PER_WRITER = 2  # shards handed to the writers and not yet written, per 
 PENDING_RAM_FRACTION = 0.25  # ... and no more bytes pending than this fraction of the host's memory
 RAMP_BATCHES = 2  # batches of worlds / 4 and worlds / 2 episodes before the full ones (see _groups)
 PHYSICS_PROCESSES = 2  # each steps its own batch: one's host work (protocols, controls) overlaps the other's GPU work
-# where the driver's time went in the last generate_feed of this process (for bench/): "start-up" (Warp, the
+# where the driver's time went in the last generate_feed of this process (for bench/): "protocols (first batch, in
+# the driver)" (made while the physics processes import), "start-up" (Warp, the
 # sensor), "simulate" (load field, sensor chain, channel arrays; protocols and physics too for kinds with their
 # own contact stage), "pack", "wait for physics", "wait for writers", "release staging" (the page-locked buffers,
 # and the worlds a driver stepped itself, freed while the writers finish), "shut down" (the process pools); and,
@@ -95,9 +96,10 @@ def _views(buf, where: list[tuple[int, str, tuple[int, ...]]]) -> list[np.ndarra
 
 
 def step_worlds(cfg: SceneConfig, gids: list[int], threads: int = 1, submitted: float | None = None,
-                select: Select | None = None) -> tuple[list, dict, dict]:
-    """Physics task (in the feed's physics process): the protocols of episodes `gids` (with `select`, only those
-    it keeps, in the order of gids; each protocol's `index` is its episode's id) and, per length group,
+                select: Select | None = None, protos: list | None = None) -> tuple[list, dict, dict]:
+    """Physics task (in the feed's physics process): the protocols of episodes `gids` (made here unless `protos`
+    brings them, made by the driver; with `select`, only those it keeps, in the order of gids; each protocol's
+    `index` is its episode's id) and, per length group,
     their (sensordata, target) from `simulate_sensors`, written straight into a shared-memory block the
     receiver unlinks: ({n_samples: (block name, layout)} or the arrays themselves where /dev/shm has no room);
     and where the task's time went ("waiting to start" since `submitted`, a time.time(), "imports", "protocols",
@@ -112,7 +114,8 @@ def step_worlds(cfg: SceneConfig, gids: list[int], threads: int = 1, submitted: 
     from simulate.generation.run import episode_protocols, physics_runs
 
     t1 = time.time()
-    protos = episode_protocols(cfg, [episode_seed(cfg.generation.root_seed, k) for k in gids], gids)
+    if protos is None:
+        protos = episode_protocols(cfg, [episode_seed(cfg.generation.root_seed, k) for k in gids], gids)
     if select is not None:
         protos = [p for p in protos if select.keeps(p.n_samples)]
     t2 = time.time()
@@ -801,9 +804,11 @@ def generate_feed(
     from sensors.warp_setup import init_warp
     from simulate.contact.load_field import CONTACT_STAGES
     from simulate.contact.mjcf import build_mjcf
+    from sensors.data.manifest import episode_seed
     from simulate.generation.run import (
         config_sha256,
         episode_ids_of_shard,
+        episode_protocols,
         shard_sensor_attrs,
     )
     from simulate.generation.shards import ShardFailedError, check_written
@@ -824,7 +829,11 @@ def generate_feed(
         release_prestarted()
         physics = None
     else:
-        physics = _take_prestarted() or ProcessPoolExecutor(PHYSICS_PROCESSES, mp_context=ctx)
+        physics = _take_prestarted()
+        if physics is None:  # started here: their imports begin now, as prestart_physics's would
+            physics = ProcessPoolExecutor(PHYSICS_PROCESSES, mp_context=ctx)
+            for _ in range(PHYSICS_PROCESSES):
+                physics.submit(_warm_physics)
     # a kind with its own contact stage steps its worlds here, in the driver: no ramp, since its latency-bound
     # batches cost about the same whatever their size (STEP_S_FLOOR), so a ramp's small batches each cost a full
     # one's time and overlap nothing (ntype 8192 episodes on an H200: ramp of 2048, 4096 then 2048 against one
@@ -833,12 +842,22 @@ def generate_feed(
                else [(g, None) for g in _groups(cfg, todo, worlds or feed_worlds(cfg), ramp=0)])
     groups = [g for g, _ in batches]
 
-    def step(b: int):
+    def step(b: int, protos: list | None = None):
         return physics.submit(step_worlds, cfg, [k for s in groups[b] for k in episode_ids_of_shard(cfg, s)], threads,
-                              time.time(), batches[b][1])
+                              time.time(), batches[b][1], protos)
 
-    ahead = [step(b) for b in range(min(PHYSICS_PROCESSES, len(groups)))] if physics else []
+    ahead = []
     try:
+        if physics:
+            # the first batch's protocols are made here while the physics processes still import (their "waiting to
+            # start", 2.6-4.4 s on the H200 host against 1.1-2.3 s for 8192 protocols there:
+            # bench/results/user-cli-h200-s17-*.json), so its worlds start that much sooner; later batches make their own
+            t0 = time.perf_counter()
+            first = [k for s in groups[0] for k in episode_ids_of_shard(cfg, s)]
+            first_protos = episode_protocols(cfg, [episode_seed(cfg.generation.root_seed, k) for k in first], first)
+            add("protocols (first batch, in the driver)", t0)
+            ahead = [step(b, first_protos if b == 0 else None) for b in range(min(PHYSICS_PROCESSES, len(groups)))]
+            first_protos = None
         if backend == "warp":
             init_warp()
         sensor = make_sensor(cfg, backend, device)

@@ -98,8 +98,9 @@ def staircase_turning_points(cfg: SceneConfig, rng: np.random.Generator | None =
     n = int(rng.integers(p.stair_cycles_min, p.stair_cycles_max + 1))
     pts = [0.0, float(p.amplitude_max), 0.0]
     for i in range(1, n):
-        peak = float(np.round(rng.uniform(p.amplitude_min, p.amplitude_max) / step * 10) * step / 10)
-        valley = 0.0 if (i == n - 1 or rng.random() < 0.5) else float(np.round(rng.uniform(0, peak / 2) / step) * step)
+        # Python's round: numpy's (half to even) on a float, without its per-call cost
+        peak = round(rng.uniform(p.amplitude_min, p.amplitude_max) / step * 10) * step / 10
+        valley = 0.0 if (i == n - 1 or rng.random() < 0.5) else round(rng.uniform(0, peak / 2) / step) * step
         pts += [max(peak, pts[-1] + step), valley]
     return pts
 
@@ -107,14 +108,25 @@ def staircase_turning_points(cfg: SceneConfig, rng: np.random.Generator | None =
 def staircase_levels(turning_points: list[float], step: float) -> np.ndarray:
     """Force levels visited one dwell each: from each turning point to the next in `step` increments, the
     turning point itself last, on the step grid (0 -> 1.27 -> 0 visits 0.1, ..., 1.2, 1.27, 1.2, ..., 0.1, 0). The first level is turning_points[0]."""
-    levels = [float(turning_points[0])]
+    tp = np.asarray(turning_points, np.float64)
+    if len(tp) < 2:
+        return np.round(tp[:1].copy(), 9)
+    step = float(step)
     eps = 1e-6 * step
-    for a, b in zip(turning_points[:-1], turning_points[1:]):
-        lo, hi = min(a, b), max(a, b)
-        grid = step * np.arange(np.floor(lo / step) - 1, np.ceil(hi / step) + 2)
-        inner = grid[(grid > lo + eps) & (grid < hi - eps)]
-        levels += list(inner if b > a else inner[::-1]) + [float(b)]
-    return np.round(np.asarray(levels), 9)
+    # every segment's grid at once (8192 fabric_1 protocols: a loop over segments cost ~0.3 ms an episode); per
+    # segment the grid step * k, k in [floor(lo / step) - 1, ceil(hi / step) + 2), walked downwards on a descending
+    # segment, keeps the values strictly inside (lo, hi) by eps, and its end point follows
+    a, b = tp[:-1], tp[1:]
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    k0, k1 = np.floor(lo / step) - 1, np.ceil(hi / step) + 2
+    n = (k1 - k0).astype(np.int64)
+    seg = np.repeat(np.arange(len(a)), n)
+    within = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+    grid = step * np.where((b > a)[seg], k0[seg] + within, k1[seg] - 1 - within)
+    keep = (grid > lo[seg] + eps) & (grid < hi[seg] - eps)
+    inner = grid[keep]
+    levels = np.insert(inner, np.cumsum(np.bincount(seg[keep], minlength=len(a))), b)
+    return np.round(np.concatenate([tp[:1], levels]), 9)
 
 
 def _staircase_draw(cfg: SceneConfig, rng: np.random.Generator) -> dict:
