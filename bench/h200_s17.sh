@@ -28,3 +28,8 @@ B)  # the driver's tail cut (pack copies in the driver's thread for small pieces
     cli velostat 8192 h200-s17-velostat; repack B4
     old velostat 8192 h200-s17-velostat-old; pack B5 ;;
 esac
+case "$1" in
+D)  # the first batch's protocols made by the driver while the physics processes import: velostat 2048 after a warm-up
+    warm velostat
+    cli velostat 2048 h200-s17-velostat-2048-protos noalone; pack D ;;
+esac
