@@ -70,7 +70,8 @@ USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w
             "user-cli-h200-s16-ntype-b.json", "user-cli-h200-s16-velostat-pop.json", "user-cli-h200-s16-velostat-nopop.json",
             "user-cli-h200-s16-cnt_pdms-pop.json", "user-cli-h200-s17-fabric_1.json", "user-cli-h200-s17-fabric_1-old.json",
             "user-cli-h200-s17-velostat.json", "user-cli-h200-s17-velostat-old.json", "user-cli-h200-s17-velostat-old2.json",
-            "user-cli-h200-s17-velostat-2.json", "user-cli-h200-s17-fabric_1-old2.json", "user-cli-h200-s17-fabric_1-2.json"]
+            "user-cli-h200-s17-velostat-2.json", "user-cli-h200-s17-fabric_1-old2.json", "user-cli-h200-s17-fabric_1-2.json",
+            "user-cli-h200-s17-velostat-2048-protos.json"]
 USER_CLI_STARTUP = [  # session 12: start-up and exit of small runs, the base tree (b833838) against the branch, one machine per pair
     ("user-cli-h100-s12-startup-base-ntype-1.json", "user-cli-h100-s12-startup-ntype-1.json"),
     ("user-cli-h100-s12-startup-base-cnt_pdms-1.json", "user-cli-h100-s12-startup-cnt_pdms-1.json"),
@@ -280,6 +281,8 @@ def bench_user_cli() -> str:
            "session 16's last (c1bcb31, `-old`): `-fabric_1` after a 256-episode warm-up run, `-fabric_1-old`, then "
            "stepping alone; `-velostat` after a warm-up run, then stepping alone, `-velostat-old`; then in the other order "
            "without warm-up runs `-velostat-old2`, `-velostat-2`, `-fabric_1-old2`, `-fabric_1-2`; "
+           "`-velostat-2048-protos`: the final session-17 code (the first batch's protocols made by the driver while "
+           "the physics processes import) on a second H200 machine after a 256-episode warm-up run; "
            "raw = a plain file of the same bytes "
            "on the same disk right after (issue 16's target: >= 50 % of it, or >= 1e6 samples/s):\n",
            table(["family", "episodes", "file", "engine (the CLI's line)", "s", "samples/s", "MB/s", "of raw MB/s"], rows)]
