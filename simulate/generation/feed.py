@@ -800,11 +800,11 @@ def generate_feed(
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
 
+    from sensors.data.manifest import episode_seed
     from sensors.registry import make_sensor
     from sensors.warp_setup import init_warp
     from simulate.contact.load_field import CONTACT_STAGES
     from simulate.contact.mjcf import build_mjcf
-    from sensors.data.manifest import episode_seed
     from simulate.generation.run import (
         config_sha256,
         episode_ids_of_shard,
