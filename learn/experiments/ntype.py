@@ -836,7 +836,7 @@ def _task_report(m: dict[str, Any], h: str = "##", plots_dir: str = "") -> str:
         lines.append(md_table(["spread"] + ks, rows))
     lines += ["", f"{h} Table 3: sliding windows (ours at each window's best spread | paper at spread 7)", ""]
     by_w = P.get("centres_win_by_window")  # a record whose windows ran with different centres (bench/ntype_window_rerun.py)
-    centres = ", ".join(f"window {w}: {c}" for w, c in by_w.items()) if by_w else P["centres_win"]
+    centres = ", ".join(f"window {w}: {c}" for w, c in by_w.items()) if by_w and len(set(by_w.values())) > 1 else P["centres_win"]
     lines += [f"One RBFNN shared by all 36 elements ({centres} centres): input the 3 resistances of the element and "
               "of its nearest neighbours (window 1 = the element alone, our extra row), output its (F_x, F_y, F_z).", ""]
     if "rbf_win" in R:
