@@ -1,5 +1,5 @@
-"""Replace the window networks of a recorded ntype run (`bench/results/experiments/ntype-full-paper*.json`: Table 1
-and window 5 of the paper's task) by a run of the same windows on the same data and folds with other settings
+"""Replace window networks of a recorded ntype run (`bench/results/experiments/ntype-full*.json`, the paper's task)
+by a run of those windows (added where the record has none) on the same data and folds with other settings
 (`bench/ntype_full_part.py --models rbf_win --centres-win N`), through `learn.experiments.ntype.merge_runs` (the
 findings recomputed on the union); the record's machine note says what ran where.
 

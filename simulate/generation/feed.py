@@ -646,18 +646,20 @@ SLICES_PER_LENGTH = int(os.environ.get("PIEZOTWIN_FEED_SLICES", "4"))  # slices 
 PROBE_EPISODES = 64  # protocols drawn to estimate a batch's mean episode length (`batch_pack_bytes`; ~30 us each)
 
 
-def batch_pack_bytes(cfg: SceneConfig, sensor, gids: list[int], threads: int = 1) -> int:
+def batch_pack_bytes(cfg: SceneConfig, sensor, gids: list[int], threads: int = 1, protos: list | None = None) -> int:
     """The bytes the pack of episodes `gids` (a batch of the worlds path) will need, estimated before their physics
     is back: one of them through the load field and the sensor chain on zero sensordata (its channels' shapes and
     dtypes do not depend on the load; on a GPU it also loads the sensor's kernels, ahead of the first slice), per
-    sample, times the mean length of up to PROBE_EPISODES of their protocols, times their count."""
+    sample, times the mean length of up to PROBE_EPISODES of their protocols, times their count. protos: those of
+    `gids`, where made already (else the probed ones are drawn here)."""
     from sensors.data.manifest import episode_seed
     from simulate.contact.load_field import build_model, read_columns
     from simulate.generation.run import episode_protocols, simulate_slices
 
-    probe = gids[:: max(1, len(gids) // PROBE_EPISODES)][:PROBE_EPISODES]
+    every = max(1, len(gids) // PROBE_EPISODES)
+    probe = gids[::every][:PROBE_EPISODES]
     seeds = [episode_seed(cfg.generation.root_seed, k) for k in probe]
-    protos = episode_protocols(cfg, seeds, probe)
+    protos = episode_protocols(cfg, seeds, probe) if protos is None else protos[::every][:PROBE_EPISODES]
     n = protos[0].n_samples
     zero = {n: (np.zeros((1, n, len(read_columns(build_model(cfg))))), np.zeros((1, n)))}
     per_episode = sum(c.data[0].nbytes for _, _, arrays in simulate_slices(cfg, seeds[:1], sensor, threads, probe[:1],
@@ -857,7 +859,6 @@ def generate_feed(
             first_protos = episode_protocols(cfg, [episode_seed(cfg.generation.root_seed, k) for k in first], first)
             add("protocols (first batch, in the driver)", t0)
             ahead = [step(b, first_protos if b == 0 else None) for b in range(min(PHYSICS_PROCESSES, len(groups)))]
-            first_protos = None
         if backend == "warp":
             init_warp()
         sensor = make_sensor(cfg, backend, device)
@@ -941,15 +942,15 @@ def generate_feed(
     try:  # (the populating inside: an interrupt there still stops the pools and unlinks the blocks below)
         if physics and POPULATE_AHEAD:  # while the first batch steps: the blocks its pack will fill, populated ahead
             t0 = time.perf_counter()
-            first = [k for s in groups[0] for k in episode_ids_of_shard(cfg, s)]
             try:
-                need = batch_pack_bytes(cfg, sensor, first, threads)
+                need = batch_pack_bytes(cfg, sensor, first, threads, first_protos)
             except Exception:  # noqa: BLE001 - an estimate only: the batch itself raises whatever is wrong
                 need = None
                 seconds["populate ahead: skipped, the estimate failed"] = 0.0
             if need is not None:
                 shared.populate_ahead(min(int(need * POPULATE_MARGIN) + 2**20, int(ram_budget)))
             add("populate ahead: estimate", t0)
+        first_protos = None
         for b, group in enumerate(groups):
             t0 = time.perf_counter()
             select = batches[b][1]
