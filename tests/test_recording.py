@@ -430,3 +430,64 @@ def test_files_of_the_earlier_storage_read_the_same(tmp_path, monkeypatch, compr
                 assert a.read(ep, name).tobytes() == b.read(ep, name).tobytes() == eps[ep][name].data.tobytes()
         assert a.compute_content_sha256() == b.compute_content_sha256() == a.content_sha256 == b.content_sha256
     assert new.stat().st_size < old.stat().st_size
+
+
+@pytest.mark.parametrize("compression", ["lzf", "lz4", "none"])
+@pytest.mark.parametrize("fast", [True, False])
+def test_zero_chunks_are_not_stored_and_read_back_the_same(tmp_path, monkeypatch, compression, fast):
+    """A time series' all-zero chunks are left unwritten (HDF5 reads them as the fill value 0): the data read back
+    are the same bytes (-0.0 and NaN stay, being nonzero bytes), the content hash and stored summary are those of
+    writing every chunk, and the file is smaller. Both write paths: the episode template (fast) and the general one
+    (an episode with an empty channel)."""
+    monkeypatch.setattr(rc, "_CHUNK_MAX_BYTES", 64 * 8 * 4)  # 64 frames of (8,) float32 per chunk
+    n = 337  # no divisor near 64 frames: six chunks of 57, the last one short (52)
+    rng = np.random.default_rng(5)
+    mixed = rng.normal(size=(n, 8)).astype(np.float32)
+    mixed[57:171] = 0.0  # chunks 1 and 2 zero: runs [0, 1) and [3, 6) written
+    mixed[-3:] = 0.0  # the short chunk partly zero: written
+    signed = np.zeros((n, 8), np.float32)
+    signed[200, 3] = -0.0  # a negative zero in chunk 3 only
+    nan_tail = np.zeros((n, 8), np.float32)
+    nan_tail[-1, 0] = np.nan  # in the short last chunk only
+    ep = {"time": Channel(np.arange(n) / 100.0, "s", ("time",)),
+          "shear": Channel(np.zeros((n, 8, 2), np.float32), "Pa", ("time", "taxel", "xy")),
+          "mixed": Channel(mixed, "Pa", ("time", "taxel")),
+          "signed": Channel(signed, "Pa", ("time", "taxel")),
+          "nan_tail": Channel(nan_tail, "Pa", ("time", "taxel")),
+          "adc": Channel(np.zeros((n, 3), np.int16), "counts", ("time", "channel"))}
+    if not fast:
+        ep["empty"] = Channel(np.zeros((0,), np.float32), "1", ("time",))
+    kw = dict(source="sim", config_json=CONFIG, root_seed=1, shard_index=0, sensor_attrs={"family": "velostat"},
+              compression=compression)
+    skipped = write_recording(tmp_path / "skip.h5", {"ep-0": ep}, **kw)
+    monkeypatch.setattr(rc, "SKIP_ZERO_CHUNKS", False)
+    whole = write_recording(tmp_path / "whole.h5", {"ep-0": ep}, **kw)
+    with Recording(skipped) as a, Recording(whole) as b:
+        for name, ch in ep.items():
+            assert a.read("ep-0", name).tobytes() == b.read("ep-0", name).tobytes() == ch.data.tobytes(), name
+        assert np.signbit(a.read("ep-0", "signed")[200, 3]) and np.isnan(a.read("ep-0", "nan_tail")[-1, 0])
+        assert a.compute_content_sha256() == a.content_sha256 == b.content_sha256
+        sa, sb = a.summary(from_data=False), b.summary(from_data=False)
+        assert sa["channels"] == sb["channels"] == a.summary()["channels"] and sa["n_samples"] == sb["n_samples"]
+        d = a._f["episodes/ep-0"]
+        assert d["shear"].id.get_storage_size() == 0 and d["adc"].id.get_storage_size() == 0
+        assert d["mixed"].chunks == (57, 8)
+        stored = {name: d[name].id.get_num_chunks() for name in ("mixed", "signed", "nan_tail", "time")}
+        assert stored == {"mixed": 4, "signed": 1, "nan_tail": 1, "time": 2}  # time: two chunks, both nonzero
+        assert b._f["episodes/ep-0/mixed"].id.get_num_chunks() == 6
+    assert skipped.stat().st_size < whole.stat().st_size
+
+
+def test_nonzero_chunks_reads_every_byte():
+    """The per-chunk test sees one nonzero byte anywhere, in whole chunks (any word size) and in the short last one."""
+    for shape, rows, dtype in [((10, 3), 4, np.float32), ((9, 5), 3, np.int16), ((7, 1), 2, np.uint8), ((5, 2, 2), 5, np.float64)]:
+        a = np.zeros(shape, dtype)
+        assert not rc._nonzero_chunks(a, rows).any()
+        flat = a.reshape(-1).view(np.uint8)
+        per_frame = flat.size // shape[0]
+        for byte in range(flat.size):
+            flat[:] = 0
+            flat[byte] = 1
+            want = np.zeros(-(-shape[0] // rows), bool)
+            want[byte // per_frame // rows] = True
+            assert (rc._nonzero_chunks(a, rows) == want).all(), (shape, byte)

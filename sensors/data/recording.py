@@ -14,7 +14,10 @@ Time series are chunked along time in blocks of whole frames of at most 1 MiB (t
 else a length that divides T where one is close to the cap, or T in equal parts), compressed with lzf + shuffle by default (gzip level 1
 + shuffle, Blosc2 zstd / lz4 level 1 + shuffle, or none). Every chunked dataset carries HDF5's Fletcher-32
 checksum per chunk: damaged data fails to read (RecordingError naming the file) instead of reading back as wrong
-numbers.
+numbers. A chunk whose bytes are all zero is not written (`_write_rows`): HDF5 leaves it unallocated and every
+reader gets the dataset's fill value, 0, back for it, so the data read are the same bytes; the filters (shuffle,
+codec, checksum) then skip it. The shear field of a pad pressed along its normal (velostat, cnt_pdms, fabric) is
+zero throughout: 48 / 33 / 10 % of those episodes' bytes (bench/results/writer-zero-chunks-cpu.json).
 
 Storage (not schema): files are written with HDF5's 1.10 object formats (``libver=("v110", "latest")``: checksummed
 object headers, a chunk index without a B-tree for one-chunk datasets), readable by HDF5 >= 1.10 (any h5py >= 2.8);
@@ -393,17 +396,67 @@ def _chunk_len(n_time: int, frame_bytes: int) -> int:
     return -(-n_time // -(-n_time // target))
 
 
+# Chunks of all-zero bytes are left unwritten (read back as the fill value 0: the same bytes). Off only to measure
+# what it saves (bench): PIEZOTWIN_SKIP_ZERO_CHUNKS=0, read when this module is imported (the writer processes too)
+SKIP_ZERO_CHUNKS = os.environ.get("PIEZOTWIN_SKIP_ZERO_CHUNKS", "1") == "1"
+
+
+def _time_chunk_rows(data: np.ndarray) -> int:
+    """Frames per chunk of a time series `data` (T, ...) as `_write_channel` lays it out."""
+    frame_bytes = int(np.prod(data.shape[1:], dtype=np.int64)) * data.dtype.itemsize
+    return _chunk_len(data.shape[0], frame_bytes)
+
+
+def _nonzero_chunks(data: np.ndarray, rows: int) -> np.ndarray:
+    """Per chunk of `rows` frames along axis 0 of a C-contiguous array: whether any of its bytes is nonzero (-0.0
+    and NaN are nonzero bytes). Compared as the widest unsigned words that divide a chunk (~0.05 ms per MB)."""
+    n = data.shape[0]
+    raw = data.reshape(-1).view(np.uint8)
+    per = raw.size // n * rows  # bytes per whole chunk
+    full = n // rows
+    word = next(w for w in (8, 4, 2, 1) if per % w == 0)
+    out = np.empty(-(-n // rows), bool)
+    if full:
+        out[:full] = raw[: full * per].view(f"<u{word}").reshape(full, -1).max(axis=1) != 0
+    if len(out) > full:
+        out[full] = raw[full * per:].max() != 0
+    return out
+
+
+def _write_rows(dsid: h5d.DatasetID, data: np.ndarray, rows: int | None) -> None:
+    """Write `data` into the chunked dataset `dsid` (chunks of `rows` frames along axis 0; None: not a time series,
+    written whole), leaving its all-zero chunks unwritten (SKIP_ZERO_CHUNKS): runs of nonzero chunks are written
+    one hyperslab each, a dataset with no zero chunk in one call."""
+    data = np.ascontiguousarray(data)
+    if not SKIP_ZERO_CHUNKS or rows is None or data.ndim == 0 or data.size == 0:
+        dsid.write(h5s.ALL, h5s.ALL, data)
+        return
+    nz = _nonzero_chunks(data, rows)
+    if nz.all():
+        dsid.write(h5s.ALL, h5s.ALL, data)
+        return
+    n, rest = data.shape[0], data.shape[1:]
+    edges = np.flatnonzero(np.diff(np.concatenate([[False], nz, [False]]).astype(np.int8)))
+    for c0, c1 in zip(edges[::2], edges[1::2]):  # runs of nonzero chunks [c0, c1)
+        r0, r1 = int(c0) * rows, min(int(c1) * rows, n)
+        fspace = dsid.get_space()
+        fspace.select_hyperslab((r0,) + (0,) * len(rest), (r1 - r0,) + rest)
+        dsid.write(h5s.create_simple((r1 - r0,) + rest), fspace, data[r0:r1])
+
+
 def _write_channel(
     group: h5py.Group, name: str, ch: Channel, compression: str, *, with_data: bool = True, checksum: bool = True
 ) -> h5py.Dataset:
     """Create the dataset of one channel, with its attributes; ``with_data=False``: no data written.
-    ``checksum``: Fletcher-32 per chunk on chunked datasets."""
+    ``checksum``: Fletcher-32 per chunk on chunked datasets. A time series' all-zero chunks are not written
+    (`_write_rows`)."""
     data = ch.data
     kwargs: dict[str, Any] = {}
+    rows = None
     if data.ndim >= 1 and data.size > 0:
         if ch.is_time_series:
-            frame_bytes = int(np.prod(data.shape[1:], dtype=np.int64)) * data.dtype.itemsize
-            kwargs["chunks"] = (_chunk_len(data.shape[0], frame_bytes),) + data.shape[1:]
+            rows = _time_chunk_rows(data)
+            kwargs["chunks"] = (rows,) + data.shape[1:]
         else:
             kwargs["chunks"] = True
         if checksum:  # per-chunk checksum: a flipped byte is a read error, not a wrong number
@@ -414,8 +467,10 @@ def _write_channel(
             kwargs.update(compression="gzip", compression_opts=1, shuffle=True)
         elif compression in ("zstd", "lz4"):
             kwargs.update(_blosc2(compression))
-    contents = {"data": data} if with_data else {"shape": data.shape, "dtype": data.dtype}
+    contents = {"data": data} if with_data and rows is None else {"shape": data.shape, "dtype": data.dtype}
     ds = group.create_dataset(name, **contents, **kwargs)
+    if with_data and rows is not None:
+        _write_rows(ds.id, data, rows)
     ds.attrs["units"] = ch.units
     ds.attrs["dim_names"] = json.dumps(list(ch.dim_names))
     if ch.description:
@@ -486,6 +541,7 @@ class _Template:
             raise
         self.values = {key: _value_key(arr) for key, arr in arrays.items()}
         self.mtypes = {key: h5t.py_create(arr.dtype) for key, arr in arrays.items()}
+        self.rows = {name: _time_chunk_rows(ch.data) if ch.is_time_series else None for name, ch in channels.items()}
 
     def write(self, dest: h5py.Group, ep_id: str, channels: Mapping[str, Channel],
               arrays: Mapping[str, np.ndarray]) -> None:
@@ -495,7 +551,7 @@ class _Template:
             if _value_key(arr) != self.values[key]:
                 h5a.open(gid, key.encode()).write(arr, mtype=self.mtypes[key])
         for name, ch in channels.items():
-            h5d.open(gid, name.encode()).write(h5s.ALL, h5s.ALL, np.asarray(ch.data, order="C"))
+            _write_rows(h5d.open(gid, name.encode()), ch.data, self.rows[name])
 
     def close(self) -> None:
         self.file.close()
