@@ -1,0 +1,22 @@
+#!/usr/bin/env bash
+# The device calls of session 18 (issue 16), run from the worktree copy on the H200 machine with the packages
+# unpacked in /root/site: `bash bench/h200_s18.sh A|B`. Logs and result files go to $OUT as one tar per step.
+source "$(dirname "$0")/h100_lib.sh"  # environment, cli (plain CLI + MuJoCo Warp alone), pack, warm, repack, prof
+whole() {  # every chunk written, zeros too (the code before this session)
+    export PIEZOTWIN_SKIP_ZERO_CHUNKS=0; cli "$@"; unset PIEZOTWIN_SKIP_ZERO_CHUNKS
+}
+case "$1" in
+A)  # all-zero chunks left unwritten (velostat's shear field, 48 % of its bytes): the plain CLI for velostat 8192,
+    # with and without, two pairs in both orders after a warm-up run, then MuJoCo Warp stepping the same worlds alone
+    warm velostat
+    cli velostat 8192 h200-s18-velostat noalone; repack A1
+    whole velostat 8192 h200-s18-velostat-whole noalone; repack A2
+    whole velostat 8192 h200-s18-velostat-whole2 noalone; repack A3
+    cli velostat 8192 h200-s18-velostat-2; pack A4 ;;
+B)  # the same for cnt_pdms 4096 (shear 33 % of its bytes; writer-bound: 28 % of the disk's raw speed)
+    warm cnt_pdms
+    cli cnt_pdms 4096 h200-s18-cnt_pdms noalone; repack B1
+    whole cnt_pdms 4096 h200-s18-cnt_pdms-whole noalone; repack B2
+    whole cnt_pdms 4096 h200-s18-cnt_pdms-whole2 noalone; repack B3
+    cli cnt_pdms 4096 h200-s18-cnt_pdms-2 noalone; pack B4 ;;
+esac
