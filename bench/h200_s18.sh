@@ -20,3 +20,11 @@ B)  # the same for cnt_pdms 4096 (shear 33 % of its bytes; writer-bound: 28 % of
     whole cnt_pdms 4096 h200-s18-cnt_pdms-whole2 noalone; repack B3
     cli cnt_pdms 4096 h200-s18-cnt_pdms-2 noalone; pack B4 ;;
 esac
+case "$1" in
+C)  # which taxel-field chunks are all zero on the GPU path (velostat 512 and cnt_pdms 256 episodes, plain CLI)
+    for f in velostat:512 cnt_pdms:256; do
+        fam=${f%%:*}; n=${f##*:}; rm -rf /tmp/z-$fam
+        timeout 250 python3 -m piezotwin generate $fam -o /tmp/z-$fam --episodes $n 2>&1 | grep -v "^Module" | grep -E "engine|samples/s" | cut -c1-200
+        python3 bench/gpu_zero_fields.py /tmp/z-$fam --out $OUT/r/gpu-zero-fields-h200-s18-$fam.json
+    done; pack C ;;
+esac

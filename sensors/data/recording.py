@@ -16,8 +16,8 @@ else a length that divides T where one is close to the cap, or T in equal parts)
 checksum per chunk: damaged data fails to read (RecordingError naming the file) instead of reading back as wrong
 numbers. A chunk whose bytes are all zero is not written (`_write_rows`): HDF5 leaves it unallocated and every
 reader gets the dataset's fill value, 0, back for it, so the data read are the same bytes; the filters (shuffle,
-codec, checksum) then skip it. The shear field of a pad pressed along its normal (velostat, cnt_pdms, fabric) is
-zero throughout: 48 / 33 / 10 % of those episodes' bytes (bench/results/writer-zero-chunks-cpu.json).
+codec, checksum) then skip it. On the CPU path the shear field of a pad pressed along its normal (velostat,
+cnt_pdms, fabric) is zero throughout: 48 / 33 / 10 % of those episodes' bytes (bench/results/writer-episode-cpu-s18-zero.json).
 
 Storage (not schema): files are written with HDF5's 1.10 object formats (``libver=("v110", "latest")``: checksummed
 object headers, a chunk index without a B-tree for one-chunk datasets), readable by HDF5 >= 1.10 (any h5py >= 2.8);
