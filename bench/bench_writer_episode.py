@@ -108,7 +108,7 @@ def write_shard_timed(path: Path, eps: list, n: int, codec: str) -> dict[str, fl
         for name, ch in channels.items():
             dsid = R.h5d.open(gid, name.encode())
             if hasattr(R, "_write_rows"):  # since session 18: all-zero chunks left unwritten
-                R._write_rows(dsid, ch.data, self.rows[name])
+                R._write_rows(dsid, ch.data, self.chunks[name] if hasattr(self, "chunks") else self.rows[name])
             else:
                 dsid.write(R.h5s.ALL, R.h5s.ALL, R.np.asarray(ch.data, order="C"))
         t2 = _clock()

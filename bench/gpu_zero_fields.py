@@ -3,7 +3,7 @@
 
     python bench/gpu_zero_fields.py DATASET_DIR [--out FILE]
 
-Per channel of the recorded episodes: the share of zero values, the share of chunks (as the writer lays them out)
+Per channel of the recorded episodes: the share of zero values, the share of chunks (as the file lays them out)
 that are all zero, the largest |value| and the 99th percentile of |value| among nonzero values, beside the
 largest |value| of the pressure for scale."""
 
@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sensors.data.recording import Recording, _nonzero_chunks, _time_chunk_rows
+from sensors.data.recording import Recording, _nonzero_chunks
 
 
 def main() -> None:
@@ -36,7 +36,7 @@ def main() -> None:
                     s = acc[n]
                     s["values"] += x.size
                     s["zeros"] += int(np.count_nonzero(x.view(f"u{x.dtype.itemsize}") == 0))
-                    nz = _nonzero_chunks(np.ascontiguousarray(x), _time_chunk_rows(x))
+                    nz = _nonzero_chunks(np.ascontiguousarray(x), r._f[f"episodes/{ep}/{n}"].chunks)
                     s["chunks"] += nz.size
                     s["zero_chunks"] += int((~nz).sum())
                     s["absmax"] = max(s["absmax"], float(np.abs(x).max()))

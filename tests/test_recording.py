@@ -418,6 +418,7 @@ def test_files_of_the_earlier_storage_read_the_same(tmp_path, monkeypatch, compr
     new, eps = write_shard(tmp_path / "new.h5", compression=compression)
     monkeypatch.setattr(rc, "_LIBVER", ("earliest", "latest"))
     monkeypatch.setattr(rc, "_CHUNK_MAX_BYTES", 256 * 36 * 2)  # 256 frames of the (n, 36) uint16 channel
+    monkeypatch.setattr(rc, "TAXEL_BLOCK", 0)  # whole frames per chunk (taxel blocks came in session 18)
     monkeypatch.setattr(rc, "_TEMPLATES", type(rc._TEMPLATES)())  # no template of the new storage
     old, _ = write_shard(tmp_path / "old.h5", compression=compression)
     with h5py.File(old, "r") as f:
@@ -479,15 +480,50 @@ def test_zero_chunks_are_not_stored_and_read_back_the_same(tmp_path, monkeypatch
 
 
 def test_nonzero_chunks_reads_every_byte():
-    """The per-chunk test sees one nonzero byte anywhere, in whole chunks (any word size) and in the short last one."""
-    for shape, rows, dtype in [((10, 3), 4, np.float32), ((9, 5), 3, np.int16), ((7, 1), 2, np.uint8), ((5, 2, 2), 5, np.float64)]:
+    """The per-chunk test sees one nonzero byte anywhere: in whole chunks (any word size), in the short last ones
+    along time and along the taxel axis."""
+    cases = [((10, 3), (4, 3), np.float32), ((9, 5), (3, 5), np.int16), ((7, 1), (2, 1), np.uint8),
+             ((5, 2, 2), (5, 2, 2), np.float64), ((7,), (3,), np.float32), ((6, 7, 2), (4, 3, 2), np.float32)]
+    for shape, chunks, dtype in cases:
         a = np.zeros(shape, dtype)
-        assert not rc._nonzero_chunks(a, rows).any()
-        flat = a.reshape(-1).view(np.uint8)
-        per_frame = flat.size // shape[0]
-        for byte in range(flat.size):
-            flat[:] = 0
-            flat[byte] = 1
-            want = np.zeros(-(-shape[0] // rows), bool)
-            want[byte // per_frame // rows] = True
-            assert (rc._nonzero_chunks(a, rows) == want).all(), (shape, byte)
+        assert not rc._nonzero_chunks(a, chunks).any()
+        idx = np.indices(shape).reshape(len(shape), -1).T
+        for i in idx:
+            for byte in range(a.itemsize):
+                a[...] = 0
+                a.view(np.uint8).reshape(*shape, a.itemsize)[tuple(i) + (byte,)] = 1
+                want = np.zeros((-(-shape[0] // chunks[0]), -(-shape[1] // chunks[1]) if len(shape) > 1 else 1), bool)
+                want[i[0] // chunks[0], i[1] // chunks[1] if len(shape) > 1 else 0] = True
+                assert (rc._nonzero_chunks(a, chunks) == want).all(), (shape, tuple(i), byte)
+
+
+def test_taxel_fields_are_chunked_in_blocks_and_untouched_blocks_not_stored(tmp_path, monkeypatch):
+    """A taxel field is chunked in blocks of TAXEL_BLOCK taxels along its taxel axis (the last block short): a press
+    on a few taxels leaves the other blocks unwritten; the data read back (whole and by slices) are the same bytes
+    and the content hash is that of the whole-frame layout (TAXEL_BLOCK = 0)."""
+    n, N = 500, 40  # blocks of 16, 16, 8 taxels
+    rng = np.random.default_rng(9)
+    pressure = np.zeros((n, N), np.float32)
+    pressure[100:300, 18:22] = rng.uniform(1e3, 5e4, (200, 4)).astype(np.float32)  # the middle block only
+    shear = np.zeros((n, N, 2), np.float32)
+    shear[100:300, 18:22] = rng.normal(0, 1e-3, (200, 4, 2)).astype(np.float32)
+    ep = {"time": Channel(np.arange(n) / 100.0, "s", ("time",)),
+          "pressure": Channel(pressure, "Pa", ("time", "taxel")),
+          "shear": Channel(shear, "Pa", ("time", "taxel", "xy")),
+          "position": Channel(rng.normal(size=(n, 3)), "m", ("time", "xyz"))}
+    kw = dict(source="sim", config_json=CONFIG, root_seed=1, shard_index=0, sensor_attrs={"family": "velostat"},
+              compression="lz4")
+    blocked = write_recording(tmp_path / "blocked.h5", {"ep-0": ep}, **kw)
+    monkeypatch.setattr(rc, "TAXEL_BLOCK", 0)
+    monkeypatch.setattr(rc, "_TEMPLATES", type(rc._TEMPLATES)())  # no template of the blocked layout
+    frames = write_recording(tmp_path / "frames.h5", {"ep-0": ep}, **kw)
+    with Recording(blocked) as a, Recording(frames) as b:
+        d = a._f["episodes/ep-0"]
+        assert d["pressure"].chunks == (n, 16) and d["shear"].chunks == (n, 16, 2)
+        assert d["position"].chunks == (n, 3) and b._f["episodes/ep-0/pressure"].chunks == (n, N)
+        assert d["pressure"].id.get_num_chunks() == 1 and d["shear"].id.get_num_chunks() == 1
+        for name, ch in ep.items():
+            assert a.read("ep-0", name).tobytes() == b.read("ep-0", name).tobytes() == ch.data.tobytes(), name
+        np.testing.assert_array_equal(a.read("ep-0", "pressure", slice(250, 260)), pressure[250:260])
+        assert a.compute_content_sha256() == a.content_sha256 == b.content_sha256
+    assert blocked.stat().st_size < frames.stat().st_size

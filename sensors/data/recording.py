@@ -399,66 +399,88 @@ def _chunk_len(n_time: int, frame_bytes: int) -> int:
 # Chunks of all-zero bytes are left unwritten (read back as the fill value 0: the same bytes). Off only to measure
 # what it saves (bench): PIEZOTWIN_SKIP_ZERO_CHUNKS=0, read when this module is imported (the writer processes too)
 SKIP_ZERO_CHUNKS = os.environ.get("PIEZOTWIN_SKIP_ZERO_CHUNKS", "1") == "1"
+# Taxels per chunk along a channel's "taxel" axis (its second): a press loads a few taxels of a large pad, so most
+# blocks of a taxel field stay zero through an episode and are not written (velostat: a 10 mm tip on 144 taxels).
+# 0: the whole frame in each chunk (the layout before session 18, and what the bench compares against:
+# PIEZOTWIN_TAXEL_BLOCK=0)
+TAXEL_BLOCK = int(os.environ.get("PIEZOTWIN_TAXEL_BLOCK", "16"))
 
 
-def _time_chunk_rows(data: np.ndarray) -> int:
-    """Frames per chunk of a time series `data` (T, ...) as `_write_channel` lays it out."""
-    frame_bytes = int(np.prod(data.shape[1:], dtype=np.int64)) * data.dtype.itemsize
-    return _chunk_len(data.shape[0], frame_bytes)
+def _chunk_shape(ch: Channel) -> tuple[int, ...] | None:
+    """The chunk shape of a channel's dataset: None for one that is not a non-empty time series (h5py's guess, or
+    no chunks); else whole frames of at most 1 MiB along time (`_chunk_len`), a taxel field cut into blocks of
+    TAXEL_BLOCK taxels (the time length then chosen for one block's frame)."""
+    data = ch.data
+    if not (data.ndim >= 1 and data.size > 0 and ch.is_time_series):
+        return None
+    frame = list(data.shape[1:])
+    if TAXEL_BLOCK > 0 and data.ndim >= 2 and len(ch.dim_names) > 1 and ch.dim_names[1] == "taxel" and frame[0] > TAXEL_BLOCK:
+        frame[0] = TAXEL_BLOCK
+    frame_bytes = int(np.prod(frame, dtype=np.int64)) * data.dtype.itemsize
+    return (_chunk_len(data.shape[0], frame_bytes), *frame)
 
 
-def _nonzero_chunks(data: np.ndarray, rows: int) -> np.ndarray:
-    """Per chunk of `rows` frames along axis 0 of a C-contiguous array: whether any of its bytes is nonzero (-0.0
-    and NaN are nonzero bytes). Compared as the widest unsigned words that divide a chunk (~0.05 ms per MB)."""
-    n = data.shape[0]
-    raw = data.reshape(-1).view(np.uint8)
-    per = raw.size // n * rows  # bytes per whole chunk
-    full = n // rows
-    word = next(w for w in (8, 4, 2, 1) if per % w == 0)
-    out = np.empty(-(-n // rows), bool)
-    if full:
-        out[:full] = raw[: full * per].view(f"<u{word}").reshape(full, -1).max(axis=1) != 0
-    if len(out) > full:
-        out[full] = raw[full * per:].max() != 0
+def _nonzero_chunks(data: np.ndarray, chunks: tuple[int, ...]) -> np.ndarray:
+    """Per chunk of a C-contiguous array laid out in `chunks` (split along its first two axes at most): whether any
+    of its bytes is nonzero (-0.0 and NaN are nonzero bytes). Shape (chunks along axis 0, chunks along axis 1)."""
+    n0 = data.shape[0]
+    n1 = data.shape[1] if data.ndim >= 2 else 1
+    c0 = chunks[0]
+    c1 = chunks[1] if data.ndim >= 2 else 1
+    raw = data.reshape(n0, n1, -1).view(np.uint8)  # (time, taxel, bytes of the rest)
+    word = next(w for w in (8, 4, 2, 1) if raw.shape[2] % w == 0)
+    words = raw.view(f"<u{word}")
+    out = np.empty((-(-n0 // c0), -(-n1 // c1)), bool)
+    for j in range(out.shape[1]):
+        block = words[:, j * c1:(j + 1) * c1]
+        full = n0 // c0
+        if full:  # splitting the time axis of the (strided) block: a view, no copy
+            out[:full, j] = block[: full * c0].reshape(full, c0, *block.shape[1:]).max(axis=(1, 2, 3)) != 0
+        if out.shape[0] > full:
+            out[full, j] = block[full * c0:].max() != 0
     return out
 
 
-def _write_rows(dsid: h5d.DatasetID, data: np.ndarray, rows: int | None) -> None:
-    """Write `data` into the chunked dataset `dsid` (chunks of `rows` frames along axis 0; None: not a time series,
-    written whole), leaving its all-zero chunks unwritten (SKIP_ZERO_CHUNKS): runs of nonzero chunks are written
-    one hyperslab each, a dataset with no zero chunk in one call."""
+def _write_rows(dsid: h5d.DatasetID, data: np.ndarray, chunks: tuple[int, ...] | None) -> None:
+    """Write `data` into the chunked dataset `dsid` laid out in `chunks` (`_chunk_shape`; None: written whole),
+    leaving its all-zero chunks unwritten (SKIP_ZERO_CHUNKS): a dataset with no zero chunk in one call, else each
+    run of nonzero chunks along time (within one taxel block) as one hyperslab."""
     data = np.ascontiguousarray(data)
-    if not SKIP_ZERO_CHUNKS or rows is None or data.ndim == 0 or data.size == 0:
+    if not SKIP_ZERO_CHUNKS or chunks is None or data.ndim == 0 or data.size == 0:
         dsid.write(h5s.ALL, h5s.ALL, data)
         return
-    nz = _nonzero_chunks(data, rows)
+    nz = _nonzero_chunks(data, chunks)
     if nz.all():
         dsid.write(h5s.ALL, h5s.ALL, data)
         return
-    n, rest = data.shape[0], data.shape[1:]
-    edges = np.flatnonzero(np.diff(np.concatenate([[False], nz, [False]]).astype(np.int8)))
-    for c0, c1 in zip(edges[::2], edges[1::2]):  # runs of nonzero chunks [c0, c1)
-        r0, r1 = int(c0) * rows, min(int(c1) * rows, n)
-        fspace = dsid.get_space()
-        fspace.select_hyperslab((r0,) + (0,) * len(rest), (r1 - r0,) + rest)
-        dsid.write(h5s.create_simple((r1 - r0,) + rest), fspace, data[r0:r1])
+    shape = data.shape
+    c0 = chunks[0]
+    c1 = chunks[1] if data.ndim >= 2 else None
+    for j in range(nz.shape[1]):
+        edges = np.flatnonzero(np.diff(np.concatenate([[False], nz[:, j], [False]]).astype(np.int8)))
+        for a, b in zip(edges[::2], edges[1::2]):  # runs of nonzero chunks [a, b) along time
+            start = [int(a) * c0] + [0] * (data.ndim - 1)
+            count = [min(int(b) * c0, shape[0]) - start[0], *shape[1:]]
+            if c1 is not None:
+                start[1] = j * c1
+                count[1] = min(c1, shape[1] - start[1])
+            fspace = dsid.get_space()
+            fspace.select_hyperslab(tuple(start), tuple(count))
+            part = data[tuple(slice(s, s + c) for s, c in zip(start, count))]
+            dsid.write(h5s.create_simple(tuple(count)), fspace, np.ascontiguousarray(part))
 
 
 def _write_channel(
     group: h5py.Group, name: str, ch: Channel, compression: str, *, with_data: bool = True, checksum: bool = True
 ) -> h5py.Dataset:
     """Create the dataset of one channel, with its attributes; ``with_data=False``: no data written.
-    ``checksum``: Fletcher-32 per chunk on chunked datasets. A time series' all-zero chunks are not written
-    (`_write_rows`)."""
+    ``checksum``: Fletcher-32 per chunk on chunked datasets. A time series is chunked by `_chunk_shape` and its
+    all-zero chunks are not written (`_write_rows`)."""
     data = ch.data
     kwargs: dict[str, Any] = {}
-    rows = None
+    chunks = _chunk_shape(ch)
     if data.ndim >= 1 and data.size > 0:
-        if ch.is_time_series:
-            rows = _time_chunk_rows(data)
-            kwargs["chunks"] = (rows,) + data.shape[1:]
-        else:
-            kwargs["chunks"] = True
+        kwargs["chunks"] = chunks if chunks is not None else True
         if checksum:  # per-chunk checksum: a flipped byte is a read error, not a wrong number
             kwargs["fletcher32"] = True
         if compression == "lzf":
@@ -467,10 +489,10 @@ def _write_channel(
             kwargs.update(compression="gzip", compression_opts=1, shuffle=True)
         elif compression in ("zstd", "lz4"):
             kwargs.update(_blosc2(compression))
-    contents = {"data": data} if with_data and rows is None else {"shape": data.shape, "dtype": data.dtype}
+    contents = {"data": data} if with_data and chunks is None else {"shape": data.shape, "dtype": data.dtype}
     ds = group.create_dataset(name, **contents, **kwargs)
-    if with_data and rows is not None:
-        _write_rows(ds.id, data, rows)
+    if with_data and chunks is not None:
+        _write_rows(ds.id, data, chunks)
     ds.attrs["units"] = ch.units
     ds.attrs["dim_names"] = json.dumps(list(ch.dim_names))
     if ch.description:
@@ -541,7 +563,7 @@ class _Template:
             raise
         self.values = {key: _value_key(arr) for key, arr in arrays.items()}
         self.mtypes = {key: h5t.py_create(arr.dtype) for key, arr in arrays.items()}
-        self.rows = {name: _time_chunk_rows(ch.data) if ch.is_time_series else None for name, ch in channels.items()}
+        self.chunks = {name: _chunk_shape(ch) for name, ch in channels.items()}
 
     def write(self, dest: h5py.Group, ep_id: str, channels: Mapping[str, Channel],
               arrays: Mapping[str, np.ndarray]) -> None:
@@ -551,7 +573,7 @@ class _Template:
             if _value_key(arr) != self.values[key]:
                 h5a.open(gid, key.encode()).write(arr, mtype=self.mtypes[key])
         for name, ch in channels.items():
-            _write_rows(h5d.open(gid, name.encode()), ch.data, self.rows[name])
+            _write_rows(h5d.open(gid, name.encode()), ch.data, self.chunks[name])
 
     def close(self) -> None:
         self.file.close()
