@@ -28,3 +28,18 @@ C)  # which taxel-field chunks are all zero on the GPU path (velostat 512 and cn
         python3 bench/gpu_zero_fields.py /tmp/z-$fam --out $OUT/r/gpu-zero-fields-h200-s18-$fam.json
     done; pack C ;;
 esac
+frames() {  # whole frames per chunk (the layout before the taxel blocks); all-zero chunks still unwritten
+    export PIEZOTWIN_TAXEL_BLOCK=0; cli "$@"; unset PIEZOTWIN_TAXEL_BLOCK
+}
+case "$1" in
+D)  # taxel fields in blocks of 16 taxels (the blocks a press never reaches stay zero, unwritten): velostat 8192, two
+    # pairs in both orders after a warm-up run; cnt_pdms 4096 (its punch covers the pad: no zero blocks) one pair
+    warm velostat
+    cli velostat 8192 h200-s18-velostat-blocks noalone; repack D1
+    frames velostat 8192 h200-s18-velostat-frames noalone; repack D2
+    frames velostat 8192 h200-s18-velostat-frames2 noalone; repack D3
+    cli velostat 8192 h200-s18-velostat-blocks2 noalone; repack D4
+    warm cnt_pdms
+    cli cnt_pdms 4096 h200-s18-cnt_pdms-blocks noalone; repack D5
+    frames cnt_pdms 4096 h200-s18-cnt_pdms-frames noalone; pack D6 ;;
+esac

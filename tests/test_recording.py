@@ -500,11 +500,13 @@ def test_nonzero_chunks_reads_every_byte():
 def test_taxel_fields_are_chunked_in_blocks_and_untouched_blocks_not_stored(tmp_path, monkeypatch):
     """A taxel field is chunked in blocks of TAXEL_BLOCK taxels along its taxel axis (the last block short): a press
     on a few taxels leaves the other blocks unwritten; the data read back (whole and by slices) are the same bytes
-    and the content hash is that of the whole-frame layout (TAXEL_BLOCK = 0)."""
-    n, N = 500, 40  # blocks of 16, 16, 8 taxels
+    and the content hash is that of the whole-frame layout (TAXEL_BLOCK = 0). A short episode, whose blocks would be
+    chunks under TAXEL_BLOCK_MIN_BYTES, keeps whole frames."""
+    n, N = 1200, 40  # blocks of 16, 16, 8 taxels: 77 kB chunks of pressure
     rng = np.random.default_rng(9)
     pressure = np.zeros((n, N), np.float32)
     pressure[100:300, 18:22] = rng.uniform(1e3, 5e4, (200, 4)).astype(np.float32)  # the middle block only
+    pressure[450:470, 20] = 1e3  # (inside the first 500 frames too)
     shear = np.zeros((n, N, 2), np.float32)
     shear[100:300, 18:22] = rng.normal(0, 1e-3, (200, 4, 2)).astype(np.float32)
     ep = {"time": Channel(np.arange(n) / 100.0, "s", ("time",)),
@@ -527,3 +529,6 @@ def test_taxel_fields_are_chunked_in_blocks_and_untouched_blocks_not_stored(tmp_
         np.testing.assert_array_equal(a.read("ep-0", "pressure", slice(250, 260)), pressure[250:260])
         assert a.compute_content_sha256() == a.content_sha256 == b.content_sha256
     assert blocked.stat().st_size < frames.stat().st_size
+    short = rc.Channel(pressure[:500], "Pa", ("time", "taxel"))  # 500 x 16 x 4 B = 32 kB a block: whole frames
+    monkeypatch.setattr(rc, "TAXEL_BLOCK", 16)
+    assert rc._chunk_shape(short) == (500, N) and rc._chunk_shape(ep["pressure"]) == (n, 16)

@@ -402,20 +402,27 @@ SKIP_ZERO_CHUNKS = os.environ.get("PIEZOTWIN_SKIP_ZERO_CHUNKS", "1") == "1"
 # Taxels per chunk along a channel's "taxel" axis (its second): a press loads a few taxels of a large pad, so most
 # blocks of a taxel field stay zero through an episode and are not written (velostat: a 10 mm tip on 144 taxels).
 # 0: the whole frame in each chunk (the layout before session 18, and what the bench compares against:
-# PIEZOTWIN_TAXEL_BLOCK=0)
+# PIEZOTWIN_TAXEL_BLOCK=0) ...
 TAXEL_BLOCK = int(os.environ.get("PIEZOTWIN_TAXEL_BLOCK", "16"))
+TAXEL_BLOCK_MIN_BYTES = 1 << 16  # ... and where a block's chunk would hold less than this: HDF5's and the codec's
+# cost per chunk then outweighs what the zero blocks save (ntype's 20-sample episodes: 5.9 -> 10.9 ms of writer CPU
+# per episode with lz4, bench/results/writer-episode-cpu-s18-blocks.json)
 
 
 def _chunk_shape(ch: Channel) -> tuple[int, ...] | None:
     """The chunk shape of a channel's dataset: None for one that is not a non-empty time series (h5py's guess, or
     no chunks); else whole frames of at most 1 MiB along time (`_chunk_len`), a taxel field cut into blocks of
-    TAXEL_BLOCK taxels (the time length then chosen for one block's frame)."""
+    TAXEL_BLOCK taxels where a block's chunk holds at least TAXEL_BLOCK_MIN_BYTES (the time length then chosen for
+    one block's frame)."""
     data = ch.data
     if not (data.ndim >= 1 and data.size > 0 and ch.is_time_series):
         return None
     frame = list(data.shape[1:])
     if TAXEL_BLOCK > 0 and data.ndim >= 2 and len(ch.dim_names) > 1 and ch.dim_names[1] == "taxel" and frame[0] > TAXEL_BLOCK:
-        frame[0] = TAXEL_BLOCK
+        block = [TAXEL_BLOCK, *frame[1:]]
+        block_bytes = int(np.prod(block, dtype=np.int64)) * data.dtype.itemsize
+        if _chunk_len(data.shape[0], block_bytes) * block_bytes >= TAXEL_BLOCK_MIN_BYTES:
+            frame = block
     frame_bytes = int(np.prod(frame, dtype=np.int64)) * data.dtype.itemsize
     return (_chunk_len(data.shape[0], frame_bytes), *frame)
 
