@@ -43,3 +43,13 @@ D)  # taxel fields in blocks of 16 taxels (the blocks a press never reaches stay
     cli cnt_pdms 4096 h200-s18-cnt_pdms-blocks noalone; repack D5
     frames cnt_pdms 4096 h200-s18-cnt_pdms-frames noalone; pack D6 ;;
 esac
+case "$1" in
+E)  # the session's final code as a user types it (README table): velostat 8192 with MuJoCo Warp stepping alone,
+    # cnt_pdms 4096; and two GPU-made velostat shards brought back to price the writers on GPU data locally
+    warm velostat
+    cli velostat 8192 h200-s18-velostat-final; repack E1
+    rm -rf /tmp/g && python3 -m piezotwin generate velostat -o /tmp/g --episodes 24 > /dev/null 2>&1
+    mkdir -p $OUT/r/shards && cp $(find /tmp/g -name "*.h5" | sort | head -2) $OUT/r/shards/; repack E2
+    warm cnt_pdms
+    cli cnt_pdms 4096 h200-s18-cnt_pdms-final noalone; pack E3 ;;
+esac
