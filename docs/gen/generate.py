@@ -85,10 +85,11 @@ PHYSICS_PROFILE = "physics-profile-h100-s4.json"
 MULTI_GPU = "gpu-pipeline-h200x2.json"
 # the latest plain-CLI run of each family (issue 16's README table): `piezotwin generate FAMILY -o X --episodes N` with
 # defaults, one GPU machine, after a warm-up run (bench/bench_user_cli.py, bench/bench_mjw_alone.py)
-# (file, family): session 17's final code for velostat and fabric_1 (each with stepping alone, on a machine whose
-# stepping was slower: fabric_1 75-90 s); session 16's final code for cnt_pdms and ntype (the tail cut of session 17
-# changes no step of theirs that its profile showed as large)
-USER_CLI_LATEST = [("user-cli-h200-s16-cnt_pdms-pop.json", "cnt_pdms"), ("user-cli-h200-s17-velostat.json", "velostat"),
+# (file, family): session 18's final code for velostat (with stepping alone) and cnt_pdms (the writers' zero chunks
+# and taxel blocks: same wall as before on the GPU, smaller files); session 17's for fabric_1 (with stepping alone, on
+# a machine whose stepping was slower: fabric_1 75-90 s); session 16's for ntype (no later change touches a step its
+# profile showed as large)
+USER_CLI_LATEST = [("user-cli-h200-s18-cnt_pdms-final.json", "cnt_pdms"), ("user-cli-h200-s18-velostat-final.json", "velostat"),
                    ("user-cli-h200-s16-ntype-b.json", "ntype"), ("user-cli-h200-s17-fabric_1.json", "fabric_1")]
 
 

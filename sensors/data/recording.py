@@ -11,13 +11,15 @@ Layout (docs/dataset.md)::
     /episodes/<id>/<name>  one dataset per channel; attrs units, dim_names, description
 
 Time series are chunked along time in blocks of whole frames of at most 1 MiB (the whole episode where it fits;
-else a length that divides T where one is close to the cap, or T in equal parts), compressed with lzf + shuffle by default (gzip level 1
+else a length that divides T where one is close to the cap, or T in equal parts); a taxel field (second axis named
+"taxel") is also cut into blocks of TAXEL_BLOCK taxels where such a chunk holds >= 64 KiB. Compressed with lzf + shuffle by default (gzip level 1
 + shuffle, Blosc2 zstd / lz4 level 1 + shuffle, or none). Every chunked dataset carries HDF5's Fletcher-32
 checksum per chunk: damaged data fails to read (RecordingError naming the file) instead of reading back as wrong
 numbers. A chunk whose bytes are all zero is not written (`_write_rows`): HDF5 leaves it unallocated and every
 reader gets the dataset's fill value, 0, back for it, so the data read are the same bytes; the filters (shuffle,
 codec, checksum) then skip it. On the CPU path the shear field of a pad pressed along its normal (velostat,
-cnt_pdms, fabric) is zero throughout: 48 / 33 / 10 % of those episodes' bytes (bench/results/writer-episode-cpu-s18-zero.json).
+cnt_pdms, fabric) is zero throughout: 48 / 33 / 10 % of those episodes' bytes; the taxel blocks a press never reaches
+are zero in every field on both paths (bench/results/writer-episode-cpu.json, user-cli-h200-s18-*.json).
 
 Storage (not schema): files are written with HDF5's 1.10 object formats (``libver=("v110", "latest")``: checksummed
 object headers, a chunk index without a B-tree for one-chunk datasets), readable by HDF5 >= 1.10 (any h5py >= 2.8);
@@ -455,6 +457,10 @@ def _write_rows(dsid: h5d.DatasetID, data: np.ndarray, chunks: tuple[int, ...] |
     data = np.ascontiguousarray(data)
     if not SKIP_ZERO_CHUNKS or chunks is None or data.ndim == 0 or data.size == 0:
         dsid.write(h5s.ALL, h5s.ALL, data)
+        return
+    if data.shape[0] <= chunks[0] and (data.ndim < 2 or data.shape[1] <= chunks[1]):  # one chunk: one count (~2 us)
+        if np.count_nonzero(data.reshape(-1).view(np.uint8)):
+            dsid.write(h5s.ALL, h5s.ALL, data)
         return
     nz = _nonzero_chunks(data, chunks)
     if nz.all():
