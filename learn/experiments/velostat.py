@@ -1452,7 +1452,10 @@ DIFFERENCES = """
   a fraction of the spacing. The elbow then follows the part's Voronoi layout, and small perturbations (another
   draw of the calibrations' speeds, MuJoCo's load field, the decoded unit) move it between 3 and 5; with no creep
   and no smooth field it is still 3 on some parts. The paper gives no figure for its units' spread, so the film's
-  structure is left an estimate (not reshaped to land on 5); the elbow is reported per run and seed.
+  structure is left an estimate (not reshaped to land on 5); the elbow is reported per run and seed. Over 64 parts
+  (`bench/bench_velostat_elbow_parts.py`, results/velostat-elbow-parts.json: the characterization's unit grid, one
+  press per unit at 6 mm/min, ideal load) the elbow is 4-6 on 72 % of them (3 on 27 %), and on 72 % too with the
+  domains switched off: the kneedle elbow of 36 units does not tell this film's structure from a smooth field.
 - **Slow A-E presses read low at 13-15 N** (same bench, `slow`). On single ramps R at full load is the same at 1
   and 6 mm/min (Fig. 5; `piezotwin calibrate velostat`), but on a staircase the hold creep grows with the speed of
   the ramp before each hold (Fig. 5): at the end of the first ramp (1 N) R is the same at both speeds, after its
