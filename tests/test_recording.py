@@ -532,3 +532,28 @@ def test_taxel_fields_are_chunked_in_blocks_and_untouched_blocks_not_stored(tmp_
     short = rc.Channel(pressure[:500], "Pa", ("time", "taxel"))  # 500 x 16 x 4 B = 32 kB a block: whole frames
     monkeypatch.setattr(rc, "TAXEL_BLOCK", 16)
     assert rc._chunk_shape(short) == (500, N) and rc._chunk_shape(ep["pressure"]) == (n, 16)
+
+
+@pytest.mark.parametrize("case", range(40))
+def test_zero_chunk_writes_read_back_for_any_layout(tmp_path, case):
+    """Random shapes (1-4 axes, a taxel axis or not), chunk sizes (partial chunks along time and taxels), dtypes and
+    zero patterns (whole chunks, rows, single values, -0.0): the dataset `_write_rows` fills reads back as the array,
+    bit for bit, and stores no chunk that is all zero. Deterministic (seeded per case)."""
+    rng = np.random.default_rng([18, case])
+    ndim = int(rng.integers(1, 5))
+    shape = tuple(int(rng.integers(1, 40)) for _ in range(ndim))
+    chunks = tuple(int(rng.integers(1, n + 1)) if k < 2 else n for k, n in enumerate(shape))
+    dtype = [np.float32, np.float64, np.int16, np.uint8][case % 4]
+    a = (rng.normal(size=shape) * 100).astype(dtype)
+    mask = rng.random(shape) < [0.0, 0.5, 0.9, 1.0][(case // 4) % 4]  # share of zeros, crossed with the dtypes
+    a[mask] = 0
+    if shape[0] > 2:
+        a[rng.integers(shape[0])] = 0  # a zero frame
+    if dtype in (np.float32, np.float64) and a.size:
+        a.reshape(-1)[rng.integers(a.size)] = -0.0
+    with h5py.File(tmp_path / "x.h5", "w") as f:
+        ds = f.create_dataset("x", shape=shape, dtype=dtype, chunks=chunks, fletcher32=True, compression="lzf")
+        rc._write_rows(ds.id, a, chunks)
+        assert ds[...].tobytes() == a.tobytes()
+        nz = rc._nonzero_chunks(a, chunks)
+        assert ds.id.get_num_chunks() == int(nz.sum())
