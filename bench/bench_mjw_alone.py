@@ -1,11 +1,12 @@
 """MuJoCo Warp stepping the worlds of a `piezotwin generate` run alone: the bound of a physics-bound CLI run.
 
-    python bench/bench_mjw_alone.py --family fabric_1 --episodes 8192 [--tag h100-s8]
+    python bench/bench_mjw_alone.py --family fabric_1 --episodes 8192 [--tag h100-s8] [--worlds 4096]
 
 The scene, overrides and episodes are those of `piezotwin generate <family> --episodes N` with defaults (the
 `auto` choice made the same way, so the same physics step), batched as the GPU feed batches them
 (`simulate.generation.feed._groups`); each batch runs `step_worlds` (protocols, controls, MuJoCo Warp, sensordata
-into shared memory) in this one process, one batch after another, with nothing else on the GPU. A 64-world
+into shared memory) in this one process, one batch after another, with nothing else on the GPU. `--worlds N`: batches of N episodes instead
+(no ramp), to price another split of the same run (e.g. its halves, stepped one after the other). A 64-world
 batch of two samples first loads the kernels (compiled by the CLI run before, so the Warp cache is warm), not timed. Reported:
 seconds per batch ("worlds": the MuJoCo Warp part, as the feed's timings name it; "wall": the whole task),
 samples/s and world-steps/s. Merged into bench/results/user-cli-<tag>.json under runs.<family>.mjw_alone when
@@ -35,6 +36,8 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, required=True)
     ap.add_argument("--tag", default="local")
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
+    ap.add_argument("--worlds", type=int, default=None,
+                    help="batches of this many episodes, no ramp, instead of the feed's (e.g. a run's halves)")
     a = ap.parse_args()
     from scenes import load_scene
     from simulate.generation.choice import choose
@@ -46,7 +49,8 @@ def main() -> None:
     chosen = choose(cfg)
     cfg = load_scene(a.family, base + chosen.overrides)
     print(chosen.line())
-    groups = _groups(cfg, list(range(n_shards(cfg))), feed_worlds(cfg))
+    groups = (_groups(cfg, list(range(n_shards(cfg))), feed_worlds(cfg)) if a.worlds is None
+              else _groups(cfg, list(range(n_shards(cfg))), a.worlds, ramp=0))
     # load the kernels (Warp's cache is warm from the CLI run): 64 worlds of the same model, two samples
     import numpy as np
 
@@ -80,6 +84,7 @@ def main() -> None:
         "engine_line": chosen.line(),
         "physics_timestep_s": cfg.sampling.physics_timestep_s,
         "episodes": a.episodes,
+        "worlds_per_batch": a.worlds,  # None: the feed's batches
         "batches": batches,
         "seconds": total,
         "worlds_seconds": sum(b["worlds_s"] for b in batches),
