@@ -107,7 +107,8 @@ def write_shard_timed(path: Path, eps: list, n: int, codec: str) -> dict[str, fl
         t1 = _clock()
         for name, ch in channels.items():
             dsid = R.h5d.open(gid, name.encode())
-            if hasattr(R, "_write_rows"):  # since session 18: all-zero chunks left unwritten
+            if hasattr(R, "_write_rows"):  # since session 18: all-zero chunks left unwritten (`rows`: its first
+                # commits, before the taxel blocks, the base of writer-episode-cpu-s18-blocks.json)
                 R._write_rows(dsid, ch.data, self.chunks[name] if hasattr(self, "chunks") else self.rows[name])
             else:
                 dsid.write(R.h5s.ALL, R.h5s.ALL, R.np.asarray(ch.data, order="C"))

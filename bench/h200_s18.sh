@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The device calls of session 18 (issue 16), run from the worktree copy on the H200 machine with the packages
-# unpacked in /root/site: `bash bench/h200_s18.sh A|B`. Logs and result files go to $OUT as one tar per step.
+# unpacked in /root/site: `bash bench/h200_s18.sh A|B|C|D|E` (B was not run: D measured cnt_pdms with the final
+# layout). Logs and result files go to $OUT as one tar per step.
 source "$(dirname "$0")/h100_lib.sh"  # environment, cli (plain CLI + MuJoCo Warp alone), pack, warm, repack, prof
 whole() {  # every chunk written, zeros too (the code before this session)
     export PIEZOTWIN_SKIP_ZERO_CHUNKS=0; cli "$@"; unset PIEZOTWIN_SKIP_ZERO_CHUNKS
