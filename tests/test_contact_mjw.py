@@ -232,3 +232,55 @@ def test_worlds_are_reused_per_shape_until_released():
     release_worlds()
     assert worlds_for(m, mjcf, 2, "cpu") is not other
     release_worlds()
+
+
+def _chunked_runs(device: str, monkeypatch) -> tuple[np.ndarray, dict]:
+    """Sensordata of the same episodes in one time chunk, and in 5 chunks (the last one short) through 1 and 2
+    sets of chunk buffers (`WarpWorlds.run`), on worlds reused between the runs."""
+    import simulate.contact.mujoco_warp as mw
+    from simulate.contact.load_field import _initial_states, build_model, episode_controls
+
+    cfg = load_scene("cnt_pdms", SHORT)
+    m, sub = build_model(cfg), cfg.sampling.substeps
+    protos = [make_episode_protocol(cfg, s) for s in range(3)]
+    n = 41  # the press starts within the first 0.4 s
+    ctrl, _ = episode_controls(cfg, protos, (n - 1) * sub)
+    st, s0 = _initial_states(m, cfg, protos, ctrl[:, 0])
+    q0 = st[:, 1 : 1 + m.nq]
+    ww = mw.WarpWorlds(m, 3, device)
+    one = ww.run(q0, ctrl, s0, sub, n)
+    per_sample = 3 * (sub * m.nu + ww.n_recorded) * 4
+    monkeypatch.setattr(mw, "CHUNK_BYTES", 9 * per_sample)  # chunks of 9 samples: 9, 9, 9, 9, 4
+    chunked = {}
+    for sets in (1, 2):
+        monkeypatch.setattr(mw, "PIPELINE_SETS", sets)
+        chunked[sets] = ww.run(q0, lambda sl, eps: ctrl[eps, sl], s0, sub, n)  # controls as a function too
+    assert ww._buffers[:3] == (9, sub, 2)  # noqa: SLF001 - the chunking under test did happen
+    assert np.abs(one[..., 4:7]).max() > 0.5  # a loaded contact is compared
+    return one, chunked
+
+
+@needs_mjw
+@pytest.mark.slow
+def test_time_chunks_in_flight_change_no_value_cpu(monkeypatch):
+    """Warp's CPU device is deterministic: the time chunks and the sets of chunk buffers they rotate through
+    (the controls made straight into them, a short last chunk) give the one-chunk run's values bit for bit."""
+    from sensors.warp_setup import init_warp
+
+    init_warp()
+    one, chunked = _chunked_runs("cpu", monkeypatch)
+    for sets, got in chunked.items():
+        np.testing.assert_array_equal(got, one, err_msg=f"{sets} set(s)")
+
+
+@needs_mjw
+@pytest.mark.gpu
+def test_time_chunks_in_flight_change_no_value_cuda(gpu_device, monkeypatch):
+    """On CUDA the chunks' transfers are asynchronous (two chunks in flight): the one-chunk run's values within
+    float32 atomics noise (forces within 1e-4 of full scale, positions within 1e-8 m); a chunk whose controls
+    or sensors were taken before they landed would be off by whole samples."""
+    one, chunked = _chunked_runs(gpu_device, monkeypatch)
+    scale = np.abs(one[..., 4:7]).max()
+    for sets, got in chunked.items():
+        assert np.abs(got[..., 4:7] - one[..., 4:7]).max() < 1e-4 * scale, f"{sets} set(s)"
+        np.testing.assert_allclose(got[..., 0:3], one[..., 0:3], atol=1e-8, err_msg=f"{sets} set(s)")

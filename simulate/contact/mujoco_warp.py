@@ -9,13 +9,16 @@ On CUDA one sample period (substeps x [set ctrl, step] + record sensors) is capt
 and replayed; per-step controls come from a device buffer indexed by a device-side step counter, so no
 Python runs per physics step. Sensors are computed only in the step that is recorded (the other substeps
 step a copy of the model with mjDSBL_SENSOR: sensors do not act on the dynamics, so the recorded values are
-the same). `worlds_for` keeps one set of worlds per process, with its buffers and graph, for the next batch.
-Controls are uploaded and sensors read back (through a page-locked buffer) in time chunks that bound
-device memory. MuJoCo Warp computes in float32 (C MuJoCo in float64) and its contact solver sums with
-atomics on the GPU, so results agree with the C path within float32 tolerances, not bit for bit.
+the same). `worlds_for` keeps one set of worlds per process, with its buffers and graphs, for the next batch.
+Controls are uploaded and sensors read back in time chunks that bound device memory, two in flight: the device
+steps one while the host takes the other's sensors (`WarpWorlds.run`). MuJoCo Warp computes in float32 (C MuJoCo
+in float64) and its contact solver sums with atomics on the GPU, so results agree with the C path within float32
+tolerances, not bit for bit.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 import warp as wp
@@ -23,8 +26,9 @@ import warp as wp
 from simulate.contact.stick_slip_kernels import stick_slip_update
 
 
-CHUNK_BYTES = 256 * 2**20  # device memory for one chunk of controls + recorded sensors
-CONTROL_THREADS = 4  # host threads making the next chunk's controls (32k episodes: ~6 s of numpy per batch)
+CHUNK_BYTES = 256 * 2**20  # device memory for one chunk of controls + recorded sensors (per set of buffers)
+PIPELINE_SETS = 2  # chunks in flight (`WarpWorlds.run`): the device steps one while the host takes the other
+CONTROL_THREADS = 4  # host threads making a chunk's controls (32k episodes: ~6 s of numpy per batch)
 
 
 @wp.kernel
@@ -92,7 +96,7 @@ class WarpWorlds:
             m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_NATIVECCD)
         quiet = copy.copy(m)  # the substeps between two records: same model, sensors off
         quiet.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
-        self._buffers: tuple | None = None  # (chunk, substeps, seq, rec, rec_host, graph) of the last run, reused by the next
+        self._buffers: tuple | None = None  # (chunk, substeps, n_sets, [_ChunkSet]) of the last run, reused by the next
         self._loaded = False
         with wp.ScopedDevice(device):
             self.m = mjw.put_model(m)
@@ -137,10 +141,15 @@ class WarpWorlds:
         """Reset the worlds to qpos0 (E, nq) at rest and replay the controls; sensors at samples 1..n-1 after
         each substeps-th step (sample 0 = sens0, computed by the caller with mj_forward).
 
-        ctrl: (E, nstep, nu) array, or a function (steps, episodes) of two slices returning those rows; the
-        next chunk's controls are made on CONTROL_THREADS host threads (blocks of episodes; numpy releases the
-        GIL) while the device runs the current one. out: a (E, n_samples, n_recorded + n_extra) float64 array to
-        fill (default a new one); sens0 has as many columns.
+        ctrl: (E, nstep, nu) array, or a function (steps, episodes) of two slices returning those rows; a chunk's
+        controls are made on CONTROL_THREADS host threads (blocks of episodes; numpy releases the GIL). out: a
+        (E, n_samples, n_recorded + n_extra) float64 array to fill (default a new one); sens0 has as many columns.
+
+        The samples go in time chunks (CHUNK_BYTES of controls + sensors each), through PIPELINE_SETS sets of
+        buffers: on CUDA every transfer is asynchronous (page-locked host buffers), so the device steps chunk
+        i + 1, already queued, while the host copies chunk i's sensors into `out` and makes chunk i + 2's
+        controls; the device never waits for the host between chunks. On Warp's CPU device the same sets are
+        used one after another (the controls are made straight into the worlds' buffer).
         """
         import mujoco_warp as mjw
         from concurrent.futures import ThreadPoolExecutor
@@ -152,63 +161,104 @@ class WarpWorlds:
         per_sample = E * (substeps * nu + ns) * 4
         chunk = int(max(1, min(n_samples - 1, CHUNK_BYTES // per_sample)))
         starts = list(range(1, n_samples, chunk))
-
+        if not starts:
+            return out
+        n_sets = min(len(starts), PIPELINE_SETS)
         blocks = [slice(b, min(E, b + -(-E // CONTROL_THREADS))) for b in range(0, E, -(-E // CONTROL_THREADS))]
-
-        def host_chunk(a: int) -> np.ndarray:  # controls of samples a .. a + chunk - 1, zero-padded, float32
-            k = min(chunk, n_samples - a)
-            host = np.zeros((E, chunk * substeps, nu), np.float32)
-            steps = slice((a - 1) * substeps, (a - 1 + k) * substeps)
-
-            def fill(eps: slice) -> None:
-                host[eps, : k * substeps] = ctrl_rows(steps, eps)
-
-            list(workers.map(fill, blocks))
-            return host
-
         cuda = wp.get_device(self.device).is_cuda
+
         with wp.ScopedDevice(self.device), ThreadPoolExecutor(1, thread_name_prefix="chunk") as pool, \
                 ThreadPoolExecutor(CONTROL_THREADS, thread_name_prefix="controls") as workers:
-            nxt = pool.submit(host_chunk, starts[0])
-            if self._buffers is not None and self._buffers[:2] == (chunk, substeps):
-                seq, rec, rec_host, graph = self._buffers[2:]
-            else:
+            if self._buffers is None or self._buffers[:3] != (chunk, substeps, n_sets):
                 self._buffers = None  # free the old ones first
-                seq = wp.zeros((E, chunk * substeps, nu), dtype=wp.float32)
-                rec = wp.zeros((E, chunk, ns), dtype=wp.float32)
-                # sensors come back through a page-locked buffer (a fresh pageable array faults page by page)
-                rec_host = wp.empty(rec.shape, dtype=wp.float32, device="cpu", pinned=True) if cuda else rec
-                graph = None
-                self._buffers = (chunk, substeps, seq, rec, rec_host, graph)
-            if cuda and not self._loaded:  # load (compile) every kernel before a graph capture
+                self._buffers = (chunk, substeps, n_sets, [self._chunk_set(chunk, substeps, cuda) for _ in range(n_sets)])
+            sets = self._buffers[3]
+
+            def fill(i: int) -> None:  # chunk i's controls (samples a .. a + k - 1, zero-padded) into its host buffer
+                a = starts[i]
+                k = min(chunk, n_samples - a)
+                host = sets[i % n_sets].ctrl_host.numpy()
+                steps = slice((a - 1) * substeps, (a - 1 + k) * substeps)
+
+                def part(eps: slice) -> None:
+                    host[eps, : k * substeps] = ctrl_rows(steps, eps)
+
+                list(workers.map(part, blocks))
+                if k < chunk:
+                    host[:, k * substeps :] = 0.0
+
+            def enqueue(i: int) -> None:  # chunk i on the device: controls up, k sample periods, sensors down
+                s, k = sets[i % n_sets], min(chunk, n_samples - starts[i])
+                if cuda:
+                    wp.copy(s.seq, s.ctrl_host)
                 self.counter.zero_()
-                self._step_sample(seq, rec, 2)
-                self._loaded = True
+                for _ in range(k):
+                    if cuda:
+                        wp.capture_launch(s.graph)
+                    else:
+                        self._step_sample(s.seq, s.rec, substeps)
+                if cuda:
+                    wp.copy(s.rec_host, s.rec)
+                    wp.record_event(s.event)
+
+            def take(i: int) -> None:  # chunk i's sensors into `out` (on CUDA once its copy has landed)
+                s, a = sets[i % n_sets], starts[i]
+                k = min(chunk, n_samples - a)
+                if cuda:
+                    wp.synchronize_event(s.event)
+                out[:, a : a + k] = s.rec_host.numpy()[:, :k]
+
+            first = pool.submit(fill, 0)  # while the kernels load and the graphs are captured
+            if cuda:
+                if not self._loaded:  # load (compile) every kernel before a graph capture
+                    self.counter.zero_()
+                    self._step_sample(sets[0].seq, sets[0].rec, 2)
+                    self._loaded = True
+                for s in sets:
+                    if s.graph is None:  # captured once (recorded, not run): its buffers are refilled in place
+                        with wp.ScopedCapture() as cap:
+                            self._step_sample(s.seq, s.rec, substeps)
+                        s.graph = cap.graph
             mjw.reset_data(self.m, self.d)
             self.d.qpos.assign(np.ascontiguousarray(qpos0, np.float32))
             self._reset_extra(qpos0, sens0)
-            for i, a in enumerate(starts):
-                k = min(chunk, n_samples - a)
-                seq.assign(nxt.result())
-                if i + 1 < len(starts):
-                    nxt = pool.submit(host_chunk, starts[i + 1])
-                self.counter.zero_()
-                if cuda:
-                    if graph is None:  # captured once (recorded, not run): its buffers are refilled in place
-                        with wp.ScopedCapture() as cap:
-                            self._step_sample(seq, rec, substeps)
-                        graph = cap.graph
-                        self._buffers = (chunk, substeps, seq, rec, rec_host, graph)
-                    for _ in range(k):
-                        wp.capture_launch(graph)
-                else:
-                    for _ in range(k):
-                        self._step_sample(seq, rec, substeps)
-                if cuda:
-                    wp.copy(rec_host, rec)
-                    wp.synchronize_device(self.device)
-                out[:, a : a + k] = rec_host.numpy()[:, :k]
+            first.result()
+            enqueue(0)
+            for i in range(1, n_sets):
+                fill(i)
+                enqueue(i)
+            for i in range(len(starts)):
+                take(i)
+                if i + n_sets < len(starts):
+                    fill(i + n_sets)
+                    enqueue(i + n_sets)
         return out
+
+    def _chunk_set(self, chunk: int, substeps: int, cuda: bool) -> "_ChunkSet":
+        """One set of chunk buffers: controls (E, chunk * substeps, nu) and recorded sensors (E, chunk, ns) on the
+        device, and on CUDA their page-locked host twins (a fresh pageable array faults page by page, and only a
+        page-locked one copies asynchronously) and the event that marks the set's sensors as landed."""
+        E, nu, ns = self.E, self.mjm.nu, self.n_recorded + self.n_extra
+        seq = wp.zeros((E, chunk * substeps, nu), dtype=wp.float32)
+        rec = wp.zeros((E, chunk, ns), dtype=wp.float32)
+        if not cuda:
+            return _ChunkSet(seq, rec, seq, rec)
+        return _ChunkSet(seq, rec, wp.empty(seq.shape, dtype=wp.float32, device="cpu", pinned=True),
+                         wp.empty(rec.shape, dtype=wp.float32, device="cpu", pinned=True), event=wp.Event())
+
+
+@dataclass
+class _ChunkSet:
+    """Buffers of one time chunk (`WarpWorlds.run`): shapes (E, chunk * substeps, nu) for the controls and
+    (E, chunk, n_recorded + n_extra) for the sensors, float32; on Warp's CPU device the host buffers are the
+    device ones. graph: the chunk's sample period captured on these buffers (CUDA)."""
+
+    seq: wp.array
+    rec: wp.array
+    ctrl_host: wp.array
+    rec_host: wp.array
+    graph: object = None
+    event: object = None
 
 
 @wp.kernel
