@@ -36,3 +36,10 @@ C)  # fabric_1 8192: the plain CLI old, then new again
     old_cli fabric_1 8192 h200-s19-fabric_1-old; repack C1
     cli fabric_1 8192 h200-s19-fabric_1-2 noalone; pack C2 ;;
 esac
+case "$1" in
+D)  # velostat stepping alone: which part of the chunks in flight is slower (old 16.6 s against new 22.8 s in A)
+    alone velostat 8192 h200-s19-velostat-alone-new3
+    PIEZOTWIN_PIPELINE_SETS=1 alone velostat 8192 h200-s19-velostat-alone-sets1
+    PIEZOTWIN_PIPELINE_SYNC=1 alone velostat 8192 h200-s19-velostat-alone-sync
+    old_alone velostat 8192 h200-s19-velostat-alone-old3; pack D ;;
+esac

@@ -28,6 +28,9 @@ from simulate.contact.stick_slip_kernels import stick_slip_update
 
 CHUNK_BYTES = 256 * 2**20  # device memory for one chunk of controls + recorded sensors (per set of buffers)
 PIPELINE_SETS = 2  # chunks in flight (`WarpWorlds.run`): the device steps one while the host takes the other
+import os as _os  # noqa: E402  (diagnostic knobs, session 19)
+PIPELINE_SETS = int(_os.environ.get("PIEZOTWIN_PIPELINE_SETS", PIPELINE_SETS))
+_DIAG_SYNC = _os.environ.get("PIEZOTWIN_PIPELINE_SYNC") == "1"
 CONTROL_THREADS = 4  # host threads making a chunk's controls (32k episodes: ~6 s of numpy per batch)
 
 
@@ -200,6 +203,8 @@ class WarpWorlds:
                 if cuda:
                     wp.copy(s.rec_host, s.rec)
                     wp.record_event(s.event)
+                    if _DIAG_SYNC:
+                        wp.synchronize_event(s.event)
 
             def take(i: int) -> None:  # chunk i's sensors into `out` (on CUDA once its copy has landed)
                 s, a = sets[i % n_sets], starts[i]
