@@ -37,9 +37,16 @@ C)  # fabric_1 8192: the plain CLI old, then new again
     cli fabric_1 8192 h200-s19-fabric_1-2 noalone; pack C2 ;;
 esac
 case "$1" in
-D)  # velostat stepping alone: which part of the chunks in flight is slower (old 16.6 s against new 22.8 s in A)
+D)  # velostat stepping alone: which part of the chunks in flight was slower (old 16.6 s against new 22.8 s in A;
+    # run with the knobs PIEZOTWIN_PIPELINE_SETS / _SYNC of commit "diagnostic knobs", since removed)
     alone velostat 8192 h200-s19-velostat-alone-new3
     PIEZOTWIN_PIPELINE_SETS=1 alone velostat 8192 h200-s19-velostat-alone-sets1
     PIEZOTWIN_PIPELINE_SYNC=1 alone velostat 8192 h200-s19-velostat-alone-sync
     old_alone velostat 8192 h200-s19-velostat-alone-old3; pack D ;;
+E)  # the controls made by the helper thread (this thread only queues work): velostat alone new / old / new / old
+    alone velostat 8192 h200-s19-velostat-alone-e-new1; old_alone velostat 8192 h200-s19-velostat-alone-e-old1
+    alone velostat 8192 h200-s19-velostat-alone-e-new2; old_alone velostat 8192 h200-s19-velostat-alone-e-old2
+    timeout 200 python3 -m pytest tests/test_contact_mjw.py -q -m gpu -p no:cacheprovider -k chunks \
+        2>&1 | grep -v "^Module" | tee $OUT/r/logs/pytest-gpu-chunks-h200-s19.log | tail -2
+    pack E ;;
 esac

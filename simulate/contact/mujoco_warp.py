@@ -28,9 +28,6 @@ from simulate.contact.stick_slip_kernels import stick_slip_update
 
 CHUNK_BYTES = 256 * 2**20  # device memory for one chunk of controls + recorded sensors (per set of buffers)
 PIPELINE_SETS = 2  # chunks in flight (`WarpWorlds.run`): the device steps one while the host takes the other
-import os as _os  # noqa: E402  (diagnostic knobs, session 19)
-PIPELINE_SETS = int(_os.environ.get("PIEZOTWIN_PIPELINE_SETS", PIPELINE_SETS))
-_DIAG_SYNC = _os.environ.get("PIEZOTWIN_PIPELINE_SYNC") == "1"
 CONTROL_THREADS = 4  # host threads making a chunk's controls (32k episodes: ~6 s of numpy per batch)
 
 
@@ -149,10 +146,12 @@ class WarpWorlds:
         (E, n_samples, n_recorded + n_extra) float64 array to fill (default a new one); sens0 has as many columns.
 
         The samples go in time chunks (CHUNK_BYTES of controls + sensors each), through PIPELINE_SETS sets of
-        buffers: on CUDA every transfer is asynchronous (page-locked host buffers), so the device steps chunk
-        i + 1, already queued, while the host copies chunk i's sensors into `out` and makes chunk i + 2's
-        controls; the device never waits for the host between chunks. On Warp's CPU device the same sets are
-        used one after another (the controls are made straight into the worlds' buffer).
+        buffers: on CUDA every transfer is asynchronous (page-locked host buffers), and this thread only queues
+        work (uploads, graph launches, copies back) while a helper thread takes chunk i's sensors into `out` and
+        makes chunk i + PIPELINE_SETS's controls once chunk i has landed, so the device does not wait for the
+        host between chunks (session 18's code, one chunk at a time: 15.6-16.7 s of worlds for velostat's 8192
+        episodes on an H200; its controls made in this thread between launches: 20.0-22.9 s). On Warp's CPU
+        device the same sets are used one after another (the controls are made straight into its buffers).
         """
         import mujoco_warp as mjw
         from concurrent.futures import ThreadPoolExecutor
@@ -203,8 +202,6 @@ class WarpWorlds:
                 if cuda:
                     wp.copy(s.rec_host, s.rec)
                     wp.record_event(s.event)
-                    if _DIAG_SYNC:
-                        wp.synchronize_event(s.event)
 
             def take(i: int) -> None:  # chunk i's sensors into `out` (on CUDA once its copy has landed)
                 s, a = sets[i % n_sets], starts[i]
@@ -213,7 +210,16 @@ class WarpWorlds:
                     wp.synchronize_event(s.event)
                 out[:, a : a + k] = s.rec_host.numpy()[:, :k]
 
-            first = pool.submit(fill, 0)  # while the kernels load and the graphs are captured
+            # the host threads keep the device fed: the launching thread (this one) queues chunk i while the helper
+            # takes chunk i - n_sets's sensors and makes chunk i's controls (a CUDA launch queue holds a few sample
+            # periods only, so work done between launches in this thread would let the device drain it and idle)
+            ready = [pool.submit(fill, j) for j in range(n_sets)]  # ready[i] done: chunk i's controls are in place
+
+            def take_then_fill(i: int) -> None:
+                take(i)
+                if i + n_sets < len(starts):
+                    fill(i + n_sets)
+
             if cuda:
                 if not self._loaded:  # load (compile) every kernel before a graph capture
                     self.counter.zero_()
@@ -227,16 +233,12 @@ class WarpWorlds:
             mjw.reset_data(self.m, self.d)
             self.d.qpos.assign(np.ascontiguousarray(qpos0, np.float32))
             self._reset_extra(qpos0, sens0)
-            first.result()
-            enqueue(0)
-            for i in range(1, n_sets):
-                fill(i)
-                enqueue(i)
             for i in range(len(starts)):
-                take(i)
-                if i + n_sets < len(starts):
-                    fill(i + n_sets)
-                    enqueue(i + n_sets)
+                ready[i].result()
+                enqueue(i)
+                ready.append(pool.submit(take_then_fill, i))
+            for f in ready:
+                f.result()
         return out
 
     def _chunk_set(self, chunk: int, substeps: int, cuda: bool) -> "_ChunkSet":
