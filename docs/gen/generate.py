@@ -71,7 +71,28 @@ USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w
             "user-cli-h200-s16-cnt_pdms-pop.json", "user-cli-h200-s17-fabric_1.json", "user-cli-h200-s17-fabric_1-old.json",
             "user-cli-h200-s17-velostat.json", "user-cli-h200-s17-velostat-old.json", "user-cli-h200-s17-velostat-old2.json",
             "user-cli-h200-s17-velostat-2.json", "user-cli-h200-s17-fabric_1-old2.json", "user-cli-h200-s17-fabric_1-2.json",
-            "user-cli-h200-s17-velostat-2048-protos.json"]
+            "user-cli-h200-s17-velostat-2048-protos.json", "user-cli-h200-s19-velostat.json",
+            "user-cli-h200-s19-velostat-old.json", "user-cli-h200-s19-fabric_1.json", "user-cli-h200-s19-fabric_1-old.json",
+            "user-cli-h200-s19-velostat-final.json"]
+# session 19's A/B of MuJoCo Warp stepping alone (bench/h200_s19.sh; mjw-alone-h200-s19-<tag>-<family>.json): (tag,
+# family, code), in the order run on each machine
+MJW_CHUNKS_AB = [
+    ("velostat-alone-new1", "velostat", "first design: controls made in the launching thread"),
+    ("velostat-alone-old1", "velostat", "session 18 (8d0f09c): one chunk at a time"),
+    ("velostat-alone-new2", "velostat", "first design: controls made in the launching thread"),
+    ("velostat-alone-old2", "velostat", "session 18 (8d0f09c): one chunk at a time"),
+    ("velostat-alone-new3", "velostat", "first design (second machine)"),
+    ("velostat-alone-sets1", "velostat", "first design, one set of chunk buffers"),
+    ("velostat-alone-sync", "velostat", "first design, waiting for each chunk"),
+    ("velostat-alone-old3", "velostat", "session 18 (8d0f09c): one chunk at a time"),
+    ("velostat-alone-e-new1", "velostat", "final: a helper thread takes the sensors and makes the controls (third machine)"),
+    ("velostat-alone-e-old1", "velostat", "session 18 (8d0f09c): one chunk at a time"),
+    ("velostat-alone-e-new2", "velostat", "final"),
+    ("velostat-alone-e-old2", "velostat", "session 18 (8d0f09c): one chunk at a time"),
+    ("fabric_1-alone-old0", "fabric_1", "session 18 (8d0f09c): one chunk at a time (third machine)"),
+    ("fabric_1-alone-new1", "fabric_1", "final"),
+    ("fabric_1-alone-old1", "fabric_1", "session 18 (8d0f09c): one chunk at a time"),
+]
 USER_CLI_STARTUP = [  # session 12: start-up and exit of small runs, the base tree (b833838) against the branch, one machine per pair
     ("user-cli-h100-s12-startup-base-ntype-1.json", "user-cli-h100-s12-startup-ntype-1.json"),
     ("user-cli-h100-s12-startup-base-cnt_pdms-1.json", "user-cli-h100-s12-startup-cnt_pdms-1.json"),
@@ -85,12 +106,12 @@ PHYSICS_PROFILE = "physics-profile-h100-s4.json"
 MULTI_GPU = "gpu-pipeline-h200x2.json"
 # the latest plain-CLI run of each family (issue 16's README table): `piezotwin generate FAMILY -o X --episodes N` with
 # defaults, one GPU machine, after a warm-up run (bench/bench_user_cli.py, bench/bench_mjw_alone.py)
-# (file, family): session 18's final code for velostat (with stepping alone) and cnt_pdms (the writers' zero chunks
-# and taxel blocks: same wall as before on the GPU, smaller files); session 17's for fabric_1 (with stepping alone, on
-# a machine whose stepping was slower: fabric_1 75-90 s); session 16's for ntype (no later change touches a step its
-# profile showed as large)
-USER_CLI_LATEST = [("user-cli-h200-s18-cnt_pdms-final.json", "cnt_pdms"), ("user-cli-h200-s18-velostat-final.json", "velostat"),
-                   ("user-cli-h200-s16-ntype-b.json", "ntype"), ("user-cli-h200-s17-fabric_1.json", "fabric_1")]
+# (file, family): session 19's final code for velostat and fabric_1 (MuJoCo Warp's time chunks two in flight; with
+# stepping alone); session 18's for cnt_pdms (the writers' zero chunks and taxel blocks: same wall as before on the
+# GPU, smaller files; its worlds are one length group stepped as before); session 16's for ntype (no later change
+# touches a step its profile showed as large)
+USER_CLI_LATEST = [("user-cli-h200-s18-cnt_pdms-final.json", "cnt_pdms"), ("user-cli-h200-s19-velostat-final.json", "velostat"),
+                   ("user-cli-h200-s16-ntype-b.json", "ntype"), ("user-cli-h200-s19-fabric_1.json", "fabric_1")]
 
 
 # ----------------------------------------------------------------------------------------------- formatting
@@ -284,6 +305,12 @@ def bench_user_cli() -> str:
            "without warm-up runs `-velostat-old2`, `-velostat-2`, `-fabric_1-old2`, `-fabric_1-2`; "
            "`-velostat-2048-protos`: the final session-17 code (the first batch's protocols made by the driver while "
            "the physics processes import) on a second H200 machine after a 256-episode warm-up run; "
+           "`user-cli-h200-s19-*.json`: session 19's A/B of MuJoCo Warp's time chunks (`WarpWorlds.run`), this code "
+           "against session 18's last (8d0f09c, `-old`), each pair on one H200 machine: `-velostat` (the first design, the "
+           "controls made in the launching thread: slower) and `-velostat-old` after a warm-up run; on a third machine "
+           "`-fabric_1` (the final design, two chunks in flight, a helper thread taking the sensors and making the "
+           "controls) after a warm-up run, its stepping alone run just before it, then `-fabric_1-old`; "
+           "`-velostat-final` (the final design) after a warm-up run, then stepping alone; "
            "raw = a plain file of the same bytes "
            "on the same disk right after (issue 16's target: >= 50 % of it, or >= 1e6 samples/s):\n",
            table(["family", "episodes", "file", "engine (the CLI's line)", "s", "samples/s", "MB/s", "of raw MB/s"], rows)]
@@ -344,6 +371,21 @@ def bench_user_cli() -> str:
                 "issue 16's target for the slow quasi-static protocols: the CLI run at >= 80 % of it:\n",
                 table(["family", "episodes", "file", "physics step ms", "batches", "alone s", "alone samples/s",
                        "alone world-steps/s", "CLI s", "CLI samples/s", "CLI / alone"], alone)]
+    chunks = []
+    for tag, fam, code in MJW_CHUNKS_AB:
+        a = load(f"mjw-alone-h200-s19-{tag}-{fam}.json")
+        if a:
+            chunks.append([fam, a["episodes"], f"`mjw-alone-h200-s19-{tag}-{fam}.json`", code, num(a["worlds_seconds"]),
+                           num(a["seconds"])])
+    if chunks:
+        out += ["MuJoCo Warp stepping alone, session 19's A/B of its time chunks (`WarpWorlds.run`; in the order run, "
+                "three H200 machines): a chunk's controls are uploaded, its sample periods replayed as CUDA graphs, its "
+                "sensors copied back; session 18's code did one chunk at a time (the device idle while the sensors "
+                "came back and the next controls went up), the final code keeps two in flight with every transfer "
+                "asynchronous and the host's work (the sensors into the output, the next controls) on a helper thread; "
+                "the first design made the controls in the launching thread, between launches, and the device drained "
+                "its launch queue meanwhile:\n",
+                table(["family", "episodes", "file", "code", "worlds s", "wall s"], chunks)]
     split = []
     for name, family in USER_CLI_LATEST:
         r = (load(name) or {}).get("runs", {}).get(family)
