@@ -179,7 +179,7 @@ class WarpWorlds:
             def fill(i: int) -> None:  # chunk i's controls (samples a .. a + k - 1, zero-padded) into its host buffer
                 a = starts[i]
                 k = min(chunk, n_samples - a)
-                host = sets[i % n_sets].ctrl_host.numpy()
+                host = sets[i % n_sets].ctrl_np
                 steps = slice((a - 1) * substeps, (a - 1 + k) * substeps)
 
                 def part(eps: slice) -> None:
@@ -208,7 +208,7 @@ class WarpWorlds:
                 k = min(chunk, n_samples - a)
                 if cuda:
                     wp.synchronize_event(s.event)
-                out[:, a : a + k] = s.rec_host.numpy()[:, :k]
+                out[:, a : a + k] = s.rec_np[:, :k]
 
             # the host threads keep the device fed: the launching thread (this one) queues chunk i while the helper
             # takes chunk i - n_sets's sensors and makes chunk i's controls (a CUDA launch queue holds a few sample
@@ -249,21 +249,26 @@ class WarpWorlds:
         seq = wp.zeros((E, chunk * substeps, nu), dtype=wp.float32)
         rec = wp.zeros((E, chunk, ns), dtype=wp.float32)
         if not cuda:
-            return _ChunkSet(seq, rec, seq, rec)
-        return _ChunkSet(seq, rec, wp.empty(seq.shape, dtype=wp.float32, device="cpu", pinned=True),
-                         wp.empty(rec.shape, dtype=wp.float32, device="cpu", pinned=True), event=wp.Event())
+            return _ChunkSet(seq, rec, seq, rec, seq.numpy(), rec.numpy())
+        ctrl_host = wp.empty(seq.shape, dtype=wp.float32, device="cpu", pinned=True)
+        rec_host = wp.empty(rec.shape, dtype=wp.float32, device="cpu", pinned=True)
+        return _ChunkSet(seq, rec, ctrl_host, rec_host, ctrl_host.numpy(), rec_host.numpy(), event=wp.Event())
 
 
 @dataclass
 class _ChunkSet:
     """Buffers of one time chunk (`WarpWorlds.run`): shapes (E, chunk * substeps, nu) for the controls and
     (E, chunk, n_recorded + n_extra) for the sensors, float32; on Warp's CPU device the host buffers are the
-    device ones. graph: the chunk's sample period captured on these buffers (CUDA)."""
+    device ones; ctrl_np / rec_np: numpy views of the host buffers, made once here (the helper thread then touches
+    no Warp call while this thread captures a graph). graph: the chunk's sample period captured on these buffers
+    (CUDA)."""
 
     seq: wp.array
     rec: wp.array
     ctrl_host: wp.array
     rec_host: wp.array
+    ctrl_np: np.ndarray
+    rec_np: np.ndarray
     graph: object = None
     event: object = None
 
