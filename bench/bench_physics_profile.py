@@ -65,7 +65,7 @@ def kernel_profile(device: str, n_worlds: int, top: int = 30) -> dict:
     m, sub, q0, ctrl, s0 = _worlds(_cfg([]), n_worlds, 6)
     ww = WarpWorlds(m, n_worlds, device)
     ww.run(q0, ctrl, s0, sub, 6)  # leaves the worlds mid-episode, the indenter pressing
-    first = ww._buffers[3][0]  # noqa: SLF001 - the bench drives one sample period by hand
+    first = ww._buffers[2][0]  # noqa: SLF001 - the bench drives one sample period by hand
     seq, rec = first.seq, first.rec
     with wp.ScopedDevice(device):
         ww.counter.zero_()

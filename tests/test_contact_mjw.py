@@ -255,7 +255,7 @@ def _chunked_runs(device: str, monkeypatch) -> tuple[np.ndarray, dict]:
     for sets in (1, 2):
         monkeypatch.setattr(mw, "PIPELINE_SETS", sets)
         chunked[sets] = ww.run(q0, lambda sl, eps: ctrl[eps, sl], s0, sub, n)  # controls as a function too
-    assert ww._buffers[:3] == (9, sub, 2)  # noqa: SLF001 - the chunking under test did happen
+    assert ww._buffers[0] == 9 and len(ww._buffers[2]) == 2  # noqa: SLF001 - the chunking under test did happen
     assert np.abs(one[..., 4:7]).max() > 0.5  # a loaded contact is compared
     return one, chunked
 

@@ -96,7 +96,7 @@ class WarpWorlds:
             m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_NATIVECCD)
         quiet = copy.copy(m)  # the substeps between two records: same model, sensors off
         quiet.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
-        self._buffers: tuple | None = None  # (chunk, substeps, n_sets, [_ChunkSet]) of the last run, reused by the next
+        self._buffers: tuple | None = None  # (chunk, substeps, [_ChunkSet]) of earlier runs, reused by the next
         self._loaded = False
         with wp.ScopedDevice(device):
             self.m = mjw.put_model(m)
@@ -160,21 +160,25 @@ class WarpWorlds:
         ctrl_rows = ctrl if callable(ctrl) else (lambda sl, eps: ctrl[eps, sl])
         out = np.zeros((E, n_samples, ns)) if out is None else out
         out[:, 0] = sens0
+        if E == 0 or n_samples < 2:
+            return out
         per_sample = E * (substeps * nu + ns) * 4
         chunk = int(max(1, min(n_samples - 1, CHUNK_BYTES // per_sample)))
         starts = list(range(1, n_samples, chunk))
-        if not starts:
-            return out
         n_sets = min(len(starts), PIPELINE_SETS)
         blocks = [slice(b, min(E, b + -(-E // CONTROL_THREADS))) for b in range(0, E, -(-E // CONTROL_THREADS))]
         cuda = wp.get_device(self.device).is_cuda
+        stream = wp.get_device(self.device).stream if cuda else None
 
         with wp.ScopedDevice(self.device), ThreadPoolExecutor(1, thread_name_prefix="chunk") as pool, \
                 ThreadPoolExecutor(CONTROL_THREADS, thread_name_prefix="controls") as workers:
-            if self._buffers is None or self._buffers[:3] != (chunk, substeps, n_sets):
+            # the sets of an earlier run are reused where they hold this run's chunks (a graph indexes its buffers
+            # by the device-side counter, not by their length): a batch's length groups then allocate and capture once
+            b = self._buffers
+            if b is None or b[1] != substeps or b[0] < chunk or len(b[2]) < n_sets:
                 self._buffers = None  # free the old ones first
-                self._buffers = (chunk, substeps, n_sets, [self._chunk_set(chunk, substeps, cuda) for _ in range(n_sets)])
-            sets = self._buffers[3]
+                self._buffers = (chunk, substeps, [self._chunk_set(chunk, substeps, cuda) for _ in range(n_sets)])
+            sets = self._buffers[2][:n_sets]
 
             def fill(i: int) -> None:  # chunk i's controls (samples a .. a + k - 1, zero-padded) into its host buffer
                 a = starts[i]
@@ -201,7 +205,7 @@ class WarpWorlds:
                         self._step_sample(s.seq, s.rec, substeps)
                 if cuda:
                     wp.copy(s.rec_host, s.rec)
-                    wp.record_event(s.event)
+                    stream.record_event(s.event)
 
             def take(i: int) -> None:  # chunk i's sensors into `out` (on CUDA once its copy has landed)
                 s, a = sets[i % n_sets], starts[i]
@@ -220,25 +224,30 @@ class WarpWorlds:
                 if i + n_sets < len(starts):
                     fill(i + n_sets)
 
-            if cuda:
-                if not self._loaded:  # load (compile) every kernel before a graph capture
-                    self.counter.zero_()
-                    self._step_sample(sets[0].seq, sets[0].rec, 2)
-                    self._loaded = True
-                for s in sets:
-                    if s.graph is None:  # captured once (recorded, not run): its buffers are refilled in place
-                        with wp.ScopedCapture() as cap:
-                            self._step_sample(s.seq, s.rec, substeps)
-                        s.graph = cap.graph
-            mjw.reset_data(self.m, self.d)
-            self.d.qpos.assign(np.ascontiguousarray(qpos0, np.float32))
-            self._reset_extra(qpos0, sens0)
-            for i in range(len(starts)):
-                ready[i].result()
-                enqueue(i)
-                ready.append(pool.submit(take_then_fill, i))
-            for f in ready:
-                f.result()
+            try:
+                if cuda:
+                    if not self._loaded:  # load (compile) every kernel before a graph capture (2 substeps: both
+                        # models; a buffer of one step's controls holds only one)
+                        self.counter.zero_()
+                        self._step_sample(sets[0].seq, sets[0].rec, min(2, sets[0].seq.shape[1]))
+                        self._loaded = True
+                    for s in sets:
+                        if s.graph is None:  # captured once (recorded, not run): its buffers are refilled in place
+                            with wp.ScopedCapture(device=self.device) as cap:
+                                self._step_sample(s.seq, s.rec, substeps)
+                            s.graph = cap.graph
+                mjw.reset_data(self.m, self.d)
+                self.d.qpos.assign(np.ascontiguousarray(qpos0, np.float32))
+                self._reset_extra(qpos0, sens0)
+                for i in range(len(starts)):
+                    ready[i].result()
+                    enqueue(i)
+                    ready.append(pool.submit(take_then_fill, i))
+                for f in ready:
+                    f.result()
+            except BaseException:
+                pool.shutdown(wait=False, cancel_futures=True)  # no more controls made for a run that failed
+                raise
         return out
 
     def _chunk_set(self, chunk: int, substeps: int, cuda: bool) -> "_ChunkSet":
