@@ -167,8 +167,9 @@ class WarpWorlds:
         starts = list(range(1, n_samples, chunk))
         n_sets = min(len(starts), PIPELINE_SETS)
         blocks = [slice(b, min(E, b + -(-E // CONTROL_THREADS))) for b in range(0, E, -(-E // CONTROL_THREADS))]
-        cuda = wp.get_device(self.device).is_cuda
-        stream = wp.get_device(self.device).stream if cuda else None
+        dev = wp.get_device(self.device)
+        cuda = dev.is_cuda
+        stream = dev.stream if cuda else None
 
         with wp.ScopedDevice(self.device), ThreadPoolExecutor(1, thread_name_prefix="chunk") as pool, \
                 ThreadPoolExecutor(CONTROL_THREADS, thread_name_prefix="controls") as workers:
@@ -180,7 +181,9 @@ class WarpWorlds:
                 self._buffers = (chunk, substeps, [self._chunk_set(chunk, substeps, cuda) for _ in range(n_sets)])
             sets = self._buffers[2][:n_sets]
 
-            def fill(i: int) -> None:  # chunk i's controls (samples a .. a + k - 1, zero-padded) into its host buffer
+            def fill(i: int) -> None:  # chunk i's controls (samples a .. a + k - 1) into its host buffer (the rows
+                # after them, a short last chunk's or a larger reused buffer's, are left as they are: the step counter
+                # never reaches them)
                 a = starts[i]
                 k = min(chunk, n_samples - a)
                 host = sets[i % n_sets].ctrl_np
@@ -190,8 +193,6 @@ class WarpWorlds:
                     host[eps, : k * substeps] = ctrl_rows(steps, eps)
 
                 list(workers.map(part, blocks))
-                if k < chunk:
-                    host[:, k * substeps :] = 0.0
 
             def enqueue(i: int) -> None:  # chunk i on the device: controls up, k sample periods, sensors down
                 s, k = sets[i % n_sets], min(chunk, n_samples - starts[i])
