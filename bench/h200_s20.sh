@@ -1,0 +1,17 @@
+#!/usr/bin/env bash
+# The device calls of session 20 (issue 16): session 19's last code (the chunk sets as the review left them, which
+# ran on Warp's CPU device only) on CUDA, and a second machine's pair for fabric_1's plain CLI against MuJoCo Warp
+# stepping alone: `bash bench/h200_s20.sh T|F|V`. Logs and result files go to $OUT as one tar per step.
+source "$(dirname "$0")/h100_lib.sh"  # environment, cli (plain CLI + MuJoCo Warp alone), pack, warm, repack
+case "$1" in
+T)  # the CUDA tests of the contact stages: the chunks in flight, the C MuJoCo equivalence, ntype's stick-slip worlds
+    timeout 500 python3 -m pytest tests/test_contact_mjw.py tests/test_contact_mjw_force.py tests/test_press_stroke_mjw.py \
+        -q -m gpu -p no:cacheprovider 2>&1 | grep -v "^Module" | tee $OUT/r/logs/pytest-gpu-mjw-h200-s20.log | tail -4
+    pack T ;;
+F)  # fabric_1 8192 as a user types it, then MuJoCo Warp stepping the same worlds alone (second machine's pair)
+    warm fabric_1
+    cli fabric_1 8192 h200-s20-fabric_1; pack F ;;
+V)  # velostat 8192 as a user types it, then stepping alone
+    warm velostat
+    cli velostat 8192 h200-s20-velostat; pack V ;;
+esac
