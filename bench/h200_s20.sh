@@ -15,3 +15,15 @@ V)  # velostat 8192 as a user types it, then stepping alone
     warm velostat
     cli velostat 8192 h200-s20-velostat; pack V ;;
 esac
+case "$1" in
+R)  # the staging buffers page-locked while the first batch steps (`reserve_staging`): its CUDA test, then velostat
+    # 8192 as a user types it with and without (PIEZOTWIN_RESERVE_STAGING=0), in turn
+    timeout 200 python3 -m pytest tests/test_gpu.py -q -m gpu -p no:cacheprovider -k staging \
+        2>&1 | grep -v "^Module" | tee $OUT/r/logs/pytest-gpu-staging-h200-s20.log | tail -2
+    warm velostat
+    cli velostat 8192 h200-s20-velostat-reserve1 noalone
+    PIEZOTWIN_RESERVE_STAGING=0 cli velostat 8192 h200-s20-velostat-noreserve1 noalone
+    cli velostat 8192 h200-s20-velostat-reserve2 noalone
+    PIEZOTWIN_RESERVE_STAGING=0 cli velostat 8192 h200-s20-velostat-noreserve2 noalone
+    pack R ;;
+esac

@@ -91,18 +91,20 @@ def resolve_device(device: str) -> str:
 
 # host_staging / to_host: copies back from the GPU into reused page-locked buffers where the caller allows it
 _STAGING: ContextVar[bool] = ContextVar("piezotwin_host_staging", default=False)
-_PINNED: dict[tuple, wp.array] = {}  # ((site, slot), shape, dtype, device) -> page-locked host array
+_PINNED: dict[tuple, wp.array] = {}  # (site, slot) -> flat page-locked host buffer (uint8), grow-only: a
+# call site's copies take views of it, so a group's last, shorter slice reuses the full slice's buffer
 # which set of staging buffers the copies go into: a consumer that still holds one slice's views while the next
 # slice is copied back (the GPU feed packs slice i while slice i + 1 runs) alternates slots (`staging_slot`)
 _SLOT: ContextVar[int] = ContextVar("piezotwin_staging_slot", default=0)
-MAX_PINNED_PER_SITE = 2  # e.g. the full slice and a group's last, shorter one
+# inside `staging_log`: (site, slot) -> the most bytes a copy asked for (a probe's, for `reserve_staging`)
+_LOG: ContextVar[dict | None] = ContextVar("piezotwin_staging_log", default=None)
 
 
 @contextmanager
 def host_staging() -> Iterator[None]:
-    """Inside, `to_host` returns views of page-locked host buffers that the next copy from the same call site
-    and shape overwrites: for a consumer that copies each slice's outputs away before asking for the next
-    (the GPU feed packs them into shared memory). A fresh pageable array per copy ran at ~1.4 GB/s on the H100
+    """Inside, `to_host` returns views of page-locked host buffers that the next copy from the same call site (in
+    the same `staging_slot`) overwrites: for a consumer that copies each slice's outputs away before asking for
+    the next (the GPU feed packs them into shared memory). A fresh pageable array per copy ran at ~1.4 GB/s on the H100
     host (page faults, staging); page-locked memory that stays mapped takes the DMA directly."""
     token = _STAGING.set(True)
     try:
@@ -125,6 +127,7 @@ def staging_slot(slot: int) -> Iterator[None]:
 def to_host(arr: wp.array, site: str) -> np.ndarray:
     """arr on the host: `arr.numpy()` (a new array, or arr's own memory on the CPU), or inside `host_staging`
     for a CUDA array, a view of the reused page-locked buffer of `site` (valid until its next copy)."""
+    _note(arr, site)
     if not _STAGING.get() or not arr.device.is_cuda:
         return arr.numpy()
     buf = _pinned_buffer(arr, site)
@@ -134,17 +137,54 @@ def to_host(arr: wp.array, site: str) -> np.ndarray:
 
 
 def _pinned_buffer(arr: wp.array, site: str) -> wp.array:
-    """The reused page-locked host buffer of `site` (in the current `staging_slot`) for arr's shape and dtype (at
-    most MAX_PINNED_PER_SITE kept per site and slot: the oldest shapes go first)."""
-    site = (site, _SLOT.get())
-    key = (site, arr.shape, arr.dtype, str(arr.device))
-    buf = _PINNED.get(key)
-    if buf is None:
-        same_site = [k for k in _PINNED if k[0] == site]
-        for k in same_site[: max(0, len(same_site) - MAX_PINNED_PER_SITE + 1)]:
-            del _PINNED[k]
-        buf = _PINNED[key] = wp.empty(arr.shape, dtype=arr.dtype, device="cpu", pinned=True)
-    return buf
+    """A page-locked host array of arr's shape and dtype: a view of the grow-only buffer of `site` in the current
+    `staging_slot` (made, or made larger, here: page-locking costs ~1 s per GB on the H200 host, so the GPU feed
+    makes them ahead with `reserve_staging` while its first batch steps)."""
+    key = (site, _SLOT.get())
+    flat = _grow_pinned(key, arr.size * wp.types.type_size_in_bytes(arr.dtype))
+    view = wp.array(ptr=flat.ptr, dtype=arr.dtype, shape=arr.shape, capacity=flat.capacity, device="cpu", pinned=True)
+    view._ref = flat  # a view handed out keeps its buffer (and values) past `release_staging`
+    return view
+
+
+def _note(arr: wp.array, site: str) -> None:
+    """Inside `staging_log` and `host_staging`: note the bytes this copy of `site` asks for (on any device, so a
+    plan can be made and checked without CUDA)."""
+    log = _LOG.get()
+    if log is not None and _STAGING.get():
+        key = (site, _SLOT.get())
+        log[key] = max(log.get(key, 0), arr.size * wp.types.type_size_in_bytes(arr.dtype))
+
+
+def _grow_pinned(key: tuple, nbytes: int) -> wp.array:
+    flat = _PINNED.get(key)
+    if flat is None or flat.capacity < nbytes:
+        _PINNED.pop(key, None)  # unpinned before the larger one is made
+        flat = _PINNED[key] = wp.empty(max(nbytes, 1), dtype=wp.uint8, device="cpu", pinned=True)
+    return flat
+
+
+@contextmanager
+def staging_log() -> Iterator[dict]:
+    """Inside, every `to_host` copy into a staging buffer notes its (site, slot) and bytes in the dict yielded
+    (the largest per key): a probe's, scaled to a batch's slices, is the plan of `reserve_staging`."""
+    log: dict = {}
+    token = _LOG.set(log)
+    try:
+        yield log
+    finally:
+        _LOG.reset(token)
+
+
+def reserve_staging(plan: dict[tuple, int]) -> int:
+    """Make the staging buffers of `plan` ((site, slot) -> bytes) at least that large now, for a caller with idle
+    time before its copies (the GPU feed, while its first batch steps); returns the bytes page-locked here."""
+    made = 0
+    for key, nbytes in plan.items():
+        before = _PINNED.get(key)
+        if before is None or before.capacity < nbytes:
+            made += _grow_pinned(key, int(nbytes)).capacity
+    return made
 
 
 def release_staging() -> int:
@@ -163,6 +203,7 @@ def to_host_many(arrs: list[wp.array], sites: list[str]) -> list[np.ndarray]:
         return [to_host(a, s) for a, s in zip(arrs, sites)]
     bufs = []
     for arr, site in zip(arrs, sites):
+        _note(arr, site)
         buf = _pinned_buffer(arr, site)
         wp.copy(buf, arr)
         bufs.append(buf)

@@ -371,6 +371,32 @@ def test_feed_hands_each_shard_on_as_its_last_slice_is_packed(monkeypatch):
                 np.testing.assert_array_equal(got[r.ep_id][n], c.data, err_msg=f"{r.ep_id} {n}")
 
 
+def test_staging_plan_names_the_largest_slice_copies(monkeypatch):
+    """While the first batch steps, the GPU feed page-locks the staging buffers that the batch's slices will copy
+    back into (`probe_batch`'s plan, from one episode on zero sensordata): the plan names every call site the
+    slices copy from, with the bytes of the largest slice (one episode length here: exactly), and a larger
+    batch scales it by its slice size."""
+    from sensors import warp_setup as ws
+    from sensors.data.manifest import episode_seed
+    from simulate.generation import feed
+
+    cfg, sensor = _gpu_slicing_on_cpu(monkeypatch)
+    monkeypatch.setattr(feed, "SLICES_PER_LENGTH", 2)  # 7 episodes: slices of 4 and 3
+    gids = list(range(7))
+    _, plan = feed.probe_batch(cfg, sensor, gids)
+    seeds = [episode_seed(cfg.generation.root_seed, k) for k in gids]
+    with ws.host_staging(), ws.staging_log() as log:
+        for _ in run.simulate_slices(cfg, seeds, sensor, 1, gids, None, None, feed.SLICES_PER_LENGTH):
+            pass
+    assert log and plan == log
+    assert len({k[0] for k in log}) >= 2  # several call sites (the sensor's outputs)
+    _, plan_big = feed.probe_batch(cfg, sensor, list(range(70)))  # slices of 35 episodes
+    assert plan_big == {k: v * 35 // 4 for k, v in plan.items()}
+    monkeypatch.setattr(feed, "PACK_OVERLAP", True)  # the pack alternates two sets of buffers: both planned
+    _, plan_two = feed.probe_batch(cfg, sensor, gids)
+    assert plan_two == {**plan, **{(site, 1): v for (site, _), v in plan.items()}}
+
+
 @pytest.mark.parametrize("split", [False, True])
 def test_pack_into_blocks_populated_ahead_from_the_estimate(monkeypatch, split):
     """While a batch's physics steps, the feed populates shared blocks (arenas) for its pack from an estimate made

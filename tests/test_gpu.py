@@ -103,6 +103,28 @@ def test_parallel_readout_cuda_equals_serial_cpu(gpu_device):
         np.testing.assert_allclose(st_g.pink, st.pink, rtol=1e-9, atol=1e-9)
 
 
+def test_reserved_staging_buffer_takes_the_copies(gpu_device):
+    # the GPU feed page-locks a slice's staging buffers ahead (`reserve_staging`): the copies of that call site
+    # then land in the reserved buffer (no new page-locking), a group's shorter last slice too, with their values
+    import warp as wp
+
+    from sensors import warp_setup as ws
+
+    if not str(gpu_device).startswith("cuda"):
+        pytest.skip("page-locked staging is for CUDA arrays")
+    ws.release_staging()
+    assert ws.reserve_staging({("test-reserve", 0): 8000}) >= 8000 and ws.reserve_staging({("test-reserve", 0): 400}) == 0
+    reserved = ws._PINNED[("test-reserve", 0)]
+    with ws.host_staging(), ws.staging_log() as log:
+        full = ws.to_host(wp.array(np.arange(2000, dtype=np.float32), device=gpu_device), "test-reserve")
+        np.testing.assert_array_equal(full, np.arange(2000, dtype=np.float32))
+        short = ws.to_host(wp.array(np.arange(500, dtype=np.float64), device=gpu_device), "test-reserve")
+        np.testing.assert_array_equal(short, np.arange(500, dtype=np.float64))
+    assert ws._PINNED[("test-reserve", 0)] is reserved and log == {("test-reserve", 0): 8000}
+    assert short.ctypes.data == full.ctypes.data == reserved.ptr
+    ws.release_staging()
+
+
 def test_release_staging_frees_the_pinned_buffers_and_keeps_views(gpu_device):
     # the GPU feed unpins its staging buffers while the writers finish: the buffers go, a view handed out before
     # keeps its values (it holds its buffer), and the next copy makes a new buffer

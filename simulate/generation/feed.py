@@ -263,6 +263,9 @@ ARENA_ALIGN = 64  # bytes: a carved piece starts on this boundary (every dtype's
 POPULATE_MARGIN = 1.05  # populated ahead: the estimate (`batch_pack_bytes`) and this share more (alignment, lengths)
 POPULATE_AHEAD = os.environ.get("PIEZOTWIN_POPULATE_AHEAD", "1") == "1"  # the GPU feed populates its first batch's
 # blocks while that batch steps (`BlockPool.populate_ahead`); "0": off (the bench's A/B)
+RESERVE_STAGING = os.environ.get("PIEZOTWIN_RESERVE_STAGING", "1") == "1"  # ... and, on a GPU, page-locks the staging
+# buffers its first slice copies back into (`probe_batch`'s plan; ~1 s per GB on the H200 host, 7 GB for velostat's
+# 2048-episode slices); "0": off (the bench's A/B)
 
 
 def _populate(shm) -> None:
@@ -648,13 +651,26 @@ PROBE_EPISODES = 64  # protocols drawn to estimate a batch's mean episode length
 
 def batch_pack_bytes(cfg: SceneConfig, sensor, gids: list[int], threads: int = 1, protos: list | None = None) -> int:
     """The bytes the pack of episodes `gids` (a batch of the worlds path) will need, estimated before their physics
-    is back: one of them through the load field and the sensor chain on zero sensordata (its channels' shapes and
-    dtypes do not depend on the load; on a GPU it also loads the sensor's kernels, ahead of the first slice), per
-    sample, times the mean length of up to PROBE_EPISODES of their protocols, times their count. protos: those of
-    `gids`, where made already (else the probed ones are drawn here)."""
+    is back (`probe_batch`)."""
+    return probe_batch(cfg, sensor, gids, threads, protos)[0]
+
+
+def probe_batch(cfg: SceneConfig, sensor, gids: list[int], threads: int = 1,
+                protos: list | None = None) -> tuple[int, dict[tuple, int]]:
+    """What a batch of the worlds path (episodes `gids`) will need, estimated before its physics is back: one of
+    them through the load field and the sensor chain on zero sensordata (its channels' shapes and dtypes do not
+    depend on the load; on a GPU it also loads the sensor's kernels, ahead of the first slice). Returns
+    - the bytes its pack will need: per sample, times the mean length of up to PROBE_EPISODES of their protocols,
+      times their count;
+    - its staging plan ((site, slot) -> bytes, for `sensors.warp_setup.reserve_staging`): the page-locked buffers
+      its largest slice copies back into, from the probe's copies per sample times that slice's samples (the slices
+      of `simulate_slices` with SLICES_PER_LENGTH pieces, from the lengths of up to PROBE_EPISODES protocols; the
+      slots the pack alternates where PACK_OVERLAP).
+    protos: those of `gids`, where made already (else the probed ones are drawn here)."""
     from sensors.data.manifest import episode_seed
+    from sensors.warp_setup import host_staging, staging_log
     from simulate.contact.load_field import build_model, read_columns
-    from simulate.generation.run import episode_protocols, simulate_slices
+    from simulate.generation.run import SENSOR_SLICE, episode_protocols, simulate_slices
 
     every = max(1, len(gids) // PROBE_EPISODES)
     probe = gids[::every][:PROBE_EPISODES]
@@ -662,10 +678,19 @@ def batch_pack_bytes(cfg: SceneConfig, sensor, gids: list[int], threads: int = 1
     protos = episode_protocols(cfg, seeds, probe) if protos is None else protos[::every][:PROBE_EPISODES]
     n = protos[0].n_samples
     zero = {n: (np.zeros((1, n, len(read_columns(build_model(cfg))))), np.zeros((1, n)))}
-    per_episode = sum(c.data[0].nbytes for _, _, arrays in simulate_slices(cfg, seeds[:1], sensor, threads, probe[:1],
-                                                                           protos[:1], zero)
-                      for c in arrays.values() if c.per_episode)
-    return int(per_episode / n * np.mean([p.n_samples for p in protos]) * len(gids))
+    with host_staging(), staging_log() as log:
+        per_episode = sum(c.data[0].nbytes for _, _, arrays in simulate_slices(cfg, seeds[:1], sensor, threads, probe[:1],
+                                                                               protos[:1], zero)
+                          for c in arrays.values() if c.per_episode)
+    lengths = np.array([p.n_samples for p in protos])
+    slice_samples = 0  # samples of the largest slice: per length group, its episodes in SLICES_PER_LENGTH pieces
+    for length in np.unique(lengths):
+        count = round(len(gids) * float(np.mean(lengths == length)))
+        per = min(SENSOR_SLICE, max(1, -(-count // max(1, SLICES_PER_LENGTH))))
+        slice_samples = max(slice_samples, per * int(length))
+    slots = (0, 1) if PACK_OVERLAP else (0,)
+    plan = {(site, slot): int(-(-nbytes * slice_samples // n)) for (site, _), nbytes in log.items() for slot in slots}
+    return int(per_episode / n * float(np.mean(lengths)) * len(gids)), plan
 
 
 def iter_produce(cfg: SceneConfig, shards: list[int], sensor, threads: int = 1, seconds: dict | None = None,
@@ -943,13 +968,19 @@ def generate_feed(
         if physics and POPULATE_AHEAD:  # while the first batch steps: the blocks its pack will fill, populated ahead
             t0 = time.perf_counter()
             try:
-                need = batch_pack_bytes(cfg, sensor, first, threads, first_protos)
+                need, staging = probe_batch(cfg, sensor, first, threads, first_protos)
             except Exception:  # noqa: BLE001 - an estimate only: the batch itself raises whatever is wrong
-                need = None
+                need, staging = None, None
                 seconds["populate ahead: skipped, the estimate failed"] = 0.0
             if need is not None:
                 shared.populate_ahead(min(int(need * POPULATE_MARGIN) + 2**20, int(ram_budget)))
             add("populate ahead: estimate", t0)
+            if staging and device != "cpu" and RESERVE_STAGING:  # the page-locked buffers of the first slice too
+                from sensors.warp_setup import reserve_staging
+
+                t0 = time.perf_counter()
+                seconds["reserve staging: GB page-locked (a size, not seconds)"] = reserve_staging(staging) / 1e9
+                add("reserve staging", t0)
         first_protos = None
         for b, group in enumerate(groups):
             t0 = time.perf_counter()
