@@ -91,7 +91,7 @@ def resolve_device(device: str) -> str:
 
 # host_staging / to_host: copies back from the GPU into reused page-locked buffers where the caller allows it
 _STAGING: ContextVar[bool] = ContextVar("piezotwin_host_staging", default=False)
-_PINNED: dict[tuple, wp.array] = {}  # (site, slot) -> flat page-locked host buffer (uint8), grow-only: a
+_PINNED: dict[tuple, wp.array] = {}  # (site, slot) -> flat page-locked host buffer (uint64), grow-only: a
 # call site's copies take views of it, so a group's last, shorter slice reuses the full slice's buffer
 # which set of staging buffers the copies go into: a consumer that still holds one slice's views while the next
 # slice is copied back (the GPU feed packs slice i while slice i + 1 runs) alternates slots (`staging_slot`)
@@ -160,7 +160,8 @@ def _grow_pinned(key: tuple, nbytes: int) -> wp.array:
     flat = _PINNED.get(key)
     if flat is None or flat.capacity < nbytes:
         _PINNED.pop(key, None)  # unpinned before the larger one is made
-        flat = _PINNED[key] = wp.empty(max(nbytes, 1), dtype=wp.uint8, device="cpu", pinned=True)
+        # 8-byte words: a Warp dimension holds < 2**31 elements, and a slice's fields reach 3.6 GB
+        flat = _PINNED[key] = wp.empty(max(1, -(-nbytes // 8)), dtype=wp.uint64, device="cpu", pinned=True)
     return flat
 
 
