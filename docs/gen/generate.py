@@ -73,7 +73,19 @@ USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w
             "user-cli-h200-s17-velostat-2.json", "user-cli-h200-s17-fabric_1-old2.json", "user-cli-h200-s17-fabric_1-2.json",
             "user-cli-h200-s17-velostat-2048-protos.json", "user-cli-h200-s19-velostat.json",
             "user-cli-h200-s19-velostat-old.json", "user-cli-h200-s19-fabric_1.json", "user-cli-h200-s19-fabric_1-old.json",
-            "user-cli-h200-s19-velostat-final.json"]
+            "user-cli-h200-s19-velostat-final.json", "user-cli-h200-s20-fabric_1.json", "user-cli-h200-s20-velostat.json",
+            "user-cli-h200-s20-velostat-reserve1.json", "user-cli-h200-s20-velostat-noreserve1.json",
+            "user-cli-h200-s20-velostat-reserve2.json", "user-cli-h200-s20-velostat-noreserve2.json",
+            "user-cli-h200-s20-velostat-final.json", "user-cli-h200-s20-cnt_pdms.json",
+            "user-cli-h200-s20-cnt_pdms-noreserve.json"]
+# session 20's A/B of the staging buffers page-locked while the first batch steps (bench/h200_s20.sh R; in the
+# order run on one machine): (file, family, reserved)
+STAGING_AB = [("user-cli-h200-s20-velostat-reserve1.json", "velostat", True),
+              ("user-cli-h200-s20-velostat-noreserve1.json", "velostat", False),
+              ("user-cli-h200-s20-velostat-reserve2.json", "velostat", True),
+              ("user-cli-h200-s20-velostat-noreserve2.json", "velostat", False),
+              ("user-cli-h200-s20-cnt_pdms.json", "cnt_pdms", True),
+              ("user-cli-h200-s20-cnt_pdms-noreserve.json", "cnt_pdms", False)]
 # session 19's A/B of MuJoCo Warp stepping alone (bench/h200_s19.sh; mjw-alone-h200-s19-<tag>-<family>.json): (tag,
 # family, code), in the order run on each machine
 MJW_CHUNKS_AB = [
@@ -110,8 +122,8 @@ MULTI_GPU = "gpu-pipeline-h200x2.json"
 # stepping alone); session 18's for cnt_pdms (the writers' zero chunks and taxel blocks: same wall as before on the
 # GPU, smaller files; its worlds are one length group stepped as before); session 16's for ntype (no later change
 # touches a step its profile showed as large)
-USER_CLI_LATEST = [("user-cli-h200-s18-cnt_pdms-final.json", "cnt_pdms"), ("user-cli-h200-s19-velostat-final.json", "velostat"),
-                   ("user-cli-h200-s16-ntype-b.json", "ntype"), ("user-cli-h200-s19-fabric_1.json", "fabric_1")]
+USER_CLI_LATEST = [("user-cli-h200-s20-cnt_pdms.json", "cnt_pdms"), ("user-cli-h200-s20-velostat-final.json", "velostat"),
+                   ("user-cli-h200-s16-ntype-b.json", "ntype"), ("user-cli-h200-s20-fabric_1.json", "fabric_1")]
 
 
 # ----------------------------------------------------------------------------------------------- formatting
@@ -386,6 +398,22 @@ def bench_user_cli() -> str:
                 "the first design made the controls in the launching thread, between launches, and the device drained "
                 "its launch queue meanwhile:\n",
                 table(["family", "episodes", "file", "code", "worlds s", "wall s"], chunks)]
+    staging = []
+    for name, fam, reserved in STAGING_AB:
+        r = (load(name) or {}).get("runs", {}).get(fam)
+        if r and "timings" in r:
+            t = r["timings"]["feed"]
+            staging.append([fam, r["episodes"], f"`{name}`", "yes" if reserved else "no",
+                            num(t.get("reserve staging: GB page-locked (a size, not seconds)")), num(t.get("reserve staging")),
+                            num(t.get("simulate")), num(r["seconds"])])
+    if staging:
+        out += ["The GPU feed's staging buffers page-locked while the first batch steps (session 20, one H200 machine, "
+                "in the order run): a slice's outputs come back from the GPU into page-locked host buffers, which "
+                "the first slice used to make (~0.35 s per GB), inside `simulate`; now `probe_batch` plans them from "
+                "one episode on zero sensordata and `reserve_staging` makes them while the driver waits for its "
+                "first batch of worlds (`PIEZOTWIN_RESERVE_STAGING=0`: off):\n",
+                table(["family", "episodes", "file", "reserved", "GB page-locked ahead", "reserve s", "simulate s",
+                       "wall s"], staging)]
     split = []
     for name, family in USER_CLI_LATEST:
         r = (load(name) or {}).get("runs", {}).get(family)
