@@ -27,3 +27,11 @@ R)  # the staging buffers page-locked while the first batch steps (`reserve_stag
     PIEZOTWIN_RESERVE_STAGING=0 cli velostat 8192 h200-s20-velostat-noreserve2 noalone
     pack R ;;
 esac
+case "$1" in
+S)  # the float32 solver's lateral residual read as 0 (TANGENTIAL_RESIDUAL_SHARE): a small velostat dataset's zero
+    # shares (bench/gpu_zero_fields.py; also compiles the kernels), then velostat 8192 as a user types it
+    timeout 200 python3 -m piezotwin generate velostat -o /tmp/z-velostat --episodes 256 2>&1 | tail -1 | cut -c1-200
+    python3 bench/gpu_zero_fields.py /tmp/z-velostat --out $OUT/r/gpu-zero-fields-h200-s20-velostat.json | tail -3
+    rm -rf /tmp/z-velostat
+    cli velostat 8192 h200-s20-velostat-residual noalone; pack S ;;
+esac

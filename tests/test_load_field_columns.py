@@ -43,3 +43,31 @@ def test_load_batch_from_the_kept_columns_equals_the_one_from_all():
         x, y = getattr(a, name), getattr(b, name)
         assert x.dtype == y.dtype and x.tobytes() == y.tobytes(), name
     assert float(np.abs(b.pressure_pa).max()) > 0  # the episodes press
+
+
+def test_tangential_solver_residual_reads_zero():
+    """A lateral contact force below TANGENTIAL_RESIDUAL_SHARE of the normal one (MuJoCo Warp's float32 residual on a
+    normal press, ~1e-5) reads 0 in the force and so in the shear field; a real tangential load (a stroke: tens of %
+    of the normal force, or a small one above the share) and a contact without normal force keep theirs."""
+    from simulate.contact import load_field as lf
+
+    cfg = load_scene("velostat", ["generation.physics=mujoco"])
+    E, T = 4, 3
+    sens = np.zeros((E, T, 7))
+    sens[..., lf._POS] = [0.0, 0.0, -1e-6]  # the tip 1 um into the pad
+    sens[..., lf._FOUND] = 4
+    normal = 5.0
+    sens[..., lf._FORCE.start + 2] = -normal  # compressive
+    share = lf.TANGENTIAL_RESIDUAL_SHARE
+    lateral = {0: 1.7e-5, 1: 0.3 * share, 2: 3.0 * share, 3: 0.2}  # episode -> lateral force / normal force
+    for e, r in lateral.items():
+        sens[e, :, lf._FORCE.start] = 0.6 * r * normal
+        sens[e, :, lf._FORCE.start + 1] = -0.8 * r * normal
+    sens[3, 2, lf._FORCE] = [1e-3, 0.0, 0.0]  # no normal force: the lateral one stays
+    b = lf.load_batch(cfg, sens, np.zeros((E, T)))
+    f = b.contact_force_n
+    assert (f[:2, :, :2] == 0).all() and (b.shear_pa[:2] == 0).all()  # residual: no force, no shear
+    np.testing.assert_allclose(f[2, :, :2], [[0.6 * 3 * share * normal, -0.8 * 3 * share * normal]] * T)
+    np.testing.assert_allclose(f[3, :2, :2], [[0.6 * 0.2 * normal, -0.8 * 0.2 * normal]] * 2)
+    assert f[3, 2, 0] == 1e-3 and np.abs(b.shear_pa[2:]).max() > 0
+    assert (f[..., 2][f[..., 2] != 0] == normal).all()  # the normal force is untouched
