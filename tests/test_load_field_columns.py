@@ -46,9 +46,10 @@ def test_load_batch_from_the_kept_columns_equals_the_one_from_all():
 
 
 def test_tangential_solver_residual_reads_zero():
-    """A lateral contact force below TANGENTIAL_RESIDUAL_SHARE of the normal one (MuJoCo Warp's float32 residual on a
-    normal press, ~1e-5) reads 0 in the force and so in the shear field; a real tangential load (a stroke: tens of %
-    of the normal force, or a small one above the share) and a contact without normal force keep theirs."""
+    """A lateral contact force below TANGENTIAL_RESIDUAL_N + TANGENTIAL_RESIDUAL_SHARE x the normal one (MuJoCo
+    Warp's float32 residual on a normal press: <= 2.6e-4 N) reads 0 in the force and so in the shear field; a real
+    tangential load (a stroke: tens of % of the normal force, or a small one above the floor) keeps its value, and
+    the normal force is untouched."""
     from simulate.contact import load_field as lf
 
     cfg = load_scene("velostat", ["generation.physics=mujoco"])
@@ -58,16 +59,17 @@ def test_tangential_solver_residual_reads_zero():
     sens[..., lf._FOUND] = 4
     normal = 5.0
     sens[..., lf._FORCE.start + 2] = -normal  # compressive
-    share = lf.TANGENTIAL_RESIDUAL_SHARE
-    lateral = {0: 1.7e-5, 1: 0.3 * share, 2: 3.0 * share, 3: 0.2}  # episode -> lateral force / normal force
-    for e, r in lateral.items():
-        sens[e, :, lf._FORCE.start] = 0.6 * r * normal
-        sens[e, :, lf._FORCE.start + 1] = -0.8 * r * normal
-    sens[3, 2, lf._FORCE] = [1e-3, 0.0, 0.0]  # no normal force: the lateral one stays
+    floor = lf.TANGENTIAL_RESIDUAL_N + lf.TANGENTIAL_RESIDUAL_SHARE * normal
+    lateral = {0: 2.6e-4, 1: 0.9 * floor, 2: 1.5 * floor, 3: 0.2 * normal}  # episode -> lateral force (N)
+    for e, t in lateral.items():
+        sens[e, :, lf._FORCE.start] = 0.6 * t
+        sens[e, :, lf._FORCE.start + 1] = -0.8 * t
+    sens[3, 1, lf._FORCE] = [5e-3, 0.0, 0.0]  # no normal force, a lateral one above the floor: kept
+    sens[3, 2, lf._FORCE] = [1e-4, 0.0, 0.0]  # no normal force, a residual: 0
     b = lf.load_batch(cfg, sens, np.zeros((E, T)))
     f = b.contact_force_n
     assert (f[:2, :, :2] == 0).all() and (b.shear_pa[:2] == 0).all()  # residual: no force, no shear
-    np.testing.assert_allclose(f[2, :, :2], [[0.6 * 3 * share * normal, -0.8 * 3 * share * normal]] * T)
-    np.testing.assert_allclose(f[3, :2, :2], [[0.6 * 0.2 * normal, -0.8 * 0.2 * normal]] * 2)
-    assert f[3, 2, 0] == 1e-3 and np.abs(b.shear_pa[2:]).max() > 0
+    np.testing.assert_allclose(f[2, :, :2], [[0.6 * 1.5 * floor, -0.8 * 1.5 * floor]] * T, rtol=1e-6)
+    np.testing.assert_allclose(f[3, 0, :2], [0.6 * 0.2 * normal, -0.8 * 0.2 * normal], rtol=1e-6)
+    assert f[3, 1, 0] == 5e-3 and f[3, 2, 0] == 0 and np.abs(b.shear_pa[2:]).max() > 0
     assert (f[..., 2][f[..., 2] != 0] == normal).all()  # the normal force is untouched
