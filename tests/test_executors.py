@@ -576,3 +576,37 @@ def test_cli_failure_after_the_physics_started_ahead_stops_them(monkeypatch, tmp
                                    "--physics", "mujoco_warp", "--device", "cuda:7"])
     assert res.exit_code == 2, res.output
     assert started and feed._PRESTARTED is None and all(not p.is_alive() for p in started)
+
+
+def test_a_driver_failure_leaves_no_physics_block_behind(cfg, tmp_path, monkeypatch):
+    """The physics processes hand each batch's sensordata over in a shared block that the driver unlinks once it
+    has read it; a driver that fails first (here: its first batch's sensor stage) unlinks the block of the batch in
+    hand and those of the batches stepped ahead, instead of leaving them in /dev/shm for the resource tracker."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from simulate.generation import feed
+
+    monkeypatch.setattr(feed, "FEED_WORLDS", 4)  # a ramp of >= 1, >= 2 episodes, then >= 4: the two physics
+    # processes step batches 0 and 1 before the driver takes batch 0
+    futures = []
+    real_submit = ProcessPoolExecutor.submit
+
+    def submit(self, fn, *a, **k):
+        fut = real_submit(self, fn, *a, **k)
+        if fn is feed.step_worlds:
+            futures.append(fut)
+        return fut
+
+    monkeypatch.setattr(ProcessPoolExecutor, "submit", submit)
+
+    def fail(self, shards, stepped=None):
+        futures[1].result()  # the batch stepped ahead is back too (its block made)
+        raise RuntimeError("sensor stage failed")
+
+    monkeypatch.setattr(feed.Producer, "batch", fail)
+    with pytest.raises(RuntimeError, match="sensor stage failed"):
+        executors.generate(cfg, tmp_path / "out", workers=2, feed=True)
+    names = [h[0] for fut in futures if fut.done() and not fut.cancelled() and fut.exception() is None
+             for h in fut.result()[1].values() if isinstance(h[0], str)]
+    assert len(names) >= 2  # the batch in hand and one stepped ahead handed blocks over
+    assert not [n for n in names if (Path("/dev/shm") / n.lstrip("/")).exists()]

@@ -95,6 +95,21 @@ def _views(buf, where: list[tuple[int, str, tuple[int, ...]]]) -> list[np.ndarra
     return [np.ndarray(shape, np.dtype(dt), buffer=buf, offset=off) for off, dt, shape in where]
 
 
+def _discard_stepped(stepped: tuple | None) -> None:
+    """Unlink the shared blocks of a `step_worlds` result that no `Producer.batch` took (a run failing before it
+    got there; a block already unlinked is skipped): else they would hold /dev/shm until the resource tracker
+    reaps them at exit, with a warning."""
+    for handed in (stepped[1].values() if stepped else ()):
+        if not isinstance(handed[0], str):
+            continue
+        try:
+            shm = _attach(handed[0])
+        except FileNotFoundError:
+            continue
+        shm.close()
+        shm.unlink()
+
+
 def step_worlds(cfg: SceneConfig, gids: list[int], threads: int = 1, submitted: float | None = None,
                 select: Select | None = None, protos: list | None = None) -> tuple[list, dict, dict]:
     """Physics task (in the feed's physics process): the protocols of episodes `gids` (made here unless `protos`
@@ -964,6 +979,7 @@ def generate_feed(
 
     produce = Producer(cfg, sensor, threads, seconds, shared)
     add("start-up", t_start)
+    stepped = None
     try:  # (the populating inside: an interrupt there still stops the pools and unlinks the blocks below)
         if physics and POPULATE_AHEAD:  # while the first batch steps: the blocks its pack will fill, populated ahead
             t0 = time.perf_counter()
@@ -1029,11 +1045,17 @@ def generate_feed(
             t0 = time.perf_counter()
         collect(None)
         add("wait for writers", t0)
+    except BaseException:
+        _discard_stepped(stepped)  # the batch in hand, where the failure came before its Producer unlinked it
+        raise
     finally:
         t0 = time.perf_counter()
         pool.shutdown(wait=True, cancel_futures=True)
         if physics:
             physics.shutdown(wait=True, cancel_futures=True)
+            for fut in ahead:  # batches stepped ahead that no Producer took (a failure): their blocks go too
+                if fut.done() and not fut.cancelled() and fut.exception() is None:
+                    _discard_stepped(fut.result())
         shared.close()
         add("shut down", t0)
     return entries
