@@ -279,7 +279,7 @@ POPULATE_MARGIN = 1.05  # populated ahead: the estimate (`batch_pack_bytes`) and
 POPULATE_AHEAD = os.environ.get("PIEZOTWIN_POPULATE_AHEAD", "1") == "1"  # the GPU feed populates its first batch's
 # blocks while that batch steps (`BlockPool.populate_ahead`); "0": off (the bench's A/B)
 RESERVE_STAGING = os.environ.get("PIEZOTWIN_RESERVE_STAGING", "1") == "1"  # ... and, on a GPU, page-locks the staging
-# buffers its first slice copies back into (`probe_batch`'s plan; ~1 s per GB on the H200 host, 7 GB for velostat's
+# buffers its first slice copies back into (`probe_batch`'s plan; ~0.35 s per GB on the H200 host, 7.3 GB for velostat's
 # 2048-episode slices); "0": off (the bench's A/B)
 
 
