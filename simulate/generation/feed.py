@@ -1009,7 +1009,8 @@ def generate_feed(
             if physics:
                 t0 = time.perf_counter()
                 try:
-                    stepped = ahead.pop(0).result()
+                    stepped = ahead[0].result()  # left in `ahead` until it is back: an interrupt meanwhile still
+                    ahead.pop(0)  # unlinks its block once the physics process is done with it (the finally below)
                 except BrokenProcessPool:
                     raise RuntimeError(f"the physics process died stepping shards {group} (complete shards are kept: "
                                        "rerun to resume)") from None
