@@ -19,13 +19,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from simulate.contact.load_field import TANGENTIAL_RESIDUAL_N, TANGENTIAL_RESIDUAL_SHARE
+from simulate.contact.load_field import TANGENTIAL_RESIDUAL_N, TANGENTIAL_RESIDUAL_SHARE, lateral_residual
 
 BANDS_N = [(0.0, 0.01), (0.01, 0.1), (0.1, 1.0), (1.0, 5.0), (5.0, 20.0), (20.0, np.inf)]
-
-
-def _floor(t: np.ndarray, n: np.ndarray) -> np.ndarray:
-    return t < TANGENTIAL_RESIDUAL_N + TANGENTIAL_RESIDUAL_SHARE * n
 
 
 def main() -> None:
@@ -54,7 +50,7 @@ def main() -> None:
     out = {"data": str(a.data), "files": len(files), "samples": int(t.size), "loaded_samples": int(loaded.sum()),
            "lateral_nonzero_samples": int((t > 0).sum()), "floor_n": TANGENTIAL_RESIDUAL_N,
            "floor_share": TANGENTIAL_RESIDUAL_SHARE, "bands": bands,
-           "loaded_under_floor_share": float(_floor(t[loaded], n[loaded]).mean()) if loaded.any() else None,
+           "loaded_under_floor_share": float(lateral_residual(t[loaded], n[loaded]).mean()) if loaded.any() else None,
            "lateral_max_n": float(t.max())}
     for b in bands:
         print(f"|F_z| {b['normal_n']} N: {b['samples']} samples, |F_xy| <= {b['lateral_max_n']:.3g} N, "
@@ -69,7 +65,7 @@ def main() -> None:
             for ep in f["episodes"]:
                 g = f["episodes"][ep]
                 cf = g["contact_force"][()]
-                res = _floor(np.hypot(cf[:, 0].astype(np.float64), cf[:, 1]), np.abs(cf[:, 2].astype(np.float64)))
+                res = lateral_residual(np.hypot(cf[:, 0].astype(np.float64), cf[:, 1]), np.abs(cf[:, 2].astype(np.float64)))
                 cf[res, :2] = 0
                 g["contact_force"][...] = cf
                 if "shear" in g:

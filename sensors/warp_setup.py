@@ -183,8 +183,8 @@ def reserve_staging(plan: dict[tuple, int]) -> int:
     made = 0
     for key, nbytes in plan.items():
         before = _PINNED.get(key)
-        if before is None or before.capacity < nbytes:
-            made += _grow_pinned(key, int(nbytes)).capacity
+        flat = _grow_pinned(key, int(nbytes))
+        made += flat.capacity if flat is not before else 0
     return made
 
 

@@ -400,6 +400,12 @@ TANGENTIAL_RESIDUAL_N = 1e-3  # ~4x the largest lateral residual measured
 TANGENTIAL_RESIDUAL_SHARE = 1e-4  # ~8x the median share at 5-20 N
 
 
+def lateral_residual(lateral_n: np.ndarray, normal_n: np.ndarray) -> np.ndarray:
+    """Where a lateral contact force |F_xy| (N) beside the normal one |F_z| (N) is the float32 solver's residual:
+    below TANGENTIAL_RESIDUAL_N + TANGENTIAL_RESIDUAL_SHARE x |F_z| (bool, elementwise)."""
+    return lateral_n < TANGENTIAL_RESIDUAL_N + TANGENTIAL_RESIDUAL_SHARE * normal_n
+
+
 def _columns(sens: np.ndarray, top: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """load_batch's pose (contiguous), world position, force (tangential x, y, normal compressive z) and contact
     count out of sensordata (E, T, ns), split over episodes by `host_rows`. A tangential force below
@@ -418,9 +424,7 @@ def _columns(sens: np.ndarray, top: float) -> tuple[np.ndarray, np.ndarray, np.n
         np.copyto(force[e, :, :2], sens[e, :, _FORCE.start : _FORCE.start + 2])
         np.negative(sens[e, :, _FORCE.start + 2], out=force[e, :, 2])
         tangential = force[e, :, :2]
-        residual = (np.hypot(tangential[..., 0], tangential[..., 1])
-                    < TANGENTIAL_RESIDUAL_N + TANGENTIAL_RESIDUAL_SHARE * np.abs(force[e, :, 2]))
-        tangential[residual] = 0.0
+        tangential[lateral_residual(np.hypot(tangential[..., 0], tangential[..., 1]), np.abs(force[e, :, 2]))] = 0.0
         np.copyto(found[e], sens[e, :, _FOUND], casting="unsafe")
 
     host_rows(part, E, sens.nbytes)
