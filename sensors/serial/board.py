@@ -335,6 +335,7 @@ class ServeLog:
     disconnects: int = 0  # links dropped by the disconnect fault
     stalls: int = 0
     clients: int = 0  # clients served (one at a time)
+    started_monotonic_s: float | None = None  # host time.monotonic() when sample 0 became due
 
     def to_json(self) -> str:
         return json.dumps(self.__dict__)
@@ -399,6 +400,7 @@ def serve(
         if not next_client(0):
             return log
         t0 = time.monotonic()
+        log.started_monotonic_s = t0
         base_t, base_k = t0, 0  # schedule anchor: sample k is due at base_t + (k - base_k) / rate
         next_stall = t0 + faults.stall_every_s if faults.stall_s else None
         next_disc = t0 + faults.disconnect_every_s if faults.disconnect_every_s else None
