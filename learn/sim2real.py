@@ -260,8 +260,10 @@ S2R_BUDGET = {  # the default budget of `piezotwin sim2real` (2 CPU cores, <= 15
     "finetune_norm": "checkpoint", "rehearsal": 0.0, "n_train_seeds": 3, "time_budget_s": 900.0, "valid_tail": 0.25,
     "press_slope": False, "rated_force_n": None, "run_level": False, "fit_threshold": False,
     "creep_linear": False, "finetune_method": "plain", "l2sp_alpha": 0.1, "l2sp_beta": 0.01, "pipeline_seed": 0,
-    "fit_contact": False, "tail_by": "presses", "static_blend": False,
+    "fit_contact": False, "tail_by": "presses", "static_blend": False, "fit_tunnel": False,
 }
+# fit_tunnel: the chain's tunneling term (R_film x exp(-F_e / F_t), sensors.chain_fit, Zhang et al. 2000) with F_t
+# fitted; round 12 (session 21), scored by the rule in bench/bench_s2r_tunnel.py written before scoring
 # tail_by: how learn.finetune.split_tail cuts each training run's validation tail: "presses" (round 11, adopted on its
 # definition: the last quarter of the run's loaded presses, peak >= 10 % of the full scale) or "samples" (rounds 4-10:
 # the last quarter of its samples, which gave a 1 N run a tail of one 0.2 N press)
@@ -545,7 +547,7 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
             fit = C.fit_chain(train_runs, p0, n_boot=int(B["n_boot"]), seed=seed,
                               progress=lambda k, n: bar.update(task, completed=k), level_prior=not any(r.attrs.get("adc_full_scale") for r in runs),
                               fit_threshold=bool(B.get("fit_threshold")), creep_linear=bool(B.get("creep_linear")),
-                              fit_contact=bool(B.get("fit_contact")))
+                              fit_contact=bool(B.get("fit_contact")), fit_tunnel=bool(B.get("fit_tunnel")))
             held = C.evaluate(fit, [r for r in runs if r.key in test_keys])
             rand = C.randomization_from_fit(fit, train_runs, press_slope=bool(B["press_slope"]),
                                             rated_force_n=B.get("rated_force_n"), run_level=bool(B.get("run_level")))

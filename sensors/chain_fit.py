@@ -9,6 +9,11 @@ Chain (one taxel or one film pressed by one tip; all SI):
   film      R_film = r0_ohm * exp(l_j) * ((F + c) / F_ref)^-n, F_ref = 1 N (power law G ~ p^n: Holm,
             Electric Contacts 1967; velostat paper Fig. 13b); the tip area only rescales r0 and F_c (p = F / A),
             so from force and reading alone A is not identifiable: it is taken from the user (tip) and kept.
+  tunneling (optional, tunnel_force_n = F_t > 0) R_film x exp(-F_e / F_t), F_e = F + c: the filler gaps close with
+            the composite's strain, and the tunneling resistance across a gap s = s0 (1 - eps) falls as
+            exp(-gamma s0 eps), eps ~ F / (A M) (Zhang, Pan, Zheng & Yi, J. Polym. Sci. B 38, 2739, 2000; Simmons,
+            J. Appl. Phys. 34, 1793, 1963), so F_t = A M / (gamma s0): d ln R / d ln F = -(n + F / F_t), a law that
+            steepens with force (the TAMS taxels: ~1 at 0.05 N, ~3.5 at 0.5 N); F_t = 0: off (rounds 1-11).
   creep     c = sum_k c_k, c_k[t] = d_k c_k[t-1] + (1 - d_k) w_k Phi(F), Phi = a F_c ln(1 + F / F_c),
             d_k = exp(-dt / tau_k), tau_k log-spaced in [tau_min, tau_max], w_k = 1 / K (Schapery-type
             log-time creep as sensors/velostat/reference.py, written in force units): creep_law "force".
@@ -92,6 +97,8 @@ class ChainParams:
     # contact area (module doc, "contact"): the share of the tip's face in contact, s = (F / (F + F_a))^beta;
     # F_a = 0: full contact at any force (rounds 1-8, bit for bit)
     contact_force_n: float = 0.0
+    # tunneling (module doc): R_film x exp(-F_e / F_t); 0: off
+    tunnel_force_n: float = 0.0
     contact_area_exponent: float = 2.0 / 3.0  # estimate: Hertz, a rounded tip's contact area grows as F^(2/3)
     # (Johnson, Contact Mechanics 1985, eq. 4.22) before it spans the face; held, not fitted (one term: F_a)
 
@@ -152,6 +159,8 @@ def film_resistance(force: np.ndarray, dt: float, p: ChainParams, level: np.ndar
             r = np.where(f > 0, p.r0_ohm * np.exp(level) * ((f + c) / F_REF_N) ** (-p.exponent), np.inf)
         if p.contact_force_n > 0.0:
             r = np.where(f > 0, r / contact_fraction(f, p), np.inf)
+        if p.tunnel_force_n > 0.0:
+            r = r * np.exp(-(f if p.creep_law == "aging" else f + c) / p.tunnel_force_n)
         return r
 
 
@@ -271,23 +280,25 @@ class ChainFit:
 
 
 NAMES = ("exponent", "ln_creep_amplitude", "ln_creep_force_n", "ln_tau_min_s", "ln_tau_max_s", "ln_r_series_ohm",
-         "threshold_force_n", "ln_contact_force_n")
-LB = np.array([0.2, np.log(1e-3), np.log(1e-3), np.log(0.02), np.log(0.5), np.log(1e-3), 0.0, np.log(1e-3)])
-UB = np.array([4.0, np.log(50.0), np.log(1e4), np.log(5.0), np.log(1e3), np.log(1e7), 1e3, np.log(1e3)])
+         "threshold_force_n", "ln_contact_force_n", "ln_tunnel_force_n")
+LB = np.array([0.2, np.log(1e-3), np.log(1e-3), np.log(0.02), np.log(0.5), np.log(1e-3), 0.0, np.log(1e-3), np.log(1e-3)])
+UB = np.array([4.0, np.log(50.0), np.log(1e4), np.log(5.0), np.log(1e3), np.log(1e7), 1e3, np.log(1e3), np.log(1e4)])
 CONTACT_START_N = 1.0  # estimate: starting F_a of the contact fit, inside the range where the Lupasic runs' law
 # steepens (below ~5 N, seventh round); from F_a -> 0 the term's gradient vanishes
 
 
-def _free(fit_series: bool, fit_threshold: bool = False, creep_linear: bool = False, fit_contact: bool = False) -> list[int]:
+def _free(fit_series: bool, fit_threshold: bool = False, creep_linear: bool = False, fit_contact: bool = False,
+          fit_tunnel: bool = False) -> list[int]:
     """Indices of theta the fit moves: the shape always (F_c not with creep_linear: held at its upper bound);
     r_series and the threshold where the readout saturates (fit_series); the threshold alone with fit_threshold
-    (a mount that carries force before the film is loaded); the contact force F_a with fit_contact."""
+    (a mount that carries force before the film is loaded); the contact force F_a with fit_contact; the tunneling
+    force F_t with fit_tunnel."""
     return sorted([0, 1, 3, 4] + ([] if creep_linear else [2]) + ([5, 6] if fit_series else [6] if fit_threshold else [])
-                  + ([7] if fit_contact else []))
+                  + ([7] if fit_contact else []) + ([8] if fit_tunnel else []))
 
 
 def _with(p: ChainParams, th: np.ndarray, free: list[int]) -> ChainParams:
-    """p with the shape of theta (all eight entries); r_series, the threshold and F_a only where free (_free)."""
+    """p with the shape of theta (all nine entries); r_series, the threshold, F_a and F_t only where free (_free)."""
     q = replace(p, exponent=float(th[0]), creep_amplitude=float(np.exp(th[1])), creep_force_n=float(np.exp(th[2])),
                 tau_min_s=float(np.exp(th[3])), tau_max_s=float(np.exp(max(th[4], th[3]))))
     if 5 in free:
@@ -296,13 +307,15 @@ def _with(p: ChainParams, th: np.ndarray, free: list[int]) -> ChainParams:
         q.threshold_force_n = float(th[6])
     if 7 in free:
         q.contact_force_n = float(np.exp(th[7]))
+    if 8 in free:
+        q.tunnel_force_n = float(np.exp(th[8]))
     return q
 
 
 def _theta(p: ChainParams) -> np.ndarray:
     return np.array([p.exponent, np.log(p.creep_amplitude), np.log(p.creep_force_n), np.log(p.tau_min_s),
                      np.log(p.tau_max_s), np.log(max(p.r_series_ohm, 1e-3)), p.threshold_force_n,
-                     np.log(max(p.contact_force_n, 1e-3))])
+                     np.log(max(p.contact_force_n, 1e-3)), np.log(max(p.tunnel_force_n, 1e-3))])
 
 
 class _Data:
@@ -479,7 +492,7 @@ N_RUN_BOOT = 200  # replicates of the run bootstrap of level_run_sd (no refit: c
 def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = None, n_boot: int = 16,
               min_force_frac: float = 0.1, min_force_n: float = 0.05, max_nfev: int = 60, seed: int = 0,
               progress=None, level_prior: bool = False, fit_threshold: bool = False,
-              creep_linear: bool = False, fit_contact: bool = False) -> ChainFit:
+              creep_linear: bool = False, fit_contact: bool = False, fit_tunnel: bool = False) -> ChainFit:
     """Fit the chain to real runs (see the module docstring); progress(k, n) is called after each fit.
 
     level_prior: the press levels are draws l_j ~ N(mu, sd^2) of a placement chosen before the press, so
@@ -499,17 +512,24 @@ def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = 
     the power law -n and the hold's relative drop is the same at every force.
 
     fit_contact: fit the contact force F_a of the tip's contact area (contact_fraction; its exponent held), started
-    at CONTACT_START_N where p0 has none; off, F_a stays p0's (0: no contact term)."""
+    at CONTACT_START_N where p0 has none; off, F_a stays p0's (0: no contact term).
+
+    fit_tunnel: fit the tunneling force F_t (module doc, "tunneling"), started where p0 has none at the median peak
+    force of the runs' presses (there the term moves ln R by ~1 over a press, so its gradient is alive); off, F_t
+    stays p0's (0: no tunneling term)."""
     p0 = replace(p0, r_leak_ohm=leak_from_unloaded(runs, p0))
     if fit_contact and p0.contact_force_n <= 0.0:
         p0 = replace(p0, contact_force_n=CONTACT_START_N)
+    if fit_tunnel and p0.tunnel_force_n <= 0.0:
+        peaks = [float(r.force[sl].max()) for r in runs for sl in presses_of(r.force, max(min_force_frac * r.force.max(), min_force_n))]
+        p0 = replace(p0, tunnel_force_n=float(np.median(peaks)) if peaks else 1.0)
     data = _Data(runs, p0, min_force_frac, min_force_n)
     if len(data.presses) < 3:
         raise ValueError(f"found {len(data.presses)} press(es) with a response; a fit needs at least 3")
     if fit_series is None:
         fit_series = any("adc_full_scale" in r.attrs for r in runs)  # an ADC of known full scale: a floor shows
     idx = np.arange(len(data.presses))
-    free = _free(bool(fit_series), fit_threshold, creep_linear, fit_contact)
+    free = _free(bool(fit_series), fit_threshold, creep_linear, fit_contact, fit_tunnel)
     if creep_linear:
         p0 = replace(p0, creep_force_n=float(np.exp(UB[2])))
     q, res = _fit_shape(data, p0, idx, free, max_nfev)
@@ -604,7 +624,8 @@ def _summary(f: dict[str, Any]) -> dict[str, float]:
             "level_log_sd": p.level_log_sd, "r_series_ohm": p.r_series_ohm,
             "level_within_run_sd": f["level_within_run_sd"], "level_between_run_sd": f["level_between_run_sd"],
             "level_run_sd": f["level_run_sd"], "level_run_sd_anova": f["level_run_sd_anova"],
-            **({"contact_force_n": p.contact_force_n} if p.contact_force_n > 0 else {})}
+            **({"contact_force_n": p.contact_force_n} if p.contact_force_n > 0 else {}),
+            **({"tunnel_force_n": p.tunnel_force_n} if p.tunnel_force_n > 0 else {})}
 
 
 def within_press_error(p: ChainParams, data: _Data, idx: np.ndarray) -> dict[str, Any]:
