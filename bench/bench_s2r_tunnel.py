@@ -21,6 +21,15 @@ Rule, written before any candidate fit was scored (commit of this file):
   (c) no split's band coverage moves farther from [0.80, 0.95] by more than 0.10.
   Otherwise the default stays (F_t = 0, no tunneling term) and the flag stays an option.
 Also recorded, not part of the rule: the within-press error on the fit runs, the shape parameters on a bound, F_t.
+
+What it showed (bench/results/s2r-tunnel.json; within-press error reference / candidate):
+- divider (TAMS): on the fit covers 0.20-0.22 -> 0.14-0.17 at every split; held out thicksil 0.319 -> 0.286,
+  thinsil 0.181 -> 0.226, nosil 0.264 -> 0.208 (mean -0.014); band coverage 0.91 / 0.71 / 0.00 -> 0.91 / 0.86 /
+  0.40. F_t 0.10-0.40 N, inside the presses' range. Rule (b) fails (thinsil +0.046; its fit puts the exponent on
+  its lower bound and the creep on its bounds): not adopted.
+- velostat (Lupasic): the fit sends F_t to 334 N and to its bound 1e4 N (the term switches itself off: the
+  Velostat film's law does not steepen over 1-40 N), held out 0.074 / 0.076 -> 0.074 / 0.081: not adopted.
+The flag stays an option (`piezotwin sim2real --fit-tunnel`); the default fit is unchanged.
 """
 
 from __future__ import annotations

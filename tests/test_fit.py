@@ -425,6 +425,48 @@ def test_chain_fit_contact_force_recovers_known_parameters():
     assert none.params.contact_force_n < 0.3, none.params.contact_force_n
 
 
+def test_chain_fit_tunnel_force_recovers_known_parameters_and_steepens_the_law():
+    """fit_tunnel: a chain made with F_t = 8 N (tunneling: d ln R / d ln F = -(n + F / F_t)) is recovered (F_t,
+    exponent, within-press error, a bootstrap range); the default fit of the same runs leaves a larger error; on a
+    power-law chain the fitted F_t runs off to large forces (the term switches itself off); F_t = 0 is the power law
+    bit for bit."""
+    true = CF.ChainParams(exponent=0.8, r0_ohm=3000.0, creep_amplitude=1.0, creep_force_n=10.0, tau_min_s=0.1,
+                          tau_max_s=3.0, n_creep=4, level_log_sd=0.3, r_ref_ohm=1e4, full_scale=1000.0, noise_sd=0.0,
+                          tunnel_force_n=8.0)
+    g = np.array([1.0, 10.0, 20.0])
+    slope = np.diff(np.log(CF.film_resistance(g, 1e3, _replace(true, creep_amplitude=1e-9)))) / np.diff(np.log(g))
+    assert slope[0] > -0.8 - 10.0 / 8.0 * 0.9 and slope[1] < -0.8 - 10.0 / 8.0  # steepens with force
+    p0 = CF.ChainParams(r_ref_ohm=1e4, full_scale=1000.0, n_creep=4)
+    runs = _synthetic_runs(true, n_runs=3, low_n=0.5, high_n=30.0)
+    fit = CF.fit_chain(runs, p0, n_boot=2, level_prior=True, fit_tunnel=True)
+    q = fit.params
+    assert abs(np.log(q.tunnel_force_n / 8.0)) < 0.25, q.tunnel_force_n
+    assert abs(q.exponent - 0.8) < 0.1, q.exponent
+    assert fit.error["rms_log_reading_within_press"] < 0.03
+    assert "ln_tunnel_force_n" in fit.result["names"] and "tunnel_force_n" in fit.ranges
+    off = CF.fit_chain(runs, p0, n_boot=0, level_prior=True)
+    assert off.params.tunnel_force_n == 0.0 and off.error["rms_log_reading_within_press"] > 2 * fit.error["rms_log_reading_within_press"]
+    none = CF.fit_chain(_synthetic_runs(_replace(true, tunnel_force_n=0.0), n_runs=3, low_n=0.5, high_n=30.0), p0,
+                        n_boot=0, level_prior=True, fit_tunnel=True)
+    assert none.params.tunnel_force_n > 300.0, none.params.tunnel_force_n
+    f = np.linspace(0.0, 30.0, 301)
+    assert np.array_equal(CF.film_resistance(f, 0.05, _replace(true, tunnel_force_n=0.0)),
+                          CF.film_resistance(f, 0.05, _replace(true, tunnel_force_n=0.0, contact_force_n=0.0)))
+
+
+def test_generation_draws_the_tunnel_force_with_its_replicate_and_scales_it_with_the_tip_area():
+    """chain_gen.episode: F_t comes with the bootstrap replicate and scales with the tip's area (F_t = A M /
+    (gamma s0): the same strain at the same pressure)."""
+    from simulate.generation.chain_gen import episode
+
+    p0 = CF.ChainParams(exponent=0.8, r0_ohm=3000.0, r_ref_ohm=1e4, full_scale=1000.0, tunnel_force_n=1.0)
+    rand = Randomization(press={"peak_force_n": Dist(kind="fixed", value=2.0)},
+                         episode={"tip_area_scale": Dist(kind="fixed", value=2.0)},
+                         boot=[{"exponent": 0.8, "tunnel_force_n": 5.0}])
+    _, attrs = episode(p0, rand, 3, 10.0, 0.05)
+    assert CF.ChainParams.from_json(attrs["chain"]).tunnel_force_n == 10.0
+
+
 def test_generation_draws_the_contact_force_with_its_replicate_and_scales_it_with_the_tip_area():
     """chain_gen.episode: F_a comes with the bootstrap replicate (joint with the exponent) and scales with the tip's
     area like F_c (Hertz: the force that makes the contact span the face ~ E* b^3 / R, ~ the area for a scaled tip);

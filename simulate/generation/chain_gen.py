@@ -85,7 +85,7 @@ def episode(p0: ChainParams, rand: Randomization, seed: int, duration_s: float, 
     vals, rng = draw(rand, seed)
     p = replace(p0)
     for k in ("exponent", "creep_amplitude", "creep_force_n", "tau_min_s", "tau_max_s", "level_log_sd", "miss_prob",
-              "r_series_ohm", "threshold_force_n", "contact_force_n"):
+              "r_series_ohm", "threshold_force_n", "contact_force_n", "tunnel_force_n"):
         if k in vals:
             setattr(p, k, float(vals[k]))
     if "r0_ohm" in vals:
@@ -94,6 +94,7 @@ def episode(p0: ChainParams, rand: Randomization, seed: int, duration_s: float, 
     p.r0_ohm = p.r0_ohm * np.exp(vals.get("gain_log", 0.0)) / a
     p.creep_force_n *= a
     p.contact_force_n *= a  # Hertz: the force at which the contact spans the face ~ E* b^3 / R, ~ the face area
+    p.tunnel_force_n *= a  # F_t = A M / (gamma s0): the same strain at the same pressure
     p.noise_sd *= float(vals.get("noise_scale", 1.0))
     fs = float(vals.get("full_scale", p.full_scale))
     force, pid = press_protocol(rand, rng, duration_s, dt)
