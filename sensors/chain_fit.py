@@ -828,7 +828,8 @@ def randomization_from_fit(fit: ChainFit, runs: Seq[RealRun], press_slope: bool 
     boot = []
     for b in fit.boot:
         d = {k: float(b[k]) for k in ("exponent", "creep_amplitude", "creep_force_n", "tau_min_s", "tau_max_s",
-                                      "r0_ohm", "r_series_ohm", "threshold_force_n", "contact_force_n") if k in b}
+                                      "r0_ohm", "r_series_ohm", "threshold_force_n", "contact_force_n", "tunnel_force_n")
+             if k in b}
         if "level_within_run_sd" in b:
             d["level_log_sd"] = float(b["level_within_run_sd"])
         boot.append(d)

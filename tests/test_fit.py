@@ -444,6 +444,7 @@ def test_chain_fit_tunnel_force_recovers_known_parameters_and_steepens_the_law()
     assert abs(q.exponent - 0.8) < 0.1, q.exponent
     assert fit.error["rms_log_reading_within_press"] < 0.03
     assert "ln_tunnel_force_n" in fit.result["names"] and "tunnel_force_n" in fit.ranges
+    assert all("tunnel_force_n" in b for b in CF.randomization_from_fit(fit, runs).boot)
     off = CF.fit_chain(runs, p0, n_boot=0, level_prior=True)
     assert off.params.tunnel_force_n == 0.0 and off.error["rms_log_reading_within_press"] > 2 * fit.error["rms_log_reading_within_press"]
     none = CF.fit_chain(_synthetic_runs(_replace(true, tunnel_force_n=0.0), n_runs=3, low_n=0.5, high_n=30.0), p0,
