@@ -566,7 +566,11 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
         if "generate" not in state["done"] or not gen_f.is_file():
             task = bar.add_task("2/4 randomized generation", total=int(B["n_episodes"]))
             generate_step(p, rand, gen_f, B, seed, progress=lambda k: bar.update(task, completed=k))
-            mark("generate", {"file": str(gen_f), "n_episodes": int(B["n_episodes"])})
+            spread = simulated_press_spread(gen_f, train_runs)
+            mark("generate", {"file": str(gen_f), "n_episodes": int(B["n_episodes"]), "press_spread": spread})
+            if spread.get("ratio"):
+                log(f"generated: presses read at equal force with ln sd {spread['sim_ln_reading_sd']:.3f} "
+                    f"(real training presses {spread['real_ln_reading_sd']:.3f}, x{spread['ratio']:.2f})")
         # 3. pre-train
         ck = out / "checkpoints" / "pretrained"
         if "pretrain" not in state["done"] or not (ck / "config.json").is_file():
@@ -598,6 +602,16 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
     (out / "metrics.json").write_text(dumps(m))
     _s2r_report(out, m)
     return m
+
+
+def simulated_press_spread(sim_file: Path, train_runs) -> dict[str, Any]:
+    """sensors.chain_fit.press_spread of the simulated recording's presses against the real training runs'."""
+    from sensors import chain_fit as C
+    from sensors.data.recording import Recording
+
+    with Recording(sim_file) as rec:
+        sim = [(rec.read(ep, "force"), rec.read(ep, "sensor")[:, 0]) for ep in rec.episode_ids]
+    return C.press_spread([(r.force, r.reading) for r in train_runs], sim)
 
 
 def _fit_key(key: dict | None) -> Any:
@@ -844,6 +858,17 @@ def error_split(comp, seqs: Seq[Sequence]) -> dict[str, float]:
             "total": rms(np.concatenate(allr)), "n_presses": len(lev)}
 
 
+def _spread_lines(sp: dict[str, Any]) -> list[str]:
+    if not sp.get("ratio"):
+        return []
+    lo, hi = sp["force_range_n"]
+    return ["## How hard the simulated presses are", "",
+            f"At equal force ({lo:.3g}-{hi:.3g} N, the real training presses' range) the simulated presses' plateau "
+            f"readings spread by {sp['sim_ln_reading_sd']:.3f} in ln ({sp['n_sim']} presses) against "
+            f"{sp['real_ln_reading_sd']:.3f} for the real training presses ({sp['n_real']}): x{sp['ratio']:.2f} "
+            "(> 1: the simulated data are harder to read than the real; sensors.chain_fit.press_spread).", ""]
+
+
 def _s2r_report(out: Path, m: dict[str, Any]) -> None:
     r = m["results"]
     rows = [[k, fmt(r[k]["rmse"]), fmt(r[k]["rmse_pct_full_scale"]), fmt(r[k]["mae"]), fmt(r[k]["r2"])]
@@ -861,6 +886,7 @@ def _s2r_report(out: Path, m: dict[str, Any]) -> None:
              "", f"Training seeds {m.get('train_seeds')}: fine-tuned and scratch are each the mean over them. Two-point "
              f"calibration: unloaded reading {z.get('unloaded_reading', float('nan')):.1f} and a known load of "
              f"{z.get('known_load_n', float('nan')):.2f} N on the first press of {z.get('calibration_run')}; scored after that press.",
-             "", "## Targets", "", *[f"- {k}: {'met' if v else 'NOT met'}" for k, v in m["targets"].items()], "",
+             "", *_spread_lines(m.get("steps", {}).get("generate", {}).get("press_spread") or {}),
+             "## Targets", "", *[f"- {k}: {'met' if v else 'NOT met'}" for k, v in m["targets"].items()], "",
              "Fit, generation and pre-training details: fit.json, state.json; numbers: metrics.json."]
     (out / "report.md").write_text("\n".join(lines) + "\n")

@@ -721,6 +721,57 @@ def press_stats(runs: Seq[RealRun], min_force_frac: float = 0.1, min_force_n: fl
     return out
 
 
+def plateau_points(pairs: Seq[tuple[np.ndarray, np.ndarray]], min_force_frac: float = 0.1,
+                   min_force_n: float = 0.05) -> np.ndarray:
+    """[P, 2]: per press of the (force [T] N, reading [T]) pairs, ln of its plateau force (mean over the samples
+    >= 90 % of its peak) and ln of its plateau reading (their median); presses with < 3 plateau samples or a
+    reading <= 0 are left out."""
+    out = []
+    for f, y in pairs:
+        f, y = np.asarray(f, np.float64), np.asarray(y, np.float64)
+        for sl in presses_of(f, max(min_force_frac * f.max(), min_force_n)):
+            ff, yy = f[sl], y[sl]
+            h = ff >= 0.9 * ff.max()
+            if h.sum() >= 3 and np.median(yy[h]) > 0:
+                out.append((np.log(ff[h].mean()), np.log(np.median(yy[h]))))
+    return np.asarray(out).reshape(-1, 2)
+
+
+def _spread_at_equal_force(pts: np.ndarray) -> tuple[float, float]:
+    """(robust sd, outlier share) of ln reading about a quadratic in ln force (a line or a constant where the
+    presses are few or their forces close): least squares, then refit without the residuals beyond 4 robust sd
+    (1.4826 x the median absolute residual); the sd is the robust one, outliers (presses that missed the film,
+    chain_fit's miss_prob) are counted apart."""
+    deg = 2 if len(pts) >= 6 and np.ptp(pts[:, 0]) > 0.2 else 1 if len(pts) >= 3 and np.ptp(pts[:, 0]) > 0.05 else 0
+    A = np.vander(pts[:, 0], deg + 1)
+    keep = np.ones(len(pts), bool)
+    for _ in range(3):
+        r = pts[:, 1] - A @ np.linalg.lstsq(A[keep], pts[keep, 1], rcond=None)[0]
+        sd = 1.4826 * float(np.median(np.abs(r[keep] - np.median(r[keep]))))
+        keep = np.abs(r - np.median(r[keep])) <= 4.0 * max(sd, 1e-9)
+    return sd, float(1.0 - keep.mean())
+
+
+def press_spread(real: Seq[tuple[np.ndarray, np.ndarray]], sim: Seq[tuple[np.ndarray, np.ndarray]]) -> dict[str, Any]:
+    """How spread the simulated presses read at equal force beside the real ones (a check of the randomization
+    on the training runs; no test data): per press (plateau_points) the robust sd of ln plateau reading about
+    a quadratic in ln plateau force (_spread_at_equal_force; outliers, presses that missed the film, apart), for the real presses and for the simulated presses inside the real presses'
+    force range. ratio > 1: the simulated presses are more spread at equal force (harder to read) than the real.
+    Its parts are each press's placement level, the episode's gain and full scale, the replicate's law and the
+    creep; see randomization_from_fit."""
+    pr, ps = plateau_points(real), plateau_points(sim)
+    if len(pr) < 3 or not len(ps):
+        return {"n_real": len(pr), "n_sim": len(ps)}
+    lo, hi = float(pr[:, 0].min()), float(pr[:, 0].max())
+    ps = ps[(ps[:, 0] >= lo) & (ps[:, 0] <= hi)]
+    if len(ps) < 3:
+        return {"n_real": len(pr), "n_sim": len(ps)}
+    (a, oa), (b, ob) = _spread_at_equal_force(pr), _spread_at_equal_force(ps)
+    return {"real_ln_reading_sd": a, "sim_ln_reading_sd": b, "ratio": b / a if a > 0 else None,
+            "real_outlier_share": oa, "sim_outlier_share": ob, "n_real": len(pr), "n_sim": len(ps),
+            "force_range_n": [float(np.exp(lo)), float(np.exp(hi))]}
+
+
 SLOPE_T0_S = 0.05  # estimate: one sample at 20 Hz, the earliest time a hold is resolved (bench_s2r_identify)
 
 

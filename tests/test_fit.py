@@ -489,3 +489,22 @@ def test_generation_draws_the_contact_force_with_its_replicate_and_scales_it_wit
         press=rand.press, episode=rand.episode, boot=[{"exponent": 0.8}]), 3, 10.0, 0.05)[0]["sensor"]
     assert np.all(off <= ch["sensor"])  # the partial contact raises R (high divider: the reading) at 2 N
     assert np.any(off < ch["sensor"] - 1.0)
+
+
+def test_press_spread_reads_the_level_spread_at_equal_force_and_counts_misses_apart():
+    """press_spread: presses whose level spreads by 0.3 ln read spread by ~0.3 ln of reading at equal force (a
+    reading that rises with resistance, R ~ e^l F^-n: ln reading ~ l - n ln F well below the reference); a chain
+    drawn with 0.6 ln is ~2x as spread beside it (ratio ~2); presses at the rest level (misses) are counted as
+    outliers, not in the sd."""
+    base = CF.ChainParams(exponent=1.0, r0_ohm=300.0, creep_amplitude=1e-6, level_log_sd=0.3, r_ref_ohm=1e5,
+                          full_scale=1000.0)
+    real = [(r.force, r.reading) for r in _synthetic_runs(base, n_runs=6, seed=3)]
+    wide = [(r.force, r.reading) for r in _synthetic_runs(_replace(base, level_log_sd=0.6), n_runs=6, seed=4)]
+    same = CF.press_spread(real, real)
+    assert same["ratio"] == 1.0 and abs(same["real_ln_reading_sd"] - 0.3) < 0.1, same
+    sp = CF.press_spread(real, wide)
+    assert 1.5 < sp["ratio"] < 2.7 and sp["sim_outlier_share"] == 0.0, sp
+    f, y = wide[0]
+    missed = [(f, np.where(f > 0.5, 1000.0 * 0.99, y))] + wide[1:]  # the first run's presses never load the film
+    mp = CF.press_spread(real, missed)
+    assert mp["sim_outlier_share"] > 0.05 and abs(mp["sim_ln_reading_sd"] - sp["sim_ln_reading_sd"]) < 0.15, mp

@@ -177,3 +177,32 @@ def test_sim2real_entry_points_train_on_one_thread(entry, monkeypatch, tmp_path)
         assert torch.get_num_threads() == 2
     finally:
         torch.set_num_threads(old)
+
+
+def test_generated_presses_read_as_spread_as_the_chain_draws_them(tmp_path):
+    """Step 2's check (simulated_press_spread): episodes generated around a chain whose presses spread by 0.4 ln
+    read at equal force about as spread as real runs made by the same chain (ratio ~1), the report says so; a
+    randomization that draws twice the spread reads ~2x."""
+    from scenes.randomize import Dist, Randomization
+    from learn.sim2real import S2R_BUDGET, _spread_lines, generate_step, simulated_press_spread
+
+    p = CF.ChainParams(exponent=1.0, r0_ohm=300.0, creep_amplitude=1e-6, level_log_sd=0.4, r_ref_ohm=1e5, full_scale=1000.0)
+    press = {"peak_force_n": Dist(kind="loguniform", low=2.0, high=30.0), "rise_s": Dist(kind="fixed", value=0.5),
+             "hold_s": Dist(kind="fixed", value=1.2), "fall_s": Dist(kind="fixed", value=0.1),
+             "gap_s": Dist(kind="fixed", value=1.5)}
+    rand = Randomization(episode={"gain_log": Dist(kind="fixed", value=0.0)}, press=press)
+    real = []
+    for k in range(6):
+        f, y = [], []
+        for pk, l in zip(np.random.default_rng(k).uniform(2.0, 30.0, 10), np.random.default_rng(k + 50).normal(0, 0.4, 10)):
+            ff = np.concatenate([np.zeros(20), np.linspace(0, pk, 10), np.full(24, pk), np.zeros(6)])
+            f.append(ff)
+            y.append(CF.simulate_reading(ff, 1 / RATE, p, level=np.where(ff > 0, l, 0.0)))
+        real.append(CF.RealRun(f"run{k}", np.concatenate(f), np.concatenate(y), 1 / RATE, 1000.0, 0.0))
+    B = dict(S2R_BUDGET, n_episodes=8, episode_s=60.0)
+    generate_step(p, rand, tmp_path / "sim.h5", B, 0)
+    sp = simulated_press_spread(tmp_path / "sim.h5", real)
+    assert 0.7 < sp["ratio"] < 1.4 and abs(sp["real_ln_reading_sd"] - 0.4) < 0.12, sp
+    assert "x{:.2f}".format(sp["ratio"]) in "\n".join(_spread_lines(sp))
+    generate_step(replace(p, level_log_sd=0.8), rand, tmp_path / "wide.h5", B, 0)
+    assert 1.5 < simulated_press_spread(tmp_path / "wide.h5", real)["ratio"] < 2.7
