@@ -22,12 +22,12 @@ What it showed (bench/results/s2r-press-spread.json; robust sd of ln plateau rea
 
 from __future__ import annotations
 
-import argparse
 import fnmatch
 import json
 import tempfile
 from pathlib import Path
 
+from bench_s2r_tunnel import real_recordings
 from learn.sim2real import S2R_BUDGET, _chain_prior, generate_step, simulated_press_spread
 from sensors import chain_fit as C
 
@@ -36,14 +36,7 @@ SPLITS = (("velostat", "lupasic", "*pike2*"), ("velostat", "lupasic", "*pike1*")
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--tams", type=Path, required=True)
-    ap.add_argument("--lupasic", type=Path, required=True)
-    ap.add_argument("-o", "--out", type=Path, default=Path(__file__).parent / "results" / "s2r-press-spread.json")
-    a = ap.parse_args()
-    rate = float(S2R_BUDGET["fit_rate_hz"])
-    data = {k: C.load_real_runs(p, input_channel="sensor", target="force", rate_hz=rate)
-            for k, p in (("tams", a.tams), ("lupasic", a.lupasic))}
+    a, data = real_recordings("s2r-press-spread.json")
     res: dict = {"recordings": {"tams": str(a.tams), "lupasic": str(a.lupasic)}, "splits": []}
     for family, rec, glob in SPLITS:
         runs = data[rec]

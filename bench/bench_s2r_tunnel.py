@@ -87,15 +87,20 @@ def decide(rows: list[dict]) -> dict:
             "max_band_miss_increase": float(max(d_band)), "a": a, "b": b, "c": c, "adopt": bool(a and b and c)}
 
 
-def main() -> None:
+def real_recordings(default_out: str) -> tuple[argparse.Namespace, dict[str, list]]:
+    """The command line (--tams, --lupasic, -o) and both recordings' runs, read as step 1 of sim2real reads them."""
     ap = argparse.ArgumentParser()
     ap.add_argument("--tams", type=Path, required=True)
     ap.add_argument("--lupasic", type=Path, required=True)
-    ap.add_argument("-o", "--out", type=Path, default=Path(__file__).parent / "results" / "s2r-tunnel.json")
+    ap.add_argument("-o", "--out", type=Path, default=Path(__file__).parent / "results" / default_out)
     a = ap.parse_args()
     rate = float(S2R_BUDGET["fit_rate_hz"])
-    data = {k: C.load_real_runs(path, input_channel="sensor", target="force", rate_hz=rate)
-            for k, path in (("tams", a.tams), ("lupasic", a.lupasic))}
+    return a, {k: C.load_real_runs(path, input_channel="sensor", target="force", rate_hz=rate)
+               for k, path in (("tams", a.tams), ("lupasic", a.lupasic))}
+
+
+def main() -> None:
+    a, data = real_recordings("s2r-tunnel.json")
     res: dict = {"recordings": {"tams": str(a.tams), "lupasic": str(a.lupasic)},
                  "rule": __doc__.split("Rule, written before any candidate fit was scored (commit of this file):")[1]
                  .split("Also recorded")[0].strip(), "splits": [], "decision": {}}
