@@ -195,10 +195,11 @@ def test_restart_appends_and_torn_tail_is_dropped(tmp_path):
 def test_disconnect_and_reconnect(tmp_path):
     src = ramp_source(1000, rate=500.0)
     # a link cycle takes 0.6 s: 0.25 s streaming, then pyserial's close of a socket sleeps 0.3 s before the
-    # capture reconnects; the board accepts no client once its duration is over
-    sv = Served(src, "socket://127.0.0.1:0", "frames", duration_s=1.4, faults=Faults(disconnect_every_s=0.25),
+    # capture reconnects; the board accepts no client once its duration is over. 2.0 s hold about three cycles,
+    # the test asks for two: a full cycle of slack for a loaded machine
+    sv = Served(src, "socket://127.0.0.1:0", "frames", duration_s=2.0, faults=Faults(disconnect_every_s=0.25),
                 start_delay_s=0.05)
-    res = capture([StreamSpec(sv.url, "frames", "b")], tmp_path / "d.h5", duration_s=2.0, reconnect_s=1.0)
+    res = capture([StreamSpec(sv.url, "frames", "b")], tmp_path / "d.h5", duration_s=2.6, reconnect_s=1.0)
     log = sv.join()
     assert log.disconnects >= 2
     with Recording(tmp_path / "d.h5") as rec:
