@@ -50,7 +50,7 @@ def main() -> None:
             with tempfile.TemporaryDirectory() as d:
                 f = Path(d) / "sim.h5"
                 generate_step(fit.params, rand, f, B, 0)
-                row[name] = simulated_press_spread(f, train)
+                row[name] = simulated_press_spread(f, train, fit.params)
             sp = row[name]
             print(f"{family:8s} {glob:14s} {name:9s} real {sp.get('real_ln_reading_sd', float('nan')):.3f} sim "
                   f"{sp.get('sim_ln_reading_sd', float('nan')):.3f} x{sp.get('ratio') or float('nan'):.2f} outliers "

@@ -83,6 +83,22 @@ FINETUNE_METHODS = ("plain", "l2sp", "lpft")
 L2SP_ALPHA = 0.1
 L2SP_BETA = 0.01
 TRANSFORMS = ("log", "none")
+# "log_headroom:<FS>": x = ln(FS - reading), for a divider whose reading rises with force toward its full scale FS
+# (the reference resistor on the ADC side, sensors.chain_fit "low"): FS - reading = FS R / (R + r_ref), the same
+# form as a "high" divider's reading, so x follows ln R as ln(reading) does there (learn.sim2real.input_transform)
+HEADROOM = "log_headroom:"
+
+
+def _headroom_fs(transform: str) -> float | None:
+    if not transform.startswith(HEADROOM):
+        return None
+    try:
+        fs = float(transform[len(HEADROOM):])
+    except ValueError:
+        fs = float("nan")
+    if not (np.isfinite(fs) and fs > 0):
+        raise ValueError(f"input transform {transform!r}: the full scale after '{HEADROOM}' must be a positive number")
+    return fs
 
 
 @dataclass
@@ -93,14 +109,16 @@ class InputMap:
     rate_hz: float | None = None  # resample to this rate (the checkpoint's); None: keep
 
     def __post_init__(self):
-        if self.transform not in TRANSFORMS:
-            raise ValueError(f"input transform must be one of {', '.join(TRANSFORMS)}; got {self.transform!r}")
+        if self.transform not in TRANSFORMS and _headroom_fs(self.transform) is None:
+            raise ValueError(f"input transform must be one of {', '.join(TRANSFORMS)} or {HEADROOM}<full scale>; "
+                             f"got {self.transform!r}")
 
     def to_json(self) -> dict[str, Any]:
         return {"transform": self.transform, "rate_hz": self.rate_hz}
 
     def describe(self) -> str:
-        t = "x = ln(reading)" if self.transform == "log" else "x = reading"
+        fs = _headroom_fs(self.transform)
+        t = "x = ln(reading)" if self.transform == "log" else f"x = ln({fs:g} - reading)" if fs else "x = reading"
         r = f", resampled to {self.rate_hz:g} Hz" if self.rate_hz else ""
         return t + r
 
@@ -109,7 +127,19 @@ def forward_transform(x: np.ndarray, transform: str) -> np.ndarray:
     x = np.asarray(x, np.float64)
     if transform == "log":
         return np.log(np.maximum(x, 1e-12))
+    fs = _headroom_fs(transform)
+    if fs is not None:
+        return np.log(np.maximum(fs - x, 1e-12))
     return x
+
+
+def inverse_transform(x: np.ndarray, transform: str) -> np.ndarray:
+    """The reading back from the model's input x (forward_transform's inverse)."""
+    x = np.asarray(x, np.float64)
+    if transform == "log":
+        return np.exp(x)
+    fs = _headroom_fs(transform)
+    return fs - np.exp(x) if fs is not None else x
 
 
 def load_recording(path: str | Path, inputs: Seq[str], targets: Seq[str], *, rate_hz: float | None = None,

@@ -319,13 +319,22 @@ def generate_step(p, rand, gen_f: Path, B: dict, seed: int, progress: Callable[[
                    duration_s=float(B["episode_s"]), rate_hz=float(B["fit_rate_hz"]), progress=progress)
 
 
-def pretrain_step(gen_f: Path, ck: Path, model: str, B: dict, seed: int, progress: bool = False) -> dict[str, Any]:
-    """Step 3: pre-train ``model`` on the simulated episodes; writes the checkpoint ``ck`` whole (tmp + rename)."""
+def input_transform(p) -> str:
+    """The model's input map for the chain ``p``: x = ln(reading) where the reading falls with force (a "high"
+    divider: reading ~ R / (R + r_ref)); x = ln(FS - reading) where it rises toward its full scale (a "low" divider:
+    FS - reading ~ R / (R + r_ref), the same form), so either way x follows ln R (learn.finetune.HEADROOM)."""
+    return "log" if p.divider == "high" else f"{FT.HEADROOM}{p.offset + p.full_scale:.9g}"
+
+
+def pretrain_step(gen_f: Path, ck: Path, model: str, B: dict, seed: int, progress: bool = False, p=None) -> dict[str, Any]:
+    """Step 3: pre-train ``model`` on the simulated episodes; writes the checkpoint ``ck`` whole (tmp + rename).
+    ``p``: the fitted chain, which sets the input map (input_transform; None: x = ln reading)."""
     from learn.checkpoint import save_checkpoint
     from learn.models.base import make_model
 
     s = pipeline_seed(seed, B)
-    seqs = FT.apply_map(FT.load_recording(gen_f, ["sensor"], ["force"]), "log")
+    transform = input_transform(p) if p is not None else "log"
+    seqs = FT.apply_map(FT.load_recording(gen_f, ["sensor"], ["force"]), transform)
     sp = _split(seqs, s)
     comp = make_model(model, max_epochs=int(B["pretrain_epochs"]), patience=int(B["pretrain_patience"]))
     t0 = time.perf_counter()
@@ -334,7 +343,7 @@ def pretrain_step(gen_f: Path, ck: Path, model: str, B: dict, seed: int, progres
     hist = getattr(comp, "history", {}) or {}
     sim_rmse = FT.rmse_on(comp, sp["valid"])
     tmp = ck.with_name(ck.name + ".tmp")
-    save_checkpoint(comp, tmp, extra={"input_map": {"channel": "sensor", "transform": "log", "rate_hz": float(B["fit_rate_hz"])},
+    save_checkpoint(comp, tmp, extra={"input_map": {"channel": "sensor", "transform": transform, "rate_hz": float(B["fit_rate_hz"])},
                                        "sim_valid_rmse": sim_rmse})
     if ck.exists():
         import shutil
@@ -345,9 +354,12 @@ def pretrain_step(gen_f: Path, ck: Path, model: str, B: dict, seed: int, progres
             "best_epoch": hist.get("best_epoch")}
 
 
-def isotonic_decreasing(x: np.ndarray, y: np.ndarray, n_knots: int = 200) -> tuple[np.ndarray, np.ndarray]:
-    """Force as a non-increasing function of x = ln reading (pool-adjacent-violators on quantile bins);
-    returns knots (x ascending, y) for np.interp."""
+def isotonic(x: np.ndarray, y: np.ndarray, n_knots: int = 200, decreasing: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Force as a non-increasing (decreasing=False: non-decreasing) function of x = ln reading (pool-adjacent-
+    violators on quantile bins); returns knots (x ascending, y) for np.interp."""
+    if not decreasing:
+        kx, ky = isotonic(-np.asarray(x), y, n_knots)
+        return -kx[::-1], ky[::-1]
     o = np.argsort(x)
     x, y = x[o], y[o]
     edges = np.unique(np.quantile(x, np.linspace(0, 1, n_knots + 1)))
@@ -378,7 +390,11 @@ class StaticCurve:
     def __init__(self, seqs):
         x = np.concatenate([s.x[:, 0] for s in seqs])
         y = np.concatenate([s.y[:, 0] for s in seqs])
-        self.kx, self.ky = isotonic_decreasing(x, y)
+        # the curve's direction from the data: force falls with the reading (a "high" divider) unless the ranks of
+        # reading and force rise together (the reference on the ADC side)
+        rx, ry = np.argsort(np.argsort(x)), np.argsort(np.argsort(y))
+        self.decreasing = not (len(x) > 2 and np.corrcoef(rx, ry)[0, 1] > 0)
+        self.kx, self.ky = isotonic(x, y, decreasing=self.decreasing)
 
     def predict(self, x: np.ndarray) -> np.ndarray:
         return np.interp(x[:, 0], self.kx, self.ky)[:, None]
@@ -439,11 +455,12 @@ class TwoPoint:
         from sensors.chain_fit import reading_from_resistance, total_resistance
 
         p = self.p
-        u = (np.exp(np.asarray(x, np.float64)) - p.offset) / self.full_scale
+        u = (FT.inverse_transform(x, input_transform(p)) - p.offset) / self.full_scale
         u = np.clip(u, 1e-9, 1.0 - 1e-6) if p.divider == "high" else np.clip(u, 1e-6, 1.0 - 1e-9)
         r = p.r_ref_ohm * (u / (1 - u) if p.divider == "high" else (1 - u) / u)
         film = film_of_total(r, p)
-        return np.log(np.maximum(reading_from_resistance(total_resistance(film * np.exp(-self.level_ln), p), p), 1e-12))
+        return FT.forward_transform(reading_from_resistance(total_resistance(film * np.exp(-self.level_ln), p), p),
+                                    input_transform(p))
 
 
 def film_of_total(r: np.ndarray, p) -> np.ndarray:
@@ -465,7 +482,7 @@ def two_point_calibration(p, run_seq, rate_hz: float) -> tuple[TwoPoint, dict[st
     from sensors.chain_fit import presses_of, resistance_from_reading, simulate_reading
 
     f = run_seq.y[:, 0]
-    y = np.exp(run_seq.x[:, 0])
+    y = FT.inverse_transform(run_seq.x[:, 0], input_transform(p))
     sl = presses_of(f, max(0.1 * f.max(), 0.05))[0]
     rest = np.flatnonzero(f[: sl.start] < 0.02 * f.max())
     # point 1 gives the gain only where the rest level is the full scale (a "high" divider whose fit saw no leak:
@@ -566,7 +583,7 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
         if "generate" not in state["done"] or not gen_f.is_file():
             task = bar.add_task("2/4 randomized generation", total=int(B["n_episodes"]))
             generate_step(p, rand, gen_f, B, seed, progress=lambda k: bar.update(task, completed=k))
-            spread = simulated_press_spread(gen_f, train_runs)
+            spread = simulated_press_spread(gen_f, train_runs, p)
             mark("generate", {"file": str(gen_f), "n_episodes": int(B["n_episodes"]), "press_spread": spread})
             if spread.get("ratio"):
                 log(f"generated: presses read at equal force with ln sd {spread['sim_ln_reading_sd']:.3f} "
@@ -575,14 +592,14 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
         ck = out / "checkpoints" / "pretrained"
         if "pretrain" not in state["done"] or not (ck / "config.json").is_file():
             task = bar.add_task("3/4 pre-training", total=1)
-            info = pretrain_step(gen_f, ck, model, B, seed, progress=progress)
+            info = pretrain_step(gen_f, ck, model, B, seed, progress=progress, p=p)
             bar.update(task, completed=1)
             mark("pretrain", info)
             log(f"pre-trained: simulated valid RMSE {info['sim_valid_rmse']:.3f} N, epochs {info['epochs']} (best {info['best_epoch']})")
         base = load_checkpoint(ck)
         # 4. fine-tune, baselines, learning curve
         task = bar.add_task("4/4 fine-tuning + baselines", total=1)
-        sim = FT.apply_map(FT.load_recording(gen_f, ["sensor"], ["force"]), "log") if max(_rehearsals(B)) > 0 else []
+        sim = FT.apply_map(FT.load_recording(gen_f, ["sensor"], ["force"]), input_transform(p)) if max(_rehearsals(B)) > 0 else []
         m = _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target, rate,
                            lambda k, n: bar.update(task, completed=k, total=n), log, sim=sim)
     w4, c4 = time.perf_counter() - clock["wall"], time.process_time() - clock["cpu"]
@@ -604,14 +621,17 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
     return m
 
 
-def simulated_press_spread(sim_file: Path, train_runs) -> dict[str, Any]:
-    """sensors.chain_fit.press_spread of the simulated recording's presses against the real training runs'."""
+def simulated_press_spread(sim_file: Path, train_runs, p=None) -> dict[str, Any]:
+    """sensors.chain_fit.press_spread of the simulated recording's presses against the real training runs', on the
+    reading as the model reads it (input_transform of the chain ``p``: FS - reading where the reading rises)."""
     from sensors import chain_fit as C
     from sensors.data.recording import Recording
 
+    t = input_transform(p) if p is not None else "log"
+    as_read = lambda y: np.exp(FT.forward_transform(y, t))  # noqa: E731 - the reading the model's ln is taken of
     with Recording(sim_file) as rec:
-        sim = [(rec.read(ep, "force"), rec.read(ep, "sensor")[:, 0]) for ep in rec.episode_ids]
-    return C.press_spread([(r.force, r.reading) for r in train_runs], sim)
+        sim = [(rec.read(ep, "force"), as_read(rec.read(ep, "sensor")[:, 0])) for ep in rec.episode_ids]
+    return C.press_spread([(r.force, as_read(r.reading)) for r in train_runs], sim)
 
 
 def _fit_key(key: dict | None) -> Any:
@@ -637,11 +657,11 @@ def _timing(done: dict[str, Any], wall4: float, cpu4: float, B: dict) -> dict[st
 
 
 def _chain_prior(family: str, runs) -> Any:
-    from sensors.chain_fit import ChainParams
+    from sensors.chain_fit import ChainParams, reading_direction
 
     adc = next((r.attrs.get("adc_full_scale") for r in runs if r.attrs.get("adc_full_scale")), None)
     rref = next((r.attrs.get("reference_resistor_ohm") for r in runs if r.attrs.get("reference_resistor_ohm")), None)
-    p = ChainParams(divider="high", r_ref_ohm=float(rref or 1e4), full_scale=float(adc or 1.0))
+    p = ChainParams(divider=reading_direction(runs), r_ref_ohm=float(rref or 1e4), full_scale=float(adc or 1.0))
     if adc:  # an ADC divider (TAMS-like): a series floor and a cover threshold show
         p.r_series_ohm, p.threshold_force_n, p.exponent = 100.0, 0.05, 1.5  # estimate: starting point of the fit
     return p
@@ -688,7 +708,7 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
     """Step 4: zero-shot, two-point, and the learning curve of fine-tuned / scratch / static curve. ``scratch``
     False leaves the scratch nets out (their rows None: a bench comparing fine-tuning methods, which scratch
     does not depend on)."""
-    seqs = FT.apply_map(FT.load_recording(recording, [input_channel], [target], rate_hz=rate), "log")
+    seqs = FT.apply_map(FT.load_recording(recording, [input_channel], [target], rate_hz=rate), input_transform(p))
     # every run outside the test glob is a training run (added along the learning curve in curve_order); early
     # stopping uses the last presses of the budget's own runs (FT.split_tail), never a run of another series/cover
     sp = FT.split_runs(seqs, train_fraction=None, test_glob=test_glob, seed=seed, n_valid=0)
@@ -802,7 +822,8 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
                            f"early stopping on the last presses of each training run of the budget (about {100 * float(B['valid_tail']):.0f} % "
                            "of its samples, cut between presses)") + "; learn.finetune.split_tail; the pre-trained weights are the first candidate",
             "tail_full_scale_n": tail_fs, "static_blend": bool(B.get("static_blend")),
-            "input_map": "x = ln(reading) at %g Hz; the simulated reading is in the real board's units" % rate}
+            "input_map": "%s at %g Hz; the simulated reading is in the real board's units"
+                         % (FT.InputMap(input_transform(p)).describe(), rate)}
 
 
 def _blend_record(net, static, t1, t2, w_tail, score, scratch=None) -> dict[str, Any]:

@@ -24,9 +24,11 @@ Chain (one taxel or one film pressed by one tip; all SI):
             to the exponent; in force units it adds ~a F_c ln(1 + F / F_c) to F and flattens the law (measured on
             the Lupasic runs: the hold drop is ~0.17 ln at 1 to 40 N, bench/bench_s2r_diagnose.py).
   readout   R = R_film + r_series (traces, mux), in parallel with r_leak (unloaded: the leak alone);
-            divider with reference resistor r_ref: reading = offset + FS * R / (R + r_ref)  ("high": reading
-            rises with resistance, the Lupasic board) or offset + FS * r_ref / (R + r_ref) ("low": TAMS,
-            reading falls with force); FS = full scale (ADC counts x samples summed, or the board's rest
+            divider with reference resistor r_ref: reading = offset + FS * R / (R + r_ref)  ("high": the taxel
+            on the ADC side, reading rises with resistance and falls with force: the Lupasic board, TAMS) or
+            offset + FS * r_ref / (R + r_ref) ("low": the reference on the ADC side, reading rises with force:
+            the FSR's basic circuit, Interlink FSR Integration Guide fig. 9); reading_direction tells them apart
+            from the capture; FS = full scale (ADC counts x samples summed, or the board's rest
             level); noise: white, noise_sd in reading units; ADC step adc_step (0: none).
 Fit (scipy least_squares, trust-region reflective, bounded; with level_prior, random-effects levels: fit_chain) of ln R on loaded samples (R from the reading
 through the inverse divider), each press's level l_j profiled out (its mean log residual): theta =
@@ -255,11 +257,31 @@ def load_real_runs(recording: str | Path, *, input_channel: str = "sensor", targ
             else:
                 dt = float(np.median(np.diff(t)))
             a = {**sattrs, **dict(rec.episode_attrs(ep))}
+            rises = _reading_rises(f, s)
+            if rises and not a.get("adc_full_scale"):
+                raise ValueError(f"{recording}: episode {ep}: the reading rises with force (the reference resistor on the "
+                                 "ADC side), so its rest level is not its full scale; give the ADC's full scale as the "
+                                 "sensor attribute adc_full_scale (the import spec's sensor_attrs)")
             fs = float(a.get("adc_full_scale") or np.median(s[f < 0.02 * max(f.max(), 1e-9)]))
-            out.append(RealRun(ep, f, s, dt, fs, noise, {k: a[k] for k in ("reference_resistor_ohm", "adc_full_scale") if k in a}))
+            kept = {k: a[k] for k in ("reference_resistor_ohm", "adc_full_scale") if k in a}
+            out.append(RealRun(ep, f, s, dt, fs, noise, {**kept, "reading_rises_with_force": rises}))
     if not out:
         raise ValueError(f"{recording}: no episode" + (f" matches {episodes!r}" if episodes else ""))
     return out
+
+
+def _reading_rises(force: np.ndarray, reading: np.ndarray) -> bool:
+    """True where the run's reading is higher under load (force >= 50 % of its largest) than at rest (< 2 %)."""
+    top = max(float(force.max()), 1e-9)
+    rest, loaded = reading[force < 0.02 * top], reading[force >= 0.5 * top]
+    return bool(len(rest) and len(loaded) and np.median(loaded) > np.median(rest))
+
+
+def reading_direction(runs: Seq[RealRun]) -> str:
+    """The divider a capture was read through (module doc, readout): "high" where the reading falls as force rises,
+    "low" where it rises; the majority of the runs (load_real_runs measures each: its loaded vs rest median)."""
+    rises = [bool(r.attrs.get("reading_rises_with_force", _reading_rises(r.force, r.reading))) for r in runs]
+    return "low" if 2 * sum(rises) > len(rises) else "high"
 
 
 # ----------------------------------------------------------------------------------------------- fit
@@ -322,6 +344,8 @@ class _Data:
     """Loaded samples of the presses of the runs: per press its run, slice, and ln R from the reading."""
 
     def __init__(self, runs: Seq[RealRun], p: ChainParams, min_force_frac: float, min_force_n: float):
+        # a press that stays at the rest level (within 15 % of the scale) missed the film: the reading near the full
+        # scale for a "high" divider (unloaded R >> r_ref), near 0 for a "low" one
         self.runs = runs
         self.presses: list[Press] = []
         self.lnr: list[np.ndarray] = []
@@ -340,8 +364,8 @@ class _Data:
                 if len(seg) < 3:
                     continue
                 lr = np.log(R[seg])
-                miss = np.nanmedian(np.abs(r.reading[seg] - p.offset) / r.fs) > 0.85 if p.divider == "high" else \
-                    np.nanmedian(np.abs(r.reading[seg] - p.offset) / r.fs) > 0.97
+                u = np.nanmedian(np.abs(r.reading[seg] - p.offset) / r.fs)
+                miss = u > 0.85 if p.divider == "high" else u < 0.15
                 self.missed.append(bool(miss or not np.isfinite(lr).mean() > 0.8))
                 if self.missed[-1]:
                     continue

@@ -508,3 +508,55 @@ def test_press_spread_reads_the_level_spread_at_equal_force_and_counts_misses_ap
     missed = [(f, np.where(f > 0.5, 1000.0 * 0.99, y))] + wide[1:]  # the first run's presses never load the film
     mp = CF.press_spread(real, missed)
     assert mp["sim_outlier_share"] > 0.05 and abs(mp["sim_ln_reading_sd"] - sp["sim_ln_reading_sd"]) < 0.15, mp
+
+
+def _divider_capture(path, divider, adc=True, seed=7):
+    """Four runs of presses of one divider taxel (sim2real's family "divider"), written as `piezotwin import` writes
+    an ADC capture; divider "low" = the reference resistor on the ADC side: the reading rises with force."""
+    from simulate.generation.chain_gen import press_protocol
+    from sensors.data.recording import Channel, write_recording
+
+    p = CF.ChainParams(exponent=1.3, r0_ohm=8000.0, creep_amplitude=0.3, creep_force_n=2.0, tau_min_s=0.2, tau_max_s=5.0,
+                       level_log_sd=0.25, r_ref_ohm=1e4, full_scale=4095.0, r_series_ohm=150.0, divider=divider, noise_sd=2.0)
+    rand = Randomization(press={"peak_force_n": Dist(kind="loguniform", low=0.3, high=8.0),
+                                "rise_s": Dist(kind="uniform", low=0.3, high=0.8), "hold_s": Dist(kind="uniform", low=1.0, high=2.0),
+                                "fall_s": Dist(kind="fixed", value=0.2), "gap_s": Dist(kind="uniform", low=1.0, high=2.0)})
+    rng = np.random.default_rng(seed)
+    eps, attrs = {}, {}
+    for k in range(4):
+        f, pid = press_protocol(rand, rng, 40.0, 0.01)
+        lev = rng.normal(0, p.level_log_sd, pid.max() + 1)
+        y = np.clip(np.round(CF.simulate_reading(f, 0.01, p, level=np.where(pid >= 0, lev[np.maximum(pid, 0)], 0.0), rng=rng)), 0, 4095)
+        eps[f"run{k}"] = {"time": Channel(np.arange(len(f)) * 0.01, "s", ("time",), "clock"),
+                          "force": Channel(f.astype(np.float32), "N", ("time",), "load cell"),
+                          "sensor": Channel(y.astype(np.float32)[:, None], "counts", ("time", "channel"), "ADC")}
+        attrs[f"run{k}"] = {"reference_resistor_ohm": 1e4}
+    write_recording(path, eps, source="real", config_json="{}", root_seed=0, shard_index=0,
+                    sensor_attrs={"family": "divider", "units": "counts", **({"adc_full_scale": 4095} if adc else {})},
+                    episode_attrs=attrs)
+    return p
+
+
+@pytest.mark.parametrize("divider", ["high", "low"])
+def test_divider_fit_reads_the_reading_direction_from_the_capture(tmp_path, divider):
+    """A taxel on either side of its divider (reading falling with force: "high", the Lupasic board and TAMS;
+    rising: "low", the FSR's basic circuit) is fitted as sim2real fits it: the direction is read from the capture
+    and the chain recovered (the exponent, a within-press error near the ADC's), the same for both wirings.
+    Before, every capture was read as "high", and a rising reading gave a within-press error of 8 ln."""
+    from learn.sim2real import _chain_prior
+
+    true = _divider_capture(tmp_path / "c.h5", divider)
+    runs = CF.load_real_runs(tmp_path / "c.h5", rate_hz=20.0)
+    assert CF.reading_direction(runs) == divider
+    fit = CF.fit_chain(runs[:3], _chain_prior("divider", runs), n_boot=0)
+    assert fit.params.divider == divider and abs(fit.params.exponent - true.exponent) < 0.15, fit.params
+    assert fit.error["rms_log_reading_within_press"] < 0.02
+    assert CF.evaluate(fit, runs[3:])["rms_log_reading_within_press"] < 0.02
+
+
+def test_a_rising_reading_without_its_full_scale_is_refused(tmp_path):
+    """A reading that rises with force rests at 0, not at its full scale: without adc_full_scale the capture is
+    refused with one message naming the attribute."""
+    _divider_capture(tmp_path / "c.h5", "low", adc=False)
+    with pytest.raises(ValueError, match="adc_full_scale"):
+        CF.load_real_runs(tmp_path / "c.h5")

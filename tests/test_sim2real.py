@@ -206,3 +206,34 @@ def test_generated_presses_read_as_spread_as_the_chain_draws_them(tmp_path):
     assert "x{:.2f}".format(sp["ratio"]) in "\n".join(_spread_lines(sp))
     generate_step(replace(p, level_log_sd=0.8), rand, tmp_path / "wide.h5", B, 0)
     assert 1.5 < simulated_press_spread(tmp_path / "wide.h5", real)["ratio"] < 2.7
+
+
+def test_a_rising_reading_is_read_through_its_headroom_and_calibrates_the_same():
+    """A "low" divider (reading rises with force toward its ADC's full scale): the model's input is ln(FS - reading)
+    (learn.sim2real.input_transform, learn.finetune.HEADROOM; forward and inverse undo each other); its two-point
+    calibration finds the film level as the "high" wiring's does, keeping the ADC's full scale; its static curve
+    rises with the reading. A malformed headroom map is refused."""
+    from learn import finetune as FT
+    from learn.sim2real import StaticCurve, input_transform
+
+    p = CF.ChainParams(exponent=1.5, r0_ohm=2000.0, creep_amplitude=0.3, creep_force_n=1.0, tau_min_s=0.2, tau_max_s=5.0,
+                       n_creep=3, r_series_ohm=200.0, r_ref_ohm=1e4, full_scale=4095.0, divider="low")
+    t = input_transform(p)
+    assert t == "log_headroom:4095" and input_transform(replace(p, divider="high")) == "log"
+    r = np.array([0.0, 10.0, 4000.0, 4094.0])
+    np.testing.assert_allclose(FT.inverse_transform(FT.forward_transform(r, t), t), r, rtol=0, atol=1e-9)
+    assert "ln(4095 - reading)" in FT.InputMap(t).describe()
+    with pytest.raises(ValueError, match="full scale"):
+        FT.InputMap("log_headroom:-3")
+    f, y = _press_run(p, fs=4095.0, level=0.3)
+    assert y[f > 1.0].mean() > y[f == 0].mean()  # the reading rises with force
+    seq = Sequence(FT.forward_transform(y, t)[:, None], f[:, None], ["sensor"], ["force"], {}, {"key": "t"}, {})
+    cal, info = two_point_calibration(p, seq, RATE)
+    assert info["full_scale_used"] == 4095.0 and abs(info["level_ln"] - 0.3) < 0.05
+    on = f > 1.0
+    ref = FT.forward_transform(CF.simulate_reading(f, 1 / RATE, p), t)
+    assert np.sqrt(np.mean((cal.apply(seq.x)[:, 0] - ref)[on] ** 2)) < 0.05
+    raw = Sequence(np.log(y)[:, None], f[:, None], ["sensor"], ["force"], {}, {"key": "t"}, {})
+    S = StaticCurve([raw])
+    assert not S.decreasing and np.all(np.diff(S.ky) >= 0)
+    assert np.sqrt(np.mean((S.predict(raw.x)[:, 0] - f)[on] ** 2)) < 0.2 * f.max()
