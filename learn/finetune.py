@@ -168,8 +168,11 @@ def load_recording(path: str | Path, inputs: Seq[str], targets: Seq[str], *, rat
                     raise ValueError(str(exc.args[0])) from None
                 t = np.asarray(rec.read(ep, "time"), np.float64)
                 if rate_hz:
-                    _, x = resample(t, x, rate_hz)
-                    t, y = resample(t, y, rate_hz)
+                    try:  # dropped samples (NaN) are bridged up to sensors.data.resample.MAX_GAP_S
+                        _, x = resample(t, x, rate_hz)
+                        t, y = resample(t, y, rate_hz)
+                    except ValueError as exc:
+                        raise ValueError(f"{f}: episode {ep}: {exc}") from None
                 units = {c: rec.units(ep, c) for c in [*inputs, *targets]}
                 meta = dict(rec.episode_attrs(ep))
                 meta["key"] = ep if len(files) == 1 else f"{f.stem}/{ep}"

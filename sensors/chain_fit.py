@@ -224,6 +224,7 @@ def presses_of(force: np.ndarray, min_force_n: float) -> list[slice]:
 
 def noise_of(reading: np.ndarray, mask: np.ndarray) -> float:
     d = np.diff(np.asarray(reading, np.float64))[mask[1:] & mask[:-1]]
+    d = d[np.isfinite(d)]  # a dropped sample (NaN) leaves its two differences out
     if len(d) < 10:
         return 0.0
     return float(np.median(np.abs(d - np.median(d))) / 0.6745 / np.sqrt(2))
@@ -243,18 +244,30 @@ def load_real_runs(recording: str | Path, *, input_channel: str = "sensor", targ
             if episodes is not None and not isinstance(episodes, str) and ep not in episodes:
                 continue
             try:
-                s = np.asarray(rec.read(ep, input_channel), np.float64).reshape(-1)
+                s = np.asarray(rec.read(ep, input_channel), np.float64)
+                if s.ndim > 1 and int(np.prod(s.shape[1:])) != 1:
+                    raise ValueError(f"{recording}: episode {ep}: channel '{input_channel}' holds {int(np.prod(s.shape[1:]))} "
+                                     "readings per sample; the chain is one taxel's: import that taxel as its own channel "
+                                     "(the column mapping of `piezotwin import`) and name it")
+                s = s.reshape(-1)
                 f = np.asarray(rec.read(ep, target), np.float64).reshape(-1)
                 t = np.asarray(rec.read(ep, "time"), np.float64)
             except KeyError as exc:
                 raise ValueError(str(exc.args[0])) from None
-            rest = f < 0.02 * max(f.max(), 1e-9)
+            top = np.nanmax(f) if np.isfinite(f).any() else 0.0
+            rest = f < 0.02 * max(top, 1e-9)
             noise = noise_of(s, ~rest)
             if rate_hz:
-                _, s2 = resample(t, s, rate_hz)
-                _, f2 = resample(t, f, rate_hz)
+                try:  # dropped samples (NaN, as `piezotwin capture` leaves them) are bridged up to MAX_GAP_S
+                    _, s2 = resample(t, s, rate_hz)
+                    _, f2 = resample(t, f, rate_hz)
+                except ValueError as exc:
+                    raise ValueError(f"{recording}: episode {ep}: {exc}") from None
                 s, f, dt = s2[:, 0], f2[:, 0], 1.0 / rate_hz
             else:
+                if not (np.isfinite(s).all() and np.isfinite(f).all()):
+                    raise ValueError(f"{recording}: episode {ep}: has samples without a value (NaN); give a rate to "
+                                     "resample it onto (they are bridged there)")
                 dt = float(np.median(np.diff(t)))
             a = {**sattrs, **dict(rec.episode_attrs(ep))}
             rises = _reading_rises(f, s)
@@ -262,7 +275,12 @@ def load_real_runs(recording: str | Path, *, input_channel: str = "sensor", targ
                 raise ValueError(f"{recording}: episode {ep}: the reading rises with force (the reference resistor on the "
                                  "ADC side), so its rest level is not its full scale; give the ADC's full scale as the "
                                  "sensor attribute adc_full_scale (the import spec's sensor_attrs)")
-            fs = float(a.get("adc_full_scale") or np.median(s[f < 0.02 * max(f.max(), 1e-9)]))
+            unloaded = s[f < 0.02 * max(f.max(), 1e-9)]
+            if not a.get("adc_full_scale") and not len(unloaded):
+                raise ValueError(f"{recording}: episode {ep}: no unloaded sample (force < 2 % of its peak), and the "
+                                 "board's full scale is read from its rest level: give adc_full_scale, or capture a "
+                                 "moment without load")
+            fs = float(a.get("adc_full_scale") or np.median(unloaded))
             kept = {k: a[k] for k in ("reference_resistor_ohm", "adc_full_scale") if k in a}
             out.append(RealRun(ep, f, s, dt, fs, noise, {**kept, "reading_rises_with_force": rises}))
     if not out:

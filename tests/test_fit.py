@@ -510,7 +510,7 @@ def test_press_spread_reads_the_level_spread_at_equal_force_and_counts_misses_ap
     assert mp["sim_outlier_share"] > 0.05 and abs(mp["sim_ln_reading_sd"] - sp["sim_ln_reading_sd"]) < 0.15, mp
 
 
-def _divider_capture(path, divider, adc=True, seed=7):
+def _divider_capture(path, divider, adc=True, seed=7, drop=0.0, gap_s=0.0):
     """Four runs of presses of one divider taxel (sim2real's family "divider"), written as `piezotwin import` writes
     an ADC capture; divider "low" = the reference resistor on the ADC side: the reading rises with force."""
     from simulate.generation.chain_gen import press_protocol
@@ -527,6 +527,8 @@ def _divider_capture(path, divider, adc=True, seed=7):
         f, pid = press_protocol(rand, rng, 40.0, 0.01)
         lev = rng.normal(0, p.level_log_sd, pid.max() + 1)
         y = np.clip(np.round(CF.simulate_reading(f, 0.01, p, level=np.where(pid >= 0, lev[np.maximum(pid, 0)], 0.0), rng=rng)), 0, 4095)
+        y[np.random.default_rng(seed + k).random(len(y)) < drop] = np.nan  # samples the capture had none of
+        y[1000:1000 + int(gap_s / 0.01)] = np.nan
         eps[f"run{k}"] = {"time": Channel(np.arange(len(f)) * 0.01, "s", ("time",), "clock"),
                           "force": Channel(f.astype(np.float32), "N", ("time",), "load cell"),
                           "sensor": Channel(y.astype(np.float32)[:, None], "counts", ("time", "channel"), "ADC")}
@@ -560,3 +562,53 @@ def test_a_rising_reading_without_its_full_scale_is_refused(tmp_path):
     _divider_capture(tmp_path / "c.h5", "low", adc=False)
     with pytest.raises(ValueError, match="adc_full_scale"):
         CF.load_real_runs(tmp_path / "c.h5")
+
+
+def test_a_channel_of_several_taxels_is_refused_in_one_line(tmp_path):
+    """The chain is one taxel's: a reading channel with 3 columns is refused naming the channel and its width (it
+    was an IndexError from the resampling)."""
+    from sensors.data.recording import Channel, write_recording
+
+    t = np.arange(500) * 0.01
+    f = np.clip(5 * np.sin(t), 0, None)
+    eps = {"run0": {"time": Channel(t, "s", ("time",), "c"), "force": Channel(f.astype(np.float32), "N", ("time",), "f"),
+                    "sensor": Channel(np.stack([1000 / (1 + f)] * 3, 1).astype(np.float32), "counts", ("time", "channel"), "a")}}
+    write_recording(tmp_path / "m.h5", eps, source="real", config_json="{}", root_seed=0, shard_index=0,
+                    sensor_attrs={"family": "divider"}, episode_attrs={})
+    with pytest.raises(ValueError, match="channel 'sensor' holds 3 readings per sample"):
+        CF.load_real_runs(tmp_path / "m.h5")
+
+
+def test_dropped_samples_are_bridged_and_a_long_gap_is_named(tmp_path):
+    """A capture with 5 % of its readings missing (NaN, as `piezotwin capture` leaves a stream's dropped samples)
+    fits as the whole one does (within-press error, exponent); a 3 s stretch without a sample is refused in one line
+    naming the episode and the gap (before: 24 % NaN after resampling, and sim2real stopped in its static curve)."""
+    from learn.sim2real import _chain_prior
+
+    _divider_capture(tmp_path / "whole.h5", "high")
+    _divider_capture(tmp_path / "holed.h5", "high", drop=0.05)
+    fits = []
+    for name in ("whole", "holed"):
+        runs = CF.load_real_runs(tmp_path / f"{name}.h5", rate_hz=20.0)
+        assert all(np.isfinite(r.reading).all() and np.isfinite(r.force).all() for r in runs)
+        fits.append(CF.fit_chain(runs[:3], _chain_prior("divider", runs), n_boot=0))
+    assert fits[1].error["rms_log_reading_within_press"] < 0.02
+    assert abs(fits[1].params.exponent - fits[0].params.exponent) < 0.05
+    _divider_capture(tmp_path / "gap.h5", "high", gap_s=3.0)
+    with pytest.raises(ValueError, match=r"episode run0: no sample for 3\.0\d s from t = (9\.99|10\.0\d) s"):
+        CF.load_real_runs(tmp_path / "gap.h5", rate_hz=20.0)
+
+
+def test_a_board_run_without_an_unloaded_moment_is_refused(tmp_path):
+    """A board without a known full scale (the Lupasic kind) reads it from its rest level: a run that is never
+    unloaded is refused in one line (it was a NaN full scale and NaN fits)."""
+    from sensors.data.recording import Channel, write_recording
+
+    t = np.arange(600) * 0.01
+    f = 3.0 + np.sin(t)  # always pressed
+    eps = {"run0": {"time": Channel(t, "s", ("time",), "c"), "force": Channel(f, "N", ("time",), "f"),
+                    "sensor": Channel((1000 / (1 + f))[:, None], "raw", ("time", "channel"), "r")}}
+    write_recording(tmp_path / "p.h5", eps, source="real", config_json="{}", root_seed=0, shard_index=0,
+                    sensor_attrs={"family": "velostat"}, episode_attrs={})
+    with pytest.raises(ValueError, match="episode run0: no unloaded sample"):
+        CF.load_real_runs(tmp_path / "p.h5")

@@ -128,6 +128,7 @@ class Run:
 
 def noise_estimate(reading: np.ndarray, loaded: np.ndarray) -> float:
     d = np.diff(np.asarray(reading, np.float64))[loaded[1:] & loaded[:-1]]
+    d = d[np.isfinite(d)]  # a dropped sample (NaN) leaves its two differences out
     if len(d) < 10:
         return float("nan")
     return float(np.median(np.abs(d - np.median(d))) / 0.6745 / np.sqrt(2))
@@ -152,8 +153,11 @@ def load_runs(recording: str | Path, *, input_channel: str = "sensor", target: s
             if len(s) != len(f):
                 raise ValueError(f"{recording}: episode {ep}: '{input_channel}' is not one value per sample")
             sig = noise_estimate(s, f > min_force_n)
-            _, sr = resample(t, s, rate_hz)
-            _, fr = resample(t, f, rate_hz)
+            try:  # dropped samples (NaN) are bridged up to sensors.data.resample.MAX_GAP_S
+                _, sr = resample(t, s, rate_hz)
+                _, fr = resample(t, f, rate_hz)
+            except ValueError as exc:
+                raise ValueError(f"{recording}: episode {ep}: {exc}") from None
             runs.append(Run(ep, fr[:, 0], sr[:, 0], 1.0 / rate_hz, sig))
     if not runs:
         raise ValueError(f"{recording}: no episode" + (f" matches '{episodes}'" if episodes else ""))
