@@ -251,6 +251,14 @@ def load_real_runs(recording: str | Path, *, input_channel: str = "sensor", targ
                                      "(the column mapping of `piezotwin import`) and name it")
                 s = s.reshape(-1)
                 f = np.asarray(rec.read(ep, target), np.float64).reshape(-1)
+                fu = rec.units(ep, target)
+                if fu != "N":
+                    from sensors.data.column_import import FORCE_TO_N
+
+                    if fu not in FORCE_TO_N:
+                        raise ValueError(f"{recording}: episode {ep}: the target '{target}' is in {fu!r}, not a force "
+                                         f"(allowed: {', '.join(FORCE_TO_N)})")
+                    f = f * FORCE_TO_N[fu]
                 t = np.asarray(rec.read(ep, "time"), np.float64)
             except KeyError as exc:
                 raise ValueError(str(exc.args[0])) from None

@@ -612,3 +612,23 @@ def test_a_board_run_without_an_unloaded_moment_is_refused(tmp_path):
                     sensor_attrs={"family": "velostat"}, episode_attrs={})
     with pytest.raises(ValueError, match="episode run0: no unloaded sample"):
         CF.load_real_runs(tmp_path / "p.h5")
+
+
+@pytest.mark.parametrize("units,scale", [("N", 1.0), ("g", 9.80665e-3), ("counts", None)])
+def test_the_force_label_is_read_in_newtons(tmp_path, units, scale):
+    """The chain is fitted in N: a label recorded in another force unit (or a scale's grams) is converted, one that
+    is no force is refused naming it."""
+    from sensors.data.recording import Channel, write_recording
+
+    t = np.arange(400) * 0.01
+    f = np.clip(5 * np.sin(t), 0, None)
+    eps = {"run0": {"time": Channel(t, "s", ("time",), "c"), "force": Channel(f, units, ("time",), "f"),
+                    "sensor": Channel((1000 / (1 + f))[:, None], "raw", ("time", "channel"), "r")}}
+    write_recording(tmp_path / "u.h5", eps, source="real", config_json="{}", root_seed=0, shard_index=0,
+                    sensor_attrs={"family": "velostat"}, episode_attrs={})
+    if scale is None:
+        with pytest.raises(ValueError, match="the target 'force' is in 'counts', not a force"):
+            CF.load_real_runs(tmp_path / "u.h5", rate_hz=None)
+    else:
+        (r,) = CF.load_real_runs(tmp_path / "u.h5", rate_hz=None)
+        np.testing.assert_allclose(r.force, f * scale)

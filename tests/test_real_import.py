@@ -231,3 +231,52 @@ def test_import_tams_layout(tmp_path):
 def test_layouts_validate():
     for name in LAYOUTS:
         assert load_spec(name).name == name
+
+
+def _ms_grams_spec(**col):
+    """A user's own log: a time column in ms, force in grams off a scale, the reading in ADC counts."""
+    return {"name": "fsr", "family": "divider", "input": "sensor", "target": "force",
+            "streams": [{"name": "log", "glob": "*.csv", "header_lines": 1, "delimiter": "comma",
+                         "columns": [{"index": 0, "name": "t", "role": "time", "units": "ms", **col},
+                                     {"index": 1, "name": "force", "units": "g"},
+                                     {"index": 2, "name": "sensor", "units": "counts"}]}]}
+
+
+def test_a_time_column_in_ms_and_grams_of_force_read_as_a_user_writes_them(tmp_path):
+    """`units: ms` on a time column is its time unit (it was ignored: the ms read as s gave a 0 Hz clock and a
+    ZeroDivisionError); the target in grams (a scale's reading) is written in N (x 9.80665e-3), the logged unit kept
+    as an attribute."""
+    d = tmp_path / "d"
+    d.mkdir()
+    (d / "r.csv").write_text("time_ms,scale_g,adc\n" + "".join(f"{5 * k},{100.0 * k},{10 * k}\n" for k in range(50)))
+    p = import_columns(d, _ms_grams_spec(), tmp_path / "o.h5")
+    with Recording(p) as rec:
+        (ep,) = rec.episode_ids
+        assert rec.episode_attrs(ep)["rate_hz"] == 200.0 and rec.units(ep, "force") == "N"
+        np.testing.assert_allclose(np.asarray(rec.read(ep, "force"))[:3], [0.0, 0.980665, 1.96133], rtol=1e-6)
+        assert rec.episode_attrs(ep)["force_units_logged"] == "g"
+
+
+@pytest.mark.parametrize("spec,needle", [
+    (_ms_grams_spec(time_units="s"), "time column 't': units 'ms' and time_units 's' differ"),
+    (_ms_grams_spec(units="min"), "time column 't': units 'min' (allowed: s, ms, us, ns)"),
+    ({**_ms_grams_spec(), "streams": [{**_ms_grams_spec()["streams"][0], "columns": [
+        {"index": 0, "name": "t", "role": "time", "units": "ms"}, {"index": 1, "name": "force", "units": "counts"},
+        {"index": 2, "name": "sensor", "units": "counts"}]}]}, "target 'force': units 'counts' is not a force"),
+])
+def test_a_time_or_force_unit_that_does_not_fit_is_one_line(tmp_path, spec, needle):
+    import yaml
+
+    f = tmp_path / "spec.yaml"
+    f.write_text(yaml.safe_dump(spec))
+    res = CliRunner().invoke(app, ["import", "--spec", str(f), str(tmp_path), "-o", str(tmp_path / "o.h5")])
+    assert res.exit_code == 2 and needle in res.output and len(res.output.strip().splitlines()) == 1, res.output
+
+
+def test_a_clock_of_zero_rate_is_one_line(tmp_path):
+    """A time column whose unit is wrong (ms read as s: 0.2 samples per second) names the file, not a traceback."""
+    d = tmp_path / "d"
+    d.mkdir()
+    (d / "r.csv").write_text("time_ms,scale_g,adc\n" + "".join(f"{5 * k},{100.0 * k},{10 * k}\n" for k in range(50)))
+    with pytest.raises(ImportLogError, match=r"r.csv: its time column gives 0.2 samples per second"):
+        import_columns(d, _ms_grams_spec(units="s"), tmp_path / "o.h5")

@@ -38,6 +38,10 @@ from sensors.data.real_import import G, ImportLogError
 __all__ = ["LAYOUTS", "ImportSpec", "import_columns", "load_spec", "read_columns", "read_weight_calibration"]
 
 TIME_SCALE = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+# the target (force label) is written in N: a log in another force unit, or in the mass a scale shows (g, kg: its
+# weight, standard gravity 9.80665 m/s^2, ISO 80000-3), is converted on import
+FORCE_TO_N = {"N": 1.0, "mN": 1e-3, "kN": 1e3, "g": 9.80665e-3, "gf": 9.80665e-3, "kg": 9.80665, "kgf": 9.80665,
+              "lbf": 4.4482216152605}
 _DELIMS = {"whitespace": None, "comma": ",", "semicolon": ";", "tab": "\t"}
 _NAME_BAD = re.compile(r"[^A-Za-z0-9_.\-]")
 _NAME_OK = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
@@ -77,6 +81,12 @@ class Column(_M):
     def _check(self):
         if not _NAME_OK.match(self.name):
             raise ValueError(f"column name {self.name!r} must be letters, digits, '_' (starting with a letter)")
+        if self.role == "time" and "units" in self.model_fields_set:  # `units: ms` on a time column is its time unit
+            if self.units not in TIME_SCALE:
+                raise ValueError(f"time column {self.name!r}: units {self.units!r} (allowed: {', '.join(TIME_SCALE)})")
+            if "time_units" in self.model_fields_set and self.time_units != self.units:
+                raise ValueError(f"time column {self.name!r}: units {self.units!r} and time_units {self.time_units!r} differ")
+            self.time_units = self.units
         return self
 
 
@@ -147,6 +157,10 @@ class ImportSpec(_M):
         for what in ("input", "target"):
             if getattr(self, what) not in sig:
                 raise ValueError(f"{what} {getattr(self, what)!r} is not a signal column (have {', '.join(sorted(sig))})")
+        tu = next(c.units for s in self.streams for c in s.columns if c.name == self.target)
+        if tu not in FORCE_TO_N:
+            raise ValueError(f"target {self.target!r}: units {tu!r} is not a force (allowed: {', '.join(FORCE_TO_N)}; "
+                             "a scale's g / kg are read as their weight)")
         if len(self.streams) == 2 and not all(s.has_time or s.rate_hz() for s in self.streams):
             raise ValueError("two streams need a time column or a stated rate each")
         return self
@@ -406,6 +420,9 @@ def import_columns(root: str | os.PathLike, spec: ImportSpec | str | dict, out: 
         st0 = streams[0]
         own_rate = (len(st0[3]) - 1) / (st0[3][-1] - st0[3][0])
         rate = float(rate_common or (round(own_rate) if st0[0].has_time else st0[0].rate_hz()))
+        if not (math.isfinite(rate) and rate > 0):
+            raise ImportLogError(f"{paths[0]}: its time column gives {own_rate:.3g} samples per second; check the "
+                                 "column's time unit (units: s, ms, us or ns)")
         nT = int(math.floor((t1 - t0) * rate + 1e-9)) + 1
         t_rel = np.arange(nT) / rate
         grid = t0 + t_rel
@@ -432,12 +449,18 @@ def import_columns(root: str | os.PathLike, spec: ImportSpec | str | dict, out: 
                 vi = v if same else interp_onto(grid, t, v)[:, 0]
                 desc = f"column {c.index} of the {st.name} log" + (", calibrated" if c.name in cals else "") + \
                        ("" if same else ", linearly interpolated onto the common clock")
+                units = c.units
+                if c.name == spec.target and c.units != "N":  # FORCE_TO_N
+                    k = FORCE_TO_N[c.units]
+                    v, vi, units = v * k, vi * k, "N"
+                    desc += f", converted from {c.units} (x {k:g} N)"
+                    attrs[f"{c.name}_units_logged"] = c.units
                 if c.name == spec.input:
-                    ch[c.name] = Channel(vi.astype(np.float32)[:, None], c.units, ("time", "channel"), desc)
+                    ch[c.name] = Channel(vi.astype(np.float32)[:, None], units, ("time", "channel"), desc)
                 else:
-                    ch[c.name] = Channel(vi.astype(np.float32), c.units, ("time",), desc)
+                    ch[c.name] = Channel(vi.astype(np.float32), units, ("time",), desc)
                 if not same:
-                    ch[f"{c.name}_native"] = Channel(v.astype(np.float32), c.units, (f"{st.name}_sample",), f"{c.name} as logged")
+                    ch[f"{c.name}_native"] = Channel(v.astype(np.float32), units, (f"{st.name}_sample",), f"{c.name} as logged")
                 attrs[f"{c.name}_min"] = float(np.min(v))
                 attrs[f"{c.name}_max"] = float(np.max(v))
             evs += [{"time_s": float(t[i] - t0), "label": lab} for i, lab in events]
