@@ -523,7 +523,8 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
     state = json.loads(state_f.read_text()) if state_f.is_file() else {}
     # the steps 1-3 key: the fine-tuning settings (step 4, always rerun) do not invalidate fit, data or pre-training
     key = {"family": family, "recording": str(Path(recording).resolve()), "test": test_glob,
-           "budget": {k: v for k, v in B.items() if k not in FINETUNE_KEYS}, "seed": seed, "model": model}
+           "budget": {k: v for k, v in B.items() if k not in FINETUNE_KEYS}, "seed": seed, "model": model,
+           **({"channels": [input_channel, target]} if (input_channel, target) != ("sensor", "force") else {})}
     if state.get("key") != key:
         # the fit does not depend on the pipeline seed (steps 2-3 only): kept when nothing else changed
         same_fit = _fit_key(state.get("key")) == _fit_key(key) and "fit" in state.get("done", {})

@@ -196,6 +196,8 @@ def sim2real(
     pretrain_epochs: Annotated[int | None, typer.Option(help="Pre-training epoch cap (default 40).")] = None,
     n_boot: Annotated[int | None, typer.Option(help="Bootstrap replicates of the fit (default 16).")] = None,
     seed: Annotated[int, typer.Option(help="Root seed (split, fit bootstrap, generation, training).")] = 0,
+    input_channel: Annotated[str, typer.Option("--input", help="Real reading channel (one taxel).")] = "sensor",
+    target: Annotated[str, typer.Option(help="Force channel (N, or a force unit the label is converted from).")] = "force",
     rated_force_n: Annotated[float | None, typer.Option("--rated-force-n", help="The sensor's / rig's rated force (N), "
                              "as the user knows it (never the test runs' maximum): the simulated presses span it.")] = None,
     run_level: Annotated[bool, typer.Option("--run-level", help="Draw each simulated run's ln gain from the fitted "
@@ -255,7 +257,8 @@ def sim2real(
         import sys
 
         cmd = "piezotwin " + " ".join(shlex.quote(a) for a in sys.argv[1:])  # recorded in metrics.json
-        m = run_sim2real(family, recording, out, test_glob=test_episodes, budget=b, seed=seed, progress=err.is_terminal,
+        m = run_sim2real(family, recording, out, test_glob=test_episodes, budget=b, seed=seed, input_channel=input_channel,
+                         target=target, progress=err.is_terminal,
                          log=lambda s: console.print(s, highlight=False), command=cmd)
     except (ValueError, KeyError) as exc:
         fail(str(exc.args[0] if exc.args else exc))

@@ -237,3 +237,27 @@ def test_a_rising_reading_is_read_through_its_headroom_and_calibrates_the_same()
     S = StaticCurve([raw])
     assert not S.decreasing and np.all(np.diff(S.ky) >= 0)
     assert np.sqrt(np.mean((S.predict(raw.x)[:, 0] - f)[on] ** 2)) < 0.2 * f.max()
+
+
+def test_cli_reads_the_channels_it_is_told(tmp_path, monkeypatch):
+    """`sim2real --input NAME --target NAME`: a capture whose streams are named otherwise (`piezotwin capture`'s
+    stream names) is read through those channels; a channel the recording lacks is one line naming what it has."""
+    import h5py
+    from typer.testing import CliRunner
+
+    import learn.sim2real as S
+    from piezotwin.cli import app
+
+    rec = tmp_path / "r.h5"
+    h5py.File(rec, "w").close()
+    seen = {}
+
+    def fake(family, recording, out, **kw):
+        seen.update(kw)
+        raise ValueError(f"{recording}: episode 'e' has no channel '{kw['input_channel']}' (has ['cell', 'time'])")
+
+    monkeypatch.setattr(S, "run_sim2real", fake)
+    res = CliRunner().invoke(app, ["sim2real", "divider", str(rec), "--test-episodes", "*x*", "-o", str(tmp_path / "o"),
+                                   "--input", "board", "--target", "cell"])
+    assert seen["input_channel"] == "board" and seen["target"] == "cell"
+    assert res.exit_code == 2 and "has no channel 'board'" in res.output and len(res.output.strip().splitlines()) == 1
