@@ -181,7 +181,10 @@ def import_with_spec(spec: str, data: Path | None, second: Path | None, out: Pat
             tgt = sp.target
             console.print(f"{ep}: {a['rate_hz']:g} Hz clock{' (period uncertain)' if a.get('time_uncertain') else ''}, "
                           f"{a['duration_s']:.1f} s, {tgt} {a.get(tgt + '_min', float('nan')):.3g} .. "
-                          f"{a.get(tgt + '_max', float('nan')):.3g}, {len(a.get('events') or [])} events",
+                          f"{a.get(tgt + '_max', float('nan')):.3g}, {len(a.get('events') or [])} events"
+                          + "".join(f"; {k[:-7]}: {len(g)} stretch(es) without a sample (> 1 s, longest "
+                                    f"{max(float(x[1]) for x in g):.1f} s) left empty" for k, g in a.items()
+                                    if k.endswith("_gaps_s") and len(g)),
                           highlight=False, soft_wrap=True)
     _print_summary(p)
 

@@ -212,6 +212,15 @@ def test_import_speed_sweep_layout(tmp_path):
         assert labels[0] == "start_exp" and "touch_grd" in labels and "go_up_roll" in labels
         assert 100 < a["sensor_rate_hz"] < 200 and a["force_max"] > 10
         assert np.asarray(rec.read(ep, "sensor")).shape[1] == 1
+        # the load cell's log pauses from touch_grd to go_up_roll (~3.2 s, the arm on the ground): those stretches
+        # stay empty on the common clock, not a straight line drawn from the touch to the lift-off
+        gaps = np.asarray(a["force_gaps_s"])
+        assert len(gaps) >= 20 and 3.0 < gaps[:, 1].max() < 3.5
+        f, t = np.asarray(rec.read(ep, "force")), np.asarray(rec.read(ep, "time"))
+        g0, gl = gaps[np.argmax(gaps[:, 1])]
+        inside = (t > g0 + 0.05) & (t < g0 + gl - 0.05)
+        assert inside.sum() > 400 and np.isnan(f[inside]).all()
+    assert "stretch(es) without a sample" in res.output
 
 
 @pytest.mark.skipif(not TAMS.is_dir(), reason="TAMS logs not present")
@@ -280,3 +289,21 @@ def test_a_clock_of_zero_rate_is_one_line(tmp_path):
     (d / "r.csv").write_text("time_ms,scale_g,adc\n" + "".join(f"{5 * k},{100.0 * k},{10 * k}\n" for k in range(50)))
     with pytest.raises(ImportLogError, match=r"r.csv: its time column gives 0.2 samples per second"):
         import_columns(d, _ms_grams_spec(units="s"), tmp_path / "o.h5")
+
+
+def test_a_stalled_stream_is_left_empty_not_bridged_by_a_line(tmp_path):
+    """Two streams on one clock: where one has no sample for more than 1 s (sensors.data.resample.MAX_GAP_S), the
+    common clock holds NaN there and the stretch is recorded; a shorter pause is interpolated as before."""
+    from sensors.serial.capture import gaps_of, interp_onto
+
+    t = np.concatenate([np.arange(0, 2, 0.01), np.arange(5, 6, 0.01), np.arange(6.5, 7, 0.01)])
+    y = t.copy()
+    grid = np.arange(0, 7, 0.005)
+    out = interp_onto(grid, t, y, 1.0)[:, 0]
+    assert np.isnan(out[(grid > 2.0) & (grid < 4.99)]).all()  # 3 s without a sample
+    mid = (grid > 6.0) & (grid < 6.5)  # 0.5 s: bridged
+    np.testing.assert_allclose(out[mid], grid[mid], atol=1e-9)
+    np.testing.assert_allclose(out[grid <= 1.99], grid[grid <= 1.99], atol=1e-9)
+    assert [[round(a, 2), round(b, 2)] for a, b in gaps_of(t, 1.0)] == [[1.99, 3.01]]
+    inside = grid <= t[-1]
+    np.testing.assert_allclose(interp_onto(grid, t, y)[inside, 0], np.interp(grid[inside], t, y))  # no max_gap_s: as before

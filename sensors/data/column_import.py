@@ -380,7 +380,8 @@ def import_columns(root: str | os.PathLike, spec: ImportSpec | str | dict, out: 
                    rate_hz: float | None = None, files: list[list[Path]] | None = None) -> Path:
     """Write a recording (source="real"), one episode per paired set of files under ``root``; see the module."""
     from sensors.data.recording import Channel, write_recording
-    from sensors.serial.capture import interp_onto
+    from sensors.data.resample import MAX_GAP_S
+    from sensors.serial.capture import gaps_of, interp_onto
 
     spec = spec if isinstance(spec, ImportSpec) else load_spec(spec)
     root = Path(root)
@@ -446,7 +447,9 @@ def import_columns(root: str | os.PathLike, spec: ImportSpec | str | dict, out: 
                     continue
                 v = cols[c.name]
                 same = len(streams) == 1 and nT == len(v)
-                vi = v if same else interp_onto(grid, t, v)[:, 0]
+                vi = v if same else interp_onto(grid, t, v, MAX_GAP_S)[:, 0]
+                if not same and (gaps := gaps_of(t, MAX_GAP_S)):  # left empty (NaN), not bridged by a made-up line
+                    attrs[f"{c.name}_gaps_s"] = [[g0 - t0, gl] for g0, gl in gaps]
                 desc = f"column {c.index} of the {st.name} log" + (", calibrated" if c.name in cals else "") + \
                        ("" if same else ", linearly interpolated onto the common clock")
                 units = c.units

@@ -182,6 +182,7 @@ def import_runs(
 
 def _import_pair(sensor_log: Path, force_log: Path, rate_hz, force_units: str, cal: dict | None, sensor_units: str):
     from sensors.data.recording import Channel
+    from sensors.data.resample import MAX_GAP_S
     from sensors.serial.capture import interp_onto
 
     sv, st = read_log(sensor_log, "value")
@@ -204,8 +205,8 @@ def _import_pair(sensor_log: Path, force_log: Path, rate_hz, force_units: str, c
     n = int(math.floor((t1 - t0) * rate)) + 1
     t_rel = np.arange(n) / rate  # exact; absolute unix times near 1.6e9 s carry only ~0.2 us resolution
     grid = t0 + t_rel
-    s_i = interp_onto(grid, st, sv)[:, 0]
-    f_i = interp_onto(grid, ft, fv)[:, 0]
+    s_i = interp_onto(grid, st, sv, MAX_GAP_S)[:, 0]
+    f_i = interp_onto(grid, ft, fv, MAX_GAP_S)[:, 0]
     ch = {
         "time": Channel(t_rel, "s", ("time",), "common clock: seconds since the later of the two streams' starts"),
         "unix_time": Channel(grid, "s", ("time",), "host unix time of the common clock"),

@@ -46,6 +46,7 @@ from typing import Any
 
 import numpy as np
 
+from sensors.data.resample import MAX_GAP_S
 from sensors.serial.codec import PROTOCOLS, make_decoder
 
 MAGIC = b"PZTRAWLOG1\n"
@@ -236,8 +237,10 @@ def _values_array(sd: _StreamData) -> np.ndarray:
     return arr
 
 
-def interp_onto(t_new: np.ndarray, t: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Linear interpolation of y[t] (time along axis 0) onto t_new; NaN outside t's span."""
+def interp_onto(t_new: np.ndarray, t: np.ndarray, y: np.ndarray, max_gap_s: float | None = None) -> np.ndarray:
+    """Linear interpolation of y[t] (time along axis 0) onto t_new; NaN outside t's span, and with ``max_gap_s``
+    NaN inside a stretch of more than max_gap_s between two samples (a stalled stream: a line drawn across it would
+    be made-up data)."""
     y = np.asarray(y, np.float64).reshape(len(t), -1)
     out = np.full((len(t_new), y.shape[1]), np.nan)
     if len(t) == 0:
@@ -245,9 +248,19 @@ def interp_onto(t_new: np.ndarray, t: np.ndarray, y: np.ndarray) -> np.ndarray:
     order = np.argsort(t, kind="stable")
     t, y = np.asarray(t, np.float64)[order], y[order]
     inside = (t_new >= t[0]) & (t_new <= t[-1])
+    if max_gap_s is not None and len(t) > 1:
+        k = np.clip(np.searchsorted(t, t_new, side="right") - 1, 0, len(t) - 2)
+        inside &= ~(np.diff(t)[k] > max_gap_s) | np.isin(t_new, t)
     for c in range(y.shape[1]):
         out[inside, c] = np.interp(t_new[inside], t, y[:, c])
     return out
+
+
+def gaps_of(t: np.ndarray, max_gap_s: float) -> list[list[float]]:
+    """[[start_s, length_s], ...]: the stretches of more than max_gap_s between consecutive samples of t."""
+    t = np.sort(np.asarray(t, np.float64))
+    d = np.diff(t)
+    return [[float(t[i]), float(d[i])] for i in np.flatnonzero(d > max_gap_s)]
 
 
 def build_recording(log: str | os.PathLike, out: str | os.PathLike) -> Path:
@@ -288,7 +301,7 @@ def build_recording(log: str | os.PathLike, out: str | os.PathLike) -> Path:
                 ch[name] = Channel(vals, units, ("time", "channel"), f"{sd.spec['protocol']} stream from {sd.spec['url']}")
             else:
                 ch[name] = Channel(
-                    interp_onto(t_ref, (hn - t0) / 1e9, vals).astype(np.float32), units, ("time", "channel"),
+                    interp_onto(t_ref, (hn - t0) / 1e9, vals, MAX_GAP_S).astype(np.float32), units, ("time", "channel"),
                     f"{sd.spec['protocol']} stream from {sd.spec['url']}, linearly interpolated onto stream 0's times",
                 )
                 ax = f"{name}_sample"
