@@ -147,7 +147,7 @@ def load_recording(path: str | Path, inputs: Seq[str], targets: Seq[str], *, rat
     """Episodes of one recording file (or a dataset folder) as Sequences in physical units, optionally
     resampled to ``rate_hz``; ``meta['key']`` is the episode id."""
     from sensors.data.manifest import shard_files
-    from sensors.data.recording import Recording
+    from sensors.data.recording import Recording, split_column
 
     path = Path(path)
     files = [path] if path.is_file() else shard_files(path)
@@ -157,8 +157,8 @@ def load_recording(path: str | Path, inputs: Seq[str], targets: Seq[str], *, rat
             for ep in rec.episode_ids:
                 if episodes is not None and ep not in episodes:
                     continue
-                def flat(c):
-                    a = np.asarray(rec.read(ep, c), np.float64)
+                def flat(c):  # a channel, or one column of it as "name[k]"
+                    a = np.asarray(rec.read_column(ep, c), np.float64)
                     return a.reshape(len(a), -1)
 
                 try:
@@ -173,7 +173,7 @@ def load_recording(path: str | Path, inputs: Seq[str], targets: Seq[str], *, rat
                         t, y = resample(t, y, rate_hz)
                     except ValueError as exc:
                         raise ValueError(f"{f}: episode {ep}: {exc}") from None
-                units = {c: rec.units(ep, c) for c in [*inputs, *targets]}
+                units = {c: rec.units(ep, split_column(c)[0]) for c in [*inputs, *targets]}
                 meta = dict(rec.episode_attrs(ep))
                 meta["key"] = ep if len(files) == 1 else f"{f.stem}/{ep}"
                 out.append(Sequence(x, y, list(inputs), list(targets), units, meta, {"time": t - t[0]}))

@@ -232,7 +232,7 @@ def noise_of(reading: np.ndarray, mask: np.ndarray) -> float:
 
 def load_real_runs(recording: str | Path, *, input_channel: str = "sensor", target: str = "force",
                    rate_hz: float | None = 20.0, episodes: str | Seq[str] | None = None) -> list[RealRun]:
-    from sensors.data.recording import Recording
+    from sensors.data.recording import Recording, split_column
     from sensors.data.resample import resample
 
     out = []
@@ -244,20 +244,21 @@ def load_real_runs(recording: str | Path, *, input_channel: str = "sensor", targ
             if episodes is not None and not isinstance(episodes, str) and ep not in episodes:
                 continue
             try:
-                s = np.asarray(rec.read(ep, input_channel), np.float64)
+                s = np.asarray(rec.read_column(ep, input_channel), np.float64)
                 if s.ndim > 1 and int(np.prod(s.shape[1:])) != 1:
                     raise ValueError(f"{recording}: episode {ep}: channel '{input_channel}' holds {int(np.prod(s.shape[1:]))} "
-                                     "readings per sample; the chain is one taxel's: import that taxel as its own channel "
-                                     "(the column mapping of `piezotwin import`) and name it")
+                                     f"readings per sample; the chain is one taxel's: name one as '{input_channel}[k]' "
+                                     "(k from 0), or import that taxel as its own channel")
                 s = s.reshape(-1)
-                f = np.asarray(rec.read(ep, target), np.float64).reshape(-1)
-                fu = rec.units(ep, target)
+                f = np.asarray(rec.read_column(ep, target), np.float64).reshape(-1)
+                fu = rec.units(ep, split_column(target)[0])
                 if fu != "N":
                     from sensors.data.column_import import FORCE_TO_N
 
                     if fu not in FORCE_TO_N:
                         raise ValueError(f"{recording}: episode {ep}: the target '{target}' is in {fu!r}, not a force "
-                                         f"(allowed: {', '.join(FORCE_TO_N)})")
+                                         f"(allowed: {', '.join(FORCE_TO_N)}; a capture records it with --units / "
+                                         "--units2, an import with the column's units)")
                     f = f * FORCE_TO_N[fu]
                 t = np.asarray(rec.read(ep, "time"), np.float64)
             except KeyError as exc:

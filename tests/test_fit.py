@@ -575,7 +575,7 @@ def test_a_channel_of_several_taxels_is_refused_in_one_line(tmp_path):
                     "sensor": Channel(np.stack([1000 / (1 + f)] * 3, 1).astype(np.float32), "counts", ("time", "channel"), "a")}}
     write_recording(tmp_path / "m.h5", eps, source="real", config_json="{}", root_seed=0, shard_index=0,
                     sensor_attrs={"family": "divider"}, episode_attrs={})
-    with pytest.raises(ValueError, match="channel 'sensor' holds 3 readings per sample"):
+    with pytest.raises(ValueError, match=r"channel .sensor. holds 3 readings per sample; the chain is one taxel.s: name one as .sensor\[k\]."):
         CF.load_real_runs(tmp_path / "m.h5")
 
 
@@ -632,3 +632,24 @@ def test_the_force_label_is_read_in_newtons(tmp_path, units, scale):
     else:
         (r,) = CF.load_real_runs(tmp_path / "u.h5", rate_hz=None)
         np.testing.assert_allclose(r.force, f * scale)
+
+
+def test_one_column_of_a_board_stream_is_named_name_k(tmp_path):
+    """`--input velostat[0]`: one column of a stream of several values per sample (a capture of our velostat board:
+    R, x, y) is read as the reading; a column beyond the stream's is one error naming the range."""
+    from learn.finetune import load_recording
+    from sensors.data.recording import Channel, write_recording
+
+    t = np.arange(500) * 0.01
+    f = np.clip(5 * np.sin(t), 0, None)
+    board = np.stack([1000 / (1 + f), np.full_like(f, 0.01), np.full_like(f, -0.02)], 1)
+    eps = {"run0": {"time": Channel(t, "s", ("time",), "c"), "cell": Channel(f, "N", ("time",), "f"),
+                    "velostat": Channel(board, "ohm", ("time", "channel"), "R, x, y")}}
+    write_recording(tmp_path / "c.h5", eps, source="real", config_json="{}", root_seed=0, shard_index=0,
+                    sensor_attrs={"family": "velostat"}, episode_attrs={})
+    (r,) = CF.load_real_runs(tmp_path / "c.h5", input_channel="velostat[0]", target="cell", rate_hz=None)
+    np.testing.assert_allclose(r.reading, board[:, 0])
+    (s,) = load_recording(tmp_path / "c.h5", ["velostat[0]"], ["cell"])
+    assert s.x.shape == (500, 1) and s.units["velostat[0]"] == "ohm"
+    with pytest.raises(ValueError, match=r"channel 'velostat' has 3 column\(s\); 'velostat\[3\]' asks for column 3"):
+        CF.load_real_runs(tmp_path / "c.h5", input_channel="velostat[3]", target="cell")

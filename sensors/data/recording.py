@@ -116,6 +116,7 @@ __all__ = [
     "generator_info",
     "merge_summaries",
     "read_recording_summary",
+    "split_column",
     "write_recording",
 ]
 
@@ -361,6 +362,15 @@ def _episode_digest(ep_id: str, attrs: Mapping[str, Any], channels: Mapping[str,
     for name in sorted(channels):
         _channel_hash(h, name, *channels[name])
     return h.digest()
+
+
+_COLUMN_RE = re.compile(r"^(?P<base>.+)\[(?P<k>\d+)\]$")
+
+
+def split_column(name: str) -> tuple[str, int | None]:
+    """``"velostat[0]"`` -> ("velostat", 0); a plain channel name -> (name, None)."""
+    m = _COLUMN_RE.match(name)
+    return (m["base"], int(m["k"])) if m else (name, None)
 
 
 def content_sha256(root_attrs: Mapping[str, Any], sensor_attrs: Mapping[str, Any], mjcf: str | None,
@@ -1088,6 +1098,19 @@ class Recording:
         if ds.ndim == 0:
             return np.asarray(ds[()])
         return np.asarray(ds[sl])
+
+    def read_column(self, ep_id: str, name: str) -> np.ndarray:
+        """A channel by name, or one column of it as ``name[k]`` (a board stream of several values per sample, e.g.
+        a capture's ``velostat[0]``): [T] for a column; KeyError naming the channel or the column range."""
+        base, k = split_column(name)
+        a = self.read(ep_id, base)
+        if k is None:
+            return a
+        a = a.reshape(len(a), -1)
+        if k >= a.shape[1]:
+            raise KeyError(f"{self.path}: episode {ep_id!r}: channel {base!r} has {a.shape[1]} column(s); {name!r} "
+                           f"asks for column {k} (allowed 0-{a.shape[1] - 1})")
+        return a[:, k]
 
     def channel(self, ep_id: str, name: str) -> Channel:
         return Channel(

@@ -145,8 +145,8 @@ def load_runs(recording: str | Path, *, input_channel: str = "sensor", target: s
             if episodes and not fnmatch.fnmatch(ep, episodes):
                 continue
             try:
-                s = np.asarray(rec.read(ep, input_channel), np.float64).reshape(-1)
-                f = np.asarray(rec.read(ep, target), np.float64).reshape(-1)
+                s = np.asarray(rec.read_column(ep, input_channel), np.float64).reshape(-1)
+                f = np.asarray(rec.read_column(ep, target), np.float64).reshape(-1)
                 t = np.asarray(rec.read(ep, "time"), np.float64)
             except KeyError as exc:
                 raise ValueError(str(exc.args[0])) from None
