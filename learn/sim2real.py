@@ -483,7 +483,11 @@ def two_point_calibration(p, run_seq, rate_hz: float) -> tuple[TwoPoint, dict[st
 
     f = run_seq.y[:, 0]
     y = FT.inverse_transform(run_seq.x[:, 0], input_transform(p))
-    sl = presses_of(f, max(0.1 * f.max(), 0.05))[0]
+    found = presses_of(f, max(0.1 * f.max(), 0.05))
+    if not found:
+        raise ValueError(f"test run {run_seq.meta.get('key', '?')}: no press above 0.05 N, and the two-point "
+                         "calibration takes its known load from the first press")
+    sl = found[0]
     rest = np.flatnonzero(f[: sl.start] < 0.02 * f.max())
     # point 1 gives the gain only where the rest level is the full scale (a "high" divider whose fit saw no leak:
     # the Lupasic board); an ADC divider of known full scale (TAMS) rests at its leak, and keeps its full scale

@@ -261,3 +261,12 @@ def test_cli_reads_the_channels_it_is_told(tmp_path, monkeypatch):
                                    "--input", "board", "--target", "cell"])
     assert seen["input_channel"] == "board" and seen["target"] == "cell"
     assert res.exit_code == 2 and "has no channel 'board'" in res.output and len(res.output.strip().splitlines()) == 1
+
+
+def test_two_point_needs_a_press_and_says_so():
+    """A test run without any press (the force never above 0.05 N) cannot give the known load: one ValueError
+    naming the run (it was an IndexError traceback)."""
+    p = CF.ChainParams(r_ref_ohm=1e4, full_scale=900.0)
+    seq = Sequence(np.zeros((100, 1)), np.full((100, 1), 0.01), ["sensor"], ["force"], {}, {"key": "idle"}, {})
+    with pytest.raises(ValueError, match="test run idle: no press above 0.05 N"):
+        two_point_calibration(p, seq, RATE)
