@@ -382,3 +382,30 @@ def test_capture_reads_in_blocks_over_loopback(tmp_path):
     assert r["bytes"] == len(data) and r["frames"] == n_frames and r["crc_errors"] == 0, r
     assert r["bytes_per_s"] >= 1e6, r
     assert r["bytes_per_read"] >= 1000 and r["rawlog_over_data"] < 1.01, r
+
+
+def test_a_capture_of_a_board_and_a_load_cell_fits_the_chain(tmp_path):
+    """The real-data path from the wire: a board streaming 3 values per sample (R, x, y) at 200 Hz and a load cell
+    (N) at 250 Hz, captured on host time, read as `--input board[0] --target cell` and fitted: the chain's exponent
+    comes back."""
+    from sensors import chain_fit as CF
+
+    def force_at(t):  # 1.5 s presses to 2-8 N, 0.3 s ramps, 1 s apart
+        k, u = np.floor(t / 2.5), np.mod(t, 2.5)
+        pk = 2.0 + 6.0 * np.mod(k * 0.618, 1.0)
+        return pk * np.clip(np.minimum(u / 0.3, (1.5 - u) / 0.3), 0.0, 1.0)
+
+    p = CF.ChainParams(exponent=1.2, r0_ohm=5000.0, creep_amplitude=1e-6, r_ref_ohm=1e4, full_scale=1000.0)
+    tb, tc = np.arange(0, 12, 1 / 200), np.arange(0, 12, 1 / 250)
+    r = CF.total_resistance(CF.film_resistance(force_at(tb), 1 / 200, p), p)
+    board = np.stack([np.minimum(r, 1e6), np.zeros_like(r), np.zeros_like(r)], 1).astype(np.float32)
+    b = Served(Source(board, 200.0, "ohm", "board", "test"), "socket://127.0.0.1:0", "frames", duration_s=8)
+    c = Served(Source(force_at(tc)[:, None].astype(np.float32), 250.0, "N", "cell", "test"), "socket://127.0.0.1:0",
+               "text", duration_s=8)
+    capture([StreamSpec(b.url, "frames", "board", units="ohm"), StreamSpec(c.url, "text", "cell", units="N")],
+            tmp_path / "cap.h5", duration_s=6.0)
+    b.join(), c.join()
+    runs = CF.load_real_runs(tmp_path / "cap.h5", input_channel="board[0]", target="cell", rate_hz=20.0)
+    assert len(runs) == 1 and runs[0].force.max() > 5.0
+    fit = CF.fit_chain(runs * 2, CF.ChainParams(r_ref_ohm=1e4, full_scale=1.0, divider="high"), n_boot=0)
+    assert abs(fit.params.exponent - 1.2) < 0.25, fit.params.exponent
