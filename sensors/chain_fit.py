@@ -232,6 +232,7 @@ def noise_of(reading: np.ndarray, mask: np.ndarray) -> float:
 
 def load_real_runs(recording: str | Path, *, input_channel: str = "sensor", target: str = "force",
                    rate_hz: float | None = 20.0, episodes: str | Seq[str] | None = None) -> list[RealRun]:
+    from sensors.data.column_import import to_newtons
     from sensors.data.recording import Recording, split_column
     from sensors.data.resample import resample
 
@@ -250,16 +251,8 @@ def load_real_runs(recording: str | Path, *, input_channel: str = "sensor", targ
                                      f"readings per sample; the chain is one taxel's: name one as '{input_channel}[k]' "
                                      "(k from 0), or import that taxel as its own channel")
                 s = s.reshape(-1)
-                f = np.asarray(rec.read_column(ep, target), np.float64).reshape(-1)
-                fu = rec.units(ep, split_column(target)[0])
-                if fu != "N":
-                    from sensors.data.column_import import FORCE_TO_N
-
-                    if fu not in FORCE_TO_N:
-                        raise ValueError(f"{recording}: episode {ep}: the target '{target}' is in {fu!r}, not a force "
-                                         f"(allowed: {', '.join(FORCE_TO_N)}; a capture records it with --units / "
-                                         "--units2, an import with the column's units)")
-                    f = f * FORCE_TO_N[fu]
+                f = to_newtons(np.asarray(rec.read_column(ep, target), np.float64).reshape(-1),
+                               rec.units(ep, split_column(target)[0]), f"{recording}: episode {ep}: the target '{target}'")
                 t = np.asarray(rec.read(ep, "time"), np.float64)
             except KeyError as exc:
                 raise ValueError(str(exc.args[0])) from None

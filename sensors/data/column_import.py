@@ -42,6 +42,15 @@ TIME_SCALE = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 # weight, standard gravity 9.80665 m/s^2, ISO 80000-3), is converted on import
 FORCE_TO_N = {"N": 1.0, "mN": 1e-3, "kN": 1e3, "g": 9.80665e-3, "gf": 9.80665e-3, "kg": 9.80665, "kgf": 9.80665,
               "lbf": 4.4482216152605}
+
+
+def to_newtons(values: np.ndarray, units: str, where: str) -> np.ndarray:
+    """A force label in N from its recorded unit (FORCE_TO_N); ValueError naming ``where`` for a unit that is no
+    force (a capture records it with --units / --units2, an import with the column's units)."""
+    if units not in FORCE_TO_N:
+        raise ValueError(f"{where} is in {units!r}, not a force (allowed: {', '.join(FORCE_TO_N)}; a capture records "
+                         "it with --units / --units2, an import with the column's units)")
+    return values if units == "N" else values * FORCE_TO_N[units]
 _DELIMS = {"whitespace": None, "comma": ",", "semicolon": ";", "tab": "\t"}
 _NAME_BAD = re.compile(r"[^A-Za-z0-9_.\-]")
 _NAME_OK = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")

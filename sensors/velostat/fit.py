@@ -136,7 +136,8 @@ def noise_estimate(reading: np.ndarray, loaded: np.ndarray) -> float:
 
 def load_runs(recording: str | Path, *, input_channel: str = "sensor", target: str = "force", rate_hz: float = 20.0,
               episodes: str | None = None, min_force_n: float = 0.5) -> list[Run]:
-    from sensors.data.recording import Recording
+    from sensors.data.column_import import to_newtons
+    from sensors.data.recording import Recording, split_column
     from sensors.data.resample import resample
 
     runs = []
@@ -146,7 +147,8 @@ def load_runs(recording: str | Path, *, input_channel: str = "sensor", target: s
                 continue
             try:
                 s = np.asarray(rec.read_column(ep, input_channel), np.float64).reshape(-1)
-                f = np.asarray(rec.read_column(ep, target), np.float64).reshape(-1)
+                f = to_newtons(np.asarray(rec.read_column(ep, target), np.float64).reshape(-1),
+                               rec.units(ep, split_column(target)[0]), f"{recording}: episode {ep}: the target '{target}'")
                 t = np.asarray(rec.read(ep, "time"), np.float64)
             except KeyError as exc:
                 raise ValueError(str(exc.args[0])) from None
