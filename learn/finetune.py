@@ -128,8 +128,8 @@ def forward_transform(x: np.ndarray, transform: str) -> np.ndarray:
     if transform == "log":
         return np.log(np.maximum(x, 1e-12))
     fs = _headroom_fs(transform)
-    if fs is not None:
-        return np.log(np.maximum(fs - x, 1e-12))
+    if fs is not None:  # a reading at its full scale (saturated) keeps 1e-4 of it: no -27 outlier from ln(0)
+        return np.log(np.maximum(fs - x, 1e-4 * fs))
     return x
 
 

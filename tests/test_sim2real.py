@@ -222,6 +222,7 @@ def test_a_rising_reading_is_read_through_its_headroom_and_calibrates_the_same()
     assert t == "log_headroom:4095" and input_transform(replace(p, divider="high")) == "log"
     r = np.array([0.0, 10.0, 4000.0, 4094.0])
     np.testing.assert_allclose(FT.inverse_transform(FT.forward_transform(r, t), t), r, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(FT.forward_transform(np.array([4095.0, 5000.0]), t), np.log(0.4095))  # saturated: bounded
     assert "ln(4095 - reading)" in FT.InputMap(t).describe()
     with pytest.raises(ValueError, match="full scale"):
         FT.InputMap("log_headroom:-3")
