@@ -146,6 +146,7 @@ def load_recording(path: str | Path, inputs: Seq[str], targets: Seq[str], *, rat
                    episodes: Seq[str] | None = None) -> list[Sequence]:
     """Episodes of one recording file (or a dataset folder) as Sequences in physical units, optionally
     resampled to ``rate_hz``; ``meta['key']`` is the episode id."""
+    from sensors.data.column_import import FORCE_TO_N
     from sensors.data.manifest import shard_files
     from sensors.data.recording import Recording, split_column
 
@@ -174,6 +175,10 @@ def load_recording(path: str | Path, inputs: Seq[str], targets: Seq[str], *, rat
                     except ValueError as exc:
                         raise ValueError(f"{f}: episode {ep}: {exc}") from None
                 units = {c: rec.units(ep, split_column(c)[0]) for c in [*inputs, *targets]}
+                for j, c in enumerate(targets):  # a force label in another force unit (a capture's g) is read in N
+                    if units[c] in FORCE_TO_N and units[c] != "N":
+                        y[:, j] *= FORCE_TO_N[units[c]]
+                        units[c] = "N"
                 meta = dict(rec.episode_attrs(ep))
                 meta["key"] = ep if len(files) == 1 else f"{f.stem}/{ep}"
                 out.append(Sequence(x, y, list(inputs), list(targets), units, meta, {"time": t - t[0]}))

@@ -630,8 +630,13 @@ def test_the_force_label_is_read_in_newtons(tmp_path, units, scale):
         with pytest.raises(ValueError, match="the target 'force' is in 'counts', not a force"):
             CF.load_real_runs(tmp_path / "u.h5", rate_hz=None)
     else:
+        from learn.finetune import load_recording
+
         (r,) = CF.load_real_runs(tmp_path / "u.h5", rate_hz=None)
         np.testing.assert_allclose(r.force, f * scale)
+        (s,) = load_recording(tmp_path / "u.h5", ["sensor"], ["force"])  # the learning side reads it in N too
+        np.testing.assert_allclose(s.y[:, 0], f * scale)
+        assert s.units["force"] == "N"
 
 
 def test_one_column_of_a_board_stream_is_named_name_k(tmp_path):
