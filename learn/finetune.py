@@ -38,7 +38,6 @@ are the first candidate (fine-tuning that never improves on them returns them).
 from __future__ import annotations
 
 import copy
-import fnmatch
 from collections.abc import Callable
 from collections.abc import Sequence as Seq
 from dataclasses import dataclass, field
@@ -52,7 +51,7 @@ from torch import nn
 from learn.data import Sequence
 from learn.models.base import Compensator, make_model
 from learn.normalize import ZScore
-from sensors.data.resample import resample
+from sensors.data.resample import PART_SEP, key_matches, resample, resample_parts
 
 __all__ = [
     "FINETUNE_METHODS",
@@ -168,20 +167,23 @@ def load_recording(path: str | Path, inputs: Seq[str], targets: Seq[str], *, rat
                 except KeyError as exc:
                     raise ValueError(str(exc.args[0])) from None
                 t = np.asarray(rec.read(ep, "time"), np.float64)
+                parts = [(t, [x, y])]
                 if rate_hz:
-                    try:  # dropped samples (NaN) are bridged up to sensors.data.resample.MAX_GAP_S
-                        _, x = resample(t, x, rate_hz)
-                        t, y = resample(t, y, rate_hz)
+                    try:  # dropped samples (NaN) bridged up to MAX_GAP_S; cut at longer stretches (parts EP@k)
+                        parts = resample_parts(t, [x, y], rate_hz)
                     except ValueError as exc:
                         raise ValueError(f"{f}: episode {ep}: {exc}") from None
                 units = {c: rec.units(ep, split_column(c)[0]) for c in [*inputs, *targets]}
+                scale = np.ones(len(targets))
                 for j, c in enumerate(targets):  # a force label in another force unit (a capture's g) is read in N
                     if units[c] in FORCE_TO_N and units[c] != "N":
-                        y[:, j] *= FORCE_TO_N[units[c]]
+                        scale[j] = FORCE_TO_N[units[c]]
                         units[c] = "N"
-                meta = dict(rec.episode_attrs(ep))
-                meta["key"] = ep if len(files) == 1 else f"{f.stem}/{ep}"
-                out.append(Sequence(x, y, list(inputs), list(targets), units, meta, {"time": t - t[0]}))
+                key = ep if len(files) == 1 else f"{f.stem}/{ep}"
+                for k, (tk, (xk, yk)) in enumerate(parts):
+                    meta = dict(rec.episode_attrs(ep))
+                    meta["key"] = key if len(parts) == 1 else f"{key}{PART_SEP}{k + 1}"
+                    out.append(Sequence(xk, yk * scale, list(inputs), list(targets), dict(units), meta, {"time": tk - tk[0]}))
     return out
 
 
@@ -216,8 +218,8 @@ def split_runs(seqs: Seq[Sequence], *, train_fraction: float | None, test_glob: 
         raise ValueError(f"need at least 3 episodes (runs) to split train/valid/test by run; the recording has {n}")
     rng = np.random.default_rng(int(seed))
     if test_glob:
-        test = [s for s in seqs if fnmatch.fnmatch(s.key, test_glob)]
-        pool = [s for s in seqs if not fnmatch.fnmatch(s.key, test_glob)]
+        test = [s for s in seqs if key_matches(s.key, test_glob)]  # a part EP@k goes with its episode EP
+        pool = [s for s in seqs if not key_matches(s.key, test_glob)]
         if not test:
             raise ValueError(f"--test-episodes {test_glob!r} matches no episode (episodes: {', '.join(s.key for s in seqs[:4])}, ...)")
         frac = 1.0 if train_fraction is None else train_fraction

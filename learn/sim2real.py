@@ -513,11 +513,11 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
     """fit -> randomized generation -> pre-training -> fine-tuning -> report; each step's artefact is written
     whole (tmp + rename) and skipped when present with the same step config (state.json). Torch trains on one
     thread (`single_thread`), so the numbers do not depend on the machine's core count."""
-    import fnmatch
     import json
 
     from learn.checkpoint import load_checkpoint
     from scenes.randomize import Randomization
+    from sensors.data.resample import key_matches
     from sensors import chain_fit as C
 
     B = {**S2R_BUDGET, **(budget or {})}
@@ -549,8 +549,8 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
         tmp.replace(state_f)
 
     runs = C.load_real_runs(recording, input_channel=input_channel, target=target, rate_hz=rate)
-    train_runs = [r for r in runs if not fnmatch.fnmatch(r.key, test_glob)]
-    test_keys = [r.key for r in runs if fnmatch.fnmatch(r.key, test_glob)]
+    train_runs = [r for r in runs if not key_matches(r.key, test_glob)]
+    test_keys = [r.key for r in runs if key_matches(r.key, test_glob)]
     if not test_keys:
         raise ValueError(f"--test-episodes {test_glob!r} matches no episode of {recording}")
     if len(train_runs) < 2:

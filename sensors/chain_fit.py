@@ -234,7 +234,7 @@ def load_real_runs(recording: str | Path, *, input_channel: str = "sensor", targ
                    rate_hz: float | None = 20.0, episodes: str | Seq[str] | None = None) -> list[RealRun]:
     from sensors.data.column_import import to_newtons
     from sensors.data.recording import Recording, split_column
-    from sensors.data.resample import resample
+    from sensors.data.resample import MAX_GAP_S, MIN_PART_S, PART_SEP, resample_parts
 
     out = []
     with Recording(recording) as rec:
@@ -260,31 +260,36 @@ def load_real_runs(recording: str | Path, *, input_channel: str = "sensor", targ
             rest = f < 0.02 * max(top, 1e-9)
             noise = noise_of(s, ~rest)
             if rate_hz:
-                try:  # dropped samples (NaN, as `piezotwin capture` leaves them) are bridged up to MAX_GAP_S
-                    _, s2 = resample(t, s, rate_hz)
-                    _, f2 = resample(t, f, rate_hz)
+                try:  # dropped samples (NaN, as `piezotwin capture` leaves them) bridged up to MAX_GAP_S; an episode
+                    # is cut at a longer stretch without a sample and read as its parts EP@1, EP@2, ...
+                    parts = [(ep if len(pp) == 1 else f"{ep}{PART_SEP}{k + 1}", sf[0][:, 0], sf[1][:, 0])
+                             for pp in [resample_parts(t, [s, f], rate_hz)] for k, (_, sf) in enumerate(pp)]
                 except ValueError as exc:
                     raise ValueError(f"{recording}: episode {ep}: {exc}") from None
-                s, f, dt = s2[:, 0], f2[:, 0], 1.0 / rate_hz
+                if not parts:
+                    raise ValueError(f"{recording}: episode {ep}: no stretch of {MIN_PART_S:g} s with both the reading "
+                                     f"and the force between its gaps (> {MAX_GAP_S:g} s without a sample)")
+                dt = 1.0 / rate_hz
             else:
                 if not (np.isfinite(s).all() and np.isfinite(f).all()):
                     raise ValueError(f"{recording}: episode {ep}: has samples without a value (NaN); give a rate to "
                                      "resample it onto (they are bridged there)")
-                dt = float(np.median(np.diff(t)))
+                parts, dt = [(ep, s, f)], float(np.median(np.diff(t)))
             a = {**sattrs, **dict(rec.episode_attrs(ep))}
-            rises = _reading_rises(f, s)
-            if rises and not a.get("adc_full_scale"):
-                raise ValueError(f"{recording}: episode {ep}: the reading rises with force (the reference resistor on the "
-                                 "ADC side), so its rest level is not its full scale; give the ADC's full scale as the "
-                                 "sensor attribute adc_full_scale (the import spec's sensor_attrs)")
-            unloaded = s[f < 0.02 * max(f.max(), 1e-9)]
-            if not a.get("adc_full_scale") and not len(unloaded):
-                raise ValueError(f"{recording}: episode {ep}: no unloaded sample (force < 2 % of its peak), and the "
-                                 "board's full scale is read from its rest level: give adc_full_scale, or capture a "
-                                 "moment without load")
-            fs = float(a.get("adc_full_scale") or np.median(unloaded))
-            kept = {k: a[k] for k in ("reference_resistor_ohm", "adc_full_scale") if k in a}
-            out.append(RealRun(ep, f, s, dt, fs, noise, {**kept, "reading_rises_with_force": rises}))
+            for key, s, f in parts:
+                rises = _reading_rises(f, s)
+                if rises and not a.get("adc_full_scale"):
+                    raise ValueError(f"{recording}: episode {key}: the reading rises with force (the reference resistor "
+                                     "on the ADC side), so its rest level is not its full scale; give the ADC's full "
+                                     "scale as the sensor attribute adc_full_scale (the import spec's sensor_attrs)")
+                unloaded = s[f < 0.02 * max(f.max(), 1e-9)]
+                if not a.get("adc_full_scale") and not len(unloaded):
+                    raise ValueError(f"{recording}: episode {key}: no unloaded sample (force < 2 % of its peak), and "
+                                     "the board's full scale is read from its rest level: give adc_full_scale, or "
+                                     "capture a moment without load")
+                fs = float(a.get("adc_full_scale") or np.median(unloaded))
+                kept = {k: a[k] for k in ("reference_resistor_ohm", "adc_full_scale") if k in a}
+                out.append(RealRun(key, f, s, dt, fs, noise, {**kept, "reading_rises_with_force": rises}))
     if not out:
         raise ValueError(f"{recording}: no episode" + (f" matches {episodes!r}" if episodes else ""))
     return out

@@ -49,3 +49,24 @@ def test_a_gap_longer_than_the_bridge_is_refused_naming_it():
     assert MAX_GAP_S < 2.0
     with pytest.raises(ValueError, match="no sample at all"):
         resample(t, np.full_like(a, np.nan), 20.0)
+
+
+def test_an_episode_is_cut_at_a_long_stall_into_parts():
+    """resample_parts: a 3 s stretch where one of the two signals has no sample cuts the episode in two parts, each
+    resampled on its own; a part shorter than MIN_PART_S is left out; without such a stretch the one part is
+    resample's own output."""
+    from sensors.data.resample import MIN_PART_S, resample_parts
+
+    t = np.arange(0, 20, 0.01)
+    a, b = np.sin(t), np.cos(t)
+    a2 = a.copy()
+    a2[500:800] = np.nan  # 5-8 s
+    a2[1850:1900] = np.nan  # a 0.5 s drop near the end: bridged
+    parts = resample_parts(t, [a2, b], 20.0)
+    assert [(round(p[0][0], 2), round(p[0][-1], 2)) for p in parts] == [(0.0, 4.95), (8.0, 19.95)]
+    assert all(np.isfinite(x).all() for p in parts for x in p[1])
+    short = a.copy()
+    short[100:400] = np.nan  # the part before the stall is 1 s long: left out
+    assert [round(p[0][0], 2) for p in resample_parts(t, [short, b], 20.0)] == [4.0] and MIN_PART_S > 1.0
+    whole = resample_parts(t, [a, b], 20.0)
+    assert len(whole) == 1 and np.array_equal(whole[0][1][0], resample(t, a, 20.0)[1])

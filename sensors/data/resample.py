@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-__all__ = ["MAX_GAP_S", "resample"]
+__all__ = ["MAX_GAP_S", "MIN_PART_S", "PART_SEP", "key_matches", "resample", "resample_parts"]
 
 MAX_GAP_S = 1.0  # estimate: the longest stretch without a sample that is bridged (a serial stall, a few dropped lines);
 # `piezotwin capture` leaves NaN where a stream had no sample on the common clock
@@ -56,3 +56,39 @@ def resample(t: np.ndarray, a: np.ndarray, rate_hz: float, max_gap_s: float = MA
         ok = np.isfinite(a[:, j])
         cols.append(np.interp(tn, t[ok], a[ok, j]))
     return tn, np.stack(cols, axis=1)
+
+
+MIN_PART_S = 2.0  # estimate: a stretch between two long gaps shorter than this holds no whole press; it is left out
+PART_SEP = "@"  # an episode cut at its long gaps is read as parts EP@1, EP@2, ... (resample_parts)
+
+
+def resample_parts(t: np.ndarray, arrays: list[np.ndarray], rate_hz: float, max_gap_s: float = MAX_GAP_S,
+                   min_part_s: float = MIN_PART_S) -> list[tuple[np.ndarray, list[np.ndarray]]]:
+    """The signals ``arrays`` (each [T, ...] on the times t) cut at every stretch of more than max_gap_s where any of
+    them has no sample (a stalled stream), each part resampled (resample) on its own: [(t', [a'...]), ...].
+    Parts shorter than min_part_s are left out; without such a stretch: one part, as resample gives it."""
+    t = np.asarray(t, np.float64)
+    ok = np.ones(len(t), bool)
+    for a in arrays:
+        ok &= np.isfinite(np.asarray(a, np.float64).reshape(len(t), -1)).all(axis=1)
+    if not ok.any():
+        raise ValueError("no sample at all (every value is NaN)")
+    idx = np.flatnonzero(ok)
+    cuts = np.flatnonzero(np.diff(t[idx]) > max_gap_s)  # a long stretch between two samples that have every value
+    bounds = [(idx[0], idx[-1])] if not len(cuts) else \
+        [(idx[0], idx[cuts[0]])] + [(idx[c + 1], idx[d]) for c, d in zip(cuts[:-1], cuts[1:])] + [(idx[cuts[-1] + 1], idx[-1])]
+    parts = []
+    for a0, b0 in bounds:
+        if t[b0] - t[a0] < min_part_s:
+            continue
+        sl = slice(a0, b0 + 1)
+        outs = [resample(t[sl], np.asarray(a)[sl], rate_hz, max_gap_s) for a in arrays]
+        parts.append((outs[0][0], [o[1] for o in outs]))
+    return parts
+
+
+def key_matches(key: str, glob: str) -> bool:
+    """A run key against a user's episode glob: the key itself, or for a part EP@k (resample_parts) its episode EP."""
+    import fnmatch
+
+    return fnmatch.fnmatch(key, glob) or (PART_SEP in key and fnmatch.fnmatch(key.rsplit(PART_SEP, 1)[0], glob))
