@@ -186,7 +186,29 @@ def import_with_spec(spec: str, data: Path | None, second: Path | None, out: Pat
                                     f"{max(float(x[1]) for x in g):.1f} s) left empty" for k, g in a.items()
                                     if k.endswith("_gaps_s") and len(g)),
                           highlight=False, soft_wrap=True)
+        rising = _rising_episodes(rec, sp.input, sp.target)
+        if rising and not dict(rec.sensor_attrs).get("adc_full_scale"):
+            console.print(f"note: the reading rises with force in {len(rising)} episode(s) ({', '.join(rising[:3])}"
+                          f"{', ...' if len(rising) > 3 else ''}): its rest level is not its full scale, so `fit` and "
+                          "`sim2real` need the ADC's full scale: add adc_full_scale to the spec's sensor_attrs",
+                          highlight=False, soft_wrap=True)
     _print_summary(p)
+
+
+def _rising_episodes(rec, input_channel: str, target: str) -> list[str]:
+    """Episodes whose reading is higher under load than at rest (chain_fit's "low" divider)."""
+    import numpy as np
+
+    from sensors.chain_fit import reading_rises
+
+    out = []
+    for ep in rec.episode_ids:
+        f = np.asarray(rec.read(ep, target), np.float64).reshape(-1)
+        y = np.asarray(rec.read(ep, input_channel), np.float64).reshape(len(f), -1)[:, 0]
+        ok = np.isfinite(f) & np.isfinite(y)
+        if ok.sum() > 10 and reading_rises(f[ok], y[ok]):
+            out.append(ep)
+    return out
 
 
 @app.command()

@@ -277,7 +277,7 @@ def load_real_runs(recording: str | Path, *, input_channel: str = "sensor", targ
                 parts, dt = [(ep, s, f)], float(np.median(np.diff(t)))
             a = {**sattrs, **dict(rec.episode_attrs(ep))}
             for key, s, f in parts:
-                rises = _reading_rises(f, s)
+                rises = reading_rises(f, s)
                 if rises and not a.get("adc_full_scale"):
                     raise ValueError(f"{recording}: episode {key}: the reading rises with force (the reference resistor "
                                      "on the ADC side), so its rest level is not its full scale; give the ADC's full "
@@ -295,7 +295,7 @@ def load_real_runs(recording: str | Path, *, input_channel: str = "sensor", targ
     return out
 
 
-def _reading_rises(force: np.ndarray, reading: np.ndarray) -> bool:
+def reading_rises(force: np.ndarray, reading: np.ndarray) -> bool:
     """True where the run's reading is higher under load (force >= 50 % of its largest) than at rest (< 2 %)."""
     top = max(float(force.max()), 1e-9)
     rest, loaded = reading[force < 0.02 * top], reading[force >= 0.5 * top]
@@ -305,7 +305,7 @@ def _reading_rises(force: np.ndarray, reading: np.ndarray) -> bool:
 def reading_direction(runs: Seq[RealRun]) -> str:
     """The divider a capture was read through (module doc, readout): "high" where the reading falls as force rises,
     "low" where it rises; the majority of the runs (load_real_runs measures each: its loaded vs rest median)."""
-    rises = [bool(r.attrs.get("reading_rises_with_force", _reading_rises(r.force, r.reading))) for r in runs]
+    rises = [bool(r.attrs.get("reading_rises_with_force", reading_rises(r.force, r.reading))) for r in runs]
     return "low" if 2 * sum(rises) > len(rises) else "high"
 
 

@@ -266,6 +266,23 @@ def test_a_time_column_in_ms_and_grams_of_force_read_as_a_user_writes_them(tmp_p
         assert rec.episode_attrs(ep)["force_units_logged"] == "g"
 
 
+def test_import_notes_a_rising_reading_without_its_full_scale(tmp_path):
+    """A reading that rises with force (the FSR above its pull-down) imported without adc_full_scale: the import
+    says at once that `fit` and `sim2real` will need it (they refuse it later); with it, no note."""
+    import yaml
+
+    d = tmp_path / "d"
+    d.mkdir()
+    rows = [(5 * k, 500.0 * (k % 40 > 20), 10 + 800 * (k % 40 > 20)) for k in range(400)]
+    (d / "r.csv").write_text("t,g,adc\n" + "".join(f"{a},{b},{c}\n" for a, b, c in rows))
+    for attrs, noted in (({}, True), ({"adc_full_scale": 1023}, False)):
+        f = tmp_path / "spec.yaml"
+        f.write_text(yaml.safe_dump({**_ms_grams_spec(), "sensor_attrs": attrs}))
+        res = CliRunner().invoke(app, ["import", "--spec", str(f), str(d), "-o", str(tmp_path / f"o{noted}.h5")])
+        assert res.exit_code == 0, res.output
+        assert ("the reading rises with force in 1 episode(s) (r)" in res.output) == noted, res.output
+
+
 @pytest.mark.parametrize("spec,needle", [
     (_ms_grams_spec(time_units="s"), "time column 't': units 'ms' and time_units 's' differ"),
     (_ms_grams_spec(units="min"), "time column 't': units 'min' (allowed: s, ms, us, ns)"),
