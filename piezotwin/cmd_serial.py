@@ -102,9 +102,25 @@ def capture(
                       f"crc/bad {st.get('crc_errors', 0)}, garbage bytes {st.get('garbage_bytes', 0)}", highlight=False)
     console.print(f"session {res.session}: {res.seconds:.1f} s, stop: {res.reason}; wrote {res.out} (raw log {res.rawlog})",
                   highlight=False)
+    _note_gaps(res.out, f"session-{res.session}")
     if res.reason.startswith("port vanished"):
         err.print(f"[bold red]error:[/] {res.reason.removeprefix('port vanished: ')}", highlight=False, soft_wrap=True)
         raise typer.Exit(1)
+
+
+def _note_gaps(path, episode: str) -> None:
+    """One line per stream that stalled for more than 1 s (left empty on the common clock, not bridged)."""
+    from sensors.data.recording import Recording, RecordingError
+
+    try:
+        with Recording(path) as rec:
+            a = rec.episode_attrs(episode)
+    except (RecordingError, KeyError, OSError):
+        return
+    for k, g in a.items():
+        if k.endswith("_gaps_s") and len(g):
+            console.print(f"note: {k[:-7]}: {len(g)} stretch(es) without a sample (> 1 s, longest "
+                          f"{max(float(x[1]) for x in g):.1f} s) left empty on the common clock", highlight=False)
 
 
 @app.command("import")

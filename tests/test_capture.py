@@ -409,3 +409,22 @@ def test_a_capture_of_a_board_and_a_load_cell_fits_the_chain(tmp_path):
     assert len(runs) == 1 and runs[0].force.max() > 5.0
     fit = CF.fit_chain(runs * 2, CF.ChainParams(r_ref_ohm=1e4, full_scale=1.0, divider="high"), n_boot=0)
     assert abs(fit.params.exponent - 1.2) < 0.25, fit.params.exponent
+
+
+def test_a_stream_that_stalls_is_left_empty_and_noted(tmp_path):
+    """A second stream that stops sending for 1.5 s (a stall fault) is left empty on the first stream's clock over
+    that stretch, not bridged by a line, and the stretch is recorded (`<name>_gaps_s`)."""
+    board = Served(ramp_source(4000, rate=400.0), "socket://127.0.0.1:0", "frames", duration_s=4)
+    cell = Served(ramp_source(4000, rate=250.0), "socket://127.0.0.1:0", "text", duration_s=4,
+                  faults=Faults(stall_s=1.5, stall_every_s=0.8))
+    capture([StreamSpec(board.url, "frames", "board"), StreamSpec(cell.url, "text", "cell")], tmp_path / "s.h5",
+            duration_s=2.6)
+    board.join(), cell.join()
+    with Recording(tmp_path / "s.h5") as rec:
+        ep = rec.episode_ids[0]
+        gaps = np.asarray(rec.episode_attrs(ep)["cell_gaps_s"])
+        c, t = rec.read(ep, "cell")[:, 0], rec.read(ep, "time")
+    assert len(gaps) >= 1 and 1.2 < gaps[:, 1].max() < 2.5
+    g0, gl = gaps[np.argmax(gaps[:, 1])]
+    inside = (t > g0 + 0.05) & (t < g0 + gl - 0.05)
+    assert inside.sum() > 100 and np.isnan(c[inside]).all()

@@ -305,6 +305,8 @@ def build_recording(log: str | os.PathLike, out: str | os.PathLike) -> Path:
                     f"{sd.spec['protocol']} stream from {sd.spec['url']}, linearly interpolated onto stream 0's times",
                 )
                 ax = f"{name}_sample"
+                if gaps := gaps_of((hn - t0) / 1e9, MAX_GAP_S):  # left empty on stream 0's clock, not bridged
+                    attrs[f"{name}_gaps_s"] = gaps
                 ch[f"{name}_native"] = Channel(vals, units, (ax, "channel"), "values as received")
                 ch[f"{name}_host_time_ns"] = Channel(hn, "ns", (ax,), "host CLOCK_MONOTONIC at arrival")
                 ch[f"{name}_seq"] = Channel(np.asarray(sd.seq, np.int64), "1", (ax,), "sequence number (-1: none)")
