@@ -564,7 +564,7 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
         fit_f = out / "fit.json"
         if "fit" not in state["done"] or not fit_f.is_file():
             task = bar.add_task("1/4 fit (bootstrap over presses)", total=B["n_boot"] + 1)
-            p0 = _chain_prior(family, runs)
+            p0 = _chain_prior(family, train_runs)  # the simulated sensor reads as the training runs do
             # placement-level prior where presses land at varying places (the Lupasic board: no ADC full scale)
             fit = C.fit_chain(train_runs, p0, n_boot=int(B["n_boot"]), seed=seed,
                               progress=lambda k, n: bar.update(task, completed=k), level_prior=not any(r.attrs.get("adc_full_scale") for r in runs),

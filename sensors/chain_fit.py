@@ -295,6 +295,13 @@ def load_real_runs(recording: str | Path, *, input_channel: str = "sensor", targ
     return out
 
 
+def run_params(p: ChainParams, run: RealRun) -> ChainParams:
+    """The chain ``p`` as the run ``run`` was read: its own reference resistor where it records one (a taxel read
+    through another divider: the prediction needs only the new value)."""
+    r_ref = run.attrs.get("reference_resistor_ohm")
+    return p if not r_ref or float(r_ref) == p.r_ref_ohm else replace(p, r_ref_ohm=float(r_ref))
+
+
 def reading_rises(force: np.ndarray, reading: np.ndarray) -> bool:
     """True where the run's reading is higher under load (force >= 50 % of its largest) than at rest (< 2 %)."""
     top = max(float(force.max()), 1e-9)
@@ -377,7 +384,7 @@ class _Data:
         self.missed: list[bool] = []
         for i, r in enumerate(runs):
             thr = max(min_force_frac * r.force.max(), min_force_n)
-            R = resistance_from_reading(r.reading, p, r.fs)
+            R = resistance_from_reading(r.reading, run_params(p, r), r.fs)
             for sl in presses_of(r.force, thr):
                 # the loading ramp above 30 % of the peak and the plateau, up to its last sample >= 90 % of the
                 # peak; the release is left out: there the tip leaves the film within one or two samples and
@@ -484,7 +491,7 @@ def leak_from_unloaded(runs: Seq[RealRun], p: ChainParams) -> float:
     vals = []
     for r in runs:
         rest = r.force < 0.02 * max(r.force.max(), 1e-9)
-        R = resistance_from_reading(r.reading[rest], p, r.fs)
+        R = resistance_from_reading(r.reading[rest], run_params(p, r), r.fs)
         R = R[np.isfinite(R)]
         if len(R) > 10 and "adc_full_scale" in r.attrs:
             vals.append(np.median(R))
@@ -685,7 +692,7 @@ def within_press_error(p: ChainParams, data: _Data, idx: np.ndarray) -> dict[str
     for j, l in zip(idx, lev):
         pr = data.presses[j]
         r = data.runs[pr.run]
-        y_sim = simulate_reading(r.force, r.dt, replace(p, r0_ohm=1.0), level=l, fs=r.fs)[pr.sl]
+        y_sim = simulate_reading(r.force, r.dt, replace(run_params(p, r), r0_ohm=1.0), level=l, fs=r.fs)[pr.sl]
         y = r.reading[pr.sl]
         ok = (y > 0) & (y_sim > 0)
         e = np.log(y_sim[ok]) - np.log(y[ok])
@@ -730,7 +737,7 @@ def plateau_drops(p: ChainParams, data: _Data, idx, lev) -> dict[str, float]:
         if len(hold) < 4:
             continue
         a, b = int(pr.sl[hold[0]]), int(pr.sl[hold[-1]])
-        ys = simulate_reading(r.force[: b + 1], r.dt, replace(p, r0_ohm=1.0), level=l, fs=r.fs)
+        ys = simulate_reading(r.force[: b + 1], r.dt, replace(run_params(p, r), r0_ohm=1.0), level=l, fs=r.fs)
         real.append(r.reading[b] / r.reading[a])
         sim.append(ys[b] / ys[a])
     if not real:
@@ -824,14 +831,14 @@ def press_spread(real: Seq[tuple[np.ndarray, np.ndarray]], sim: Seq[tuple[np.nda
 SLOPE_T0_S = 0.05  # estimate: one sample at 20 Hz, the earliest time a hold is resolved (bench_s2r_identify)
 
 
-def _press_slopes(force_runs: Seq[tuple[np.ndarray, np.ndarray, float, float]], p: ChainParams) -> tuple[np.ndarray, np.ndarray]:
+def _press_slopes(force_runs: Seq[tuple[np.ndarray, np.ndarray, float, float, float]], p: ChainParams) -> tuple[np.ndarray, np.ndarray]:
     """Per press (runs of >= 4 usable presses): the local slope d ln R / d ln F (ln R on [1, ln F, ln(1 + t / T0)]
     over the ramp above 30 % of the peak and the hold; R through the inverse divider) minus its run mean, and the
     press level (median ln R on the hold, >= 90 % of the peak) minus its run mean."""
     ds, dl = [], []
-    for force, reading, dt, fs in force_runs:
+    for force, reading, dt, fs, r_ref in force_runs:  # r_ref: the run's reference resistor (run_params)
         with np.errstate(divide="ignore", invalid="ignore"):
-            lnr = np.log(resistance_from_reading(reading, p, fs))
+            lnr = np.log(resistance_from_reading(reading, replace(p, r_ref_ohm=r_ref), fs))
         s_run, l_run = [], []
         for sl in presses_of(force, max(0.1 * float(force.max()), 0.05)):
             seg = np.arange(sl.start, sl.stop)
@@ -862,12 +869,13 @@ def press_slope_spread(fit: ChainFit, runs: Seq[RealRun], seed: int = 0) -> dict
     same forces at one level, seeded) is removed in quadrature. Returns slope_level_coef (per unit ln level),
     slope_press_sd (the rest, independent of the level) and the measured parts."""
     p = fit.params
-    ds, dl = _press_slopes([(r.force, r.reading, r.dt, r.fs) for r in runs], p)
+    ds, dl = _press_slopes([(r.force, r.reading, r.dt, r.fs, run_params(p, r).r_ref_ohm) for r in runs], p)
     if len(ds) < 8:
         return {"slope_level_coef": 0.0, "slope_press_sd": 0.0, "n_presses": len(ds)}
     rng = np.random.default_rng([int(seed), 0x51])
     q = replace(p, miss_prob=0.0)
-    sim = [(r.force, simulate_reading(r.force, r.dt, q, fs=r.fs, rng=rng), r.dt, r.fs) for r in runs]
+    sim = [(r.force, simulate_reading(r.force, r.dt, run_params(q, r), fs=r.fs, rng=rng), r.dt, r.fs,
+            run_params(q, r).r_ref_ohm) for r in runs]
     cs, _ = _press_slopes(sim, p)
     var_dl = float(np.var(dl, ddof=1))
     corr = float(np.corrcoef(ds, dl)[0, 1]) if var_dl > 0 else 0.0

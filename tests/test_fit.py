@@ -666,3 +666,23 @@ def test_one_column_of_a_board_stream_is_named_name_k(tmp_path):
     assert s.x.shape == (500, 1) and s.units["velostat[0]"] == "ohm"
     with pytest.raises(ValueError, match=r"channel 'velostat' has 3 column\(s\); 'velostat\[3\]' asks for column 3"):
         CF.load_real_runs(tmp_path / "c.h5", input_channel="velostat[3]", target="cell")
+
+
+def test_a_run_read_through_another_reference_resistor_is_evaluated_through_it():
+    """The fit and its held-out evaluation read each run through its own reference resistor (the run's
+    reference_resistor_ohm, as the TAMS file names give it): a taxel fitted at 10 kOhm, held out at 2.2 kOhm, has a
+    within-press error and a level as at 10 kOhm; read through the fit's 10 kOhm instead, its level is off by more
+    than a press-to-press spread."""
+    true = CF.ChainParams(exponent=1.5, r0_ohm=2000.0, creep_amplitude=0.3, creep_force_n=1.0, tau_min_s=0.2, tau_max_s=5.0,
+                          n_creep=3, r_series_ohm=200.0, r_leak_ohm=4e5, r_ref_ohm=1e4, full_scale=5115.0, level_log_sd=0.05)
+    runs = _synthetic_runs(true, n_runs=3)
+    held = _synthetic_runs(_replace(true, r_ref_ohm=2.2e3), n_runs=1, seed=9)
+    for r in runs:
+        r.attrs.update(adc_full_scale=5115.0, reference_resistor_ohm=1e4)
+    held[0].attrs.update(adc_full_scale=5115.0, reference_resistor_ohm=2.2e3)
+    fit = CF.fit_chain(runs, CF.ChainParams(r_ref_ohm=1e4, full_scale=5115.0, n_creep=3, r_series_ohm=50.0), n_boot=0)
+    ev = CF.evaluate(fit, held)
+    assert ev["rms_log_reading_within_press"] < 0.05 and abs(ev["level_mean_log_vs_fit"]) < 0.15, ev
+    assert CF.run_params(fit.params, held[0]).r_ref_ohm == 2.2e3 and CF.run_params(fit.params, runs[0]) is fit.params
+    held[0].attrs.pop("reference_resistor_ohm")  # read as if through the fit's own 10 kOhm
+    assert abs(CF.evaluate(fit, held)["level_mean_log_vs_fit"]) > 0.3
