@@ -319,6 +319,29 @@ def generate_step(p, rand, gen_f: Path, B: dict, seed: int, progress: Callable[[
                    duration_s=float(B["episode_s"]), rate_hz=float(B["fit_rate_hz"]), progress=progress)
 
 
+def reread_through(seq: Sequence, p) -> Sequence:
+    """A real run read through another reference resistor than the chain's (its ``reference_resistor_ohm``), re-read
+    as through the chain's: R through the run's own divider, then the chain's divider (sensors.chain_fit: the
+    resistor is told, nothing is fitted); its readout floor and ceiling stay where the run reached them. Other runs
+    come back as they are."""
+    from dataclasses import replace as _r
+
+    from sensors.chain_fit import reading_from_resistance, resistance_from_reading
+
+    r_ref = seq.meta.get("reference_resistor_ohm")
+    if not r_ref or float(r_ref) == p.r_ref_ohm:
+        return seq
+    y = seq.x[:, 0]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = resistance_from_reading(y, _r(p, r_ref_ohm=float(r_ref)))
+        y2 = np.where(np.isfinite(r), reading_from_resistance(r, p), np.where(y - p.offset >= p.full_scale / 2,
+                                                                               p.offset + p.full_scale, p.offset))
+    x = seq.x.copy()
+    x[:, 0] = y2
+    meta = {**seq.meta, "reread_from_reference_resistor_ohm": float(r_ref), "reference_resistor_ohm": p.r_ref_ohm}
+    return Sequence(x, seq.y, seq.inputs, seq.targets, seq.units, meta, seq.extra)
+
+
 def input_transform(p) -> str:
     """The model's input map for the chain ``p``: x = ln(reading) where the reading falls with force (a "high"
     divider: reading ~ R / (R + r_ref)); x = ln(FS - reading) where it rises toward its full scale (a "low" divider:
@@ -713,7 +736,8 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
     """Step 4: zero-shot, two-point, and the learning curve of fine-tuned / scratch / static curve. ``scratch``
     False leaves the scratch nets out (their rows None: a bench comparing fine-tuning methods, which scratch
     does not depend on)."""
-    seqs = FT.apply_map(FT.load_recording(recording, [input_channel], [target], rate_hz=rate), input_transform(p))
+    raw = [reread_through(s, p) for s in FT.load_recording(recording, [input_channel], [target], rate_hz=rate)]
+    seqs = FT.apply_map(raw, input_transform(p))
     # every run outside the test glob is a training run (added along the learning curve in curve_order); early
     # stopping uses the last presses of the budget's own runs (FT.split_tail), never a run of another series/cover
     sp = FT.split_runs(seqs, train_fraction=None, test_glob=test_glob, seed=seed, n_valid=0)

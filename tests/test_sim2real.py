@@ -271,3 +271,23 @@ def test_two_point_needs_a_press_and_says_so():
     seq = Sequence(np.zeros((100, 1)), np.full((100, 1), 0.01), ["sensor"], ["force"], {}, {"key": "idle"}, {})
     with pytest.raises(ValueError, match="test run idle: no press above 0.05 N"):
         two_point_calibration(p, seq, RATE)
+
+
+def test_a_run_through_another_resistor_is_reread_through_the_chains():
+    """sim2real's step 4 re-reads a real run recorded through another reference resistor (its episode attribute)
+    as through the chain's own (reread_through): the reading it gives equals the same presses read through the
+    chain's resistor; a run through the chain's resistor, or without the attribute, comes back as it is."""
+    from learn.sim2real import reread_through
+
+    p = CF.ChainParams(exponent=1.5, r0_ohm=2000.0, creep_amplitude=0.3, creep_force_n=1.0, tau_min_s=0.2, tau_max_s=5.0,
+                       n_creep=3, r_series_ohm=200.0, r_ref_ohm=1e4, full_scale=5115.0)
+    f, y_10k = _press_run(p, fs=5115.0, level=0.2)
+    _, y_2k = _press_run(replace(p, r_ref_ohm=2.2e3), fs=5115.0, level=0.2)
+    seq = Sequence(y_2k[:, None], f[:, None], ["sensor"], ["force"], {}, {"key": "b", "reference_resistor_ohm": 2.2e3}, {})
+    out = reread_through(seq, p)
+    on = f > 0.5
+    np.testing.assert_allclose(out.x[on, 0], y_10k[on], rtol=1e-9)
+    assert np.max(np.abs(np.log(y_2k[on] / y_10k[on]))) > 0.5  # the two resistors read far apart
+    assert out.meta["reread_from_reference_resistor_ohm"] == 2.2e3
+    same = Sequence(y_10k[:, None], f[:, None], ["sensor"], ["force"], {}, {"key": "a", "reference_resistor_ohm": 1e4}, {})
+    assert reread_through(same, p) is same
