@@ -184,7 +184,8 @@ def import_with_spec(spec: str, data: Path | None, second: Path | None, out: Pat
                           f"{a.get(tgt + '_max', float('nan')):.3g}, {len(a.get('events') or [])} events"
                           + "".join(f"; {k[:-7]}: {len(g)} stretch(es) without a sample (> 1 s, longest "
                                     f"{max(float(x[1]) for x in g):.1f} s) left empty" for k, g in a.items()
-                                    if k.endswith("_gaps_s") and len(g)),
+                                    if k.endswith("_gaps_s") and len(g))
+                          + (f"; not in the file name: {', '.join(a['name_attrs_missing'])}" if a.get("name_attrs_missing") else ""),
                           highlight=False, soft_wrap=True)
         rising = _rising_episodes(rec, sp.input, sp.target)
         if rising and not dict(rec.sensor_attrs).get("adc_full_scale"):

@@ -324,3 +324,26 @@ def test_a_stalled_stream_is_left_empty_not_bridged_by_a_line(tmp_path):
     assert [[round(a, 2), round(b, 2)] for a, b in gaps_of(t, 1.0)] == [[1.99, 3.01]]
     inside = grid <= t[-1]
     np.testing.assert_allclose(interp_onto(grid, t, y)[inside, 0], np.interp(grid[inside], t, y))  # no max_gap_s: as before
+
+
+def test_a_resistor_in_a_file_name_is_read_in_any_usual_writing(tmp_path):
+    """name_attrs of kind "resistance" (the TAMS layout's reference resistor): 10k, 4.7k, 4k7 (IEC 60062 RKM), 470R,
+    1M5 are read in ohm; a file whose name does not give it is imported without the attribute, and the summary
+    line says so."""
+    from sensors.data.column_import import parse_resistance
+
+    assert [parse_resistance(t) for t in ("10k", "4.7k", "4k7", "2K2", "470R", "1M5", "x7")] == \
+        [1e4, 4.7e3, 4.7e3, 2.2e3, 470.0, 1.5e6, None]
+    d = tmp_path / "cal"
+    d.mkdir()
+    (d / "calibration2.txt").write_text("no weight: 1660130\n20g weight: 1667333\ntip: 6mm\nresistance: 10kOhm\n")
+    body = "".join(f"{1660130 + 100 * (k % 30)} {5000 - 100 * (k % 30)}\n" for k in range(300))
+    for name in ("4k7-nosil-cylindertip.1614926403.33.txt", "nores-nosil-cylindertip.1614926404.10.txt"):
+        (d / name).write_text(body)
+    res = CliRunner().invoke(app, ["import", "--spec", "tams", str(d), "-o", str(tmp_path / "t.h5")])
+    assert res.exit_code == 0, res.output
+    with Recording(tmp_path / "t.h5") as rec:
+        a = {ep: rec.episode_attrs(ep) for ep in rec.episode_ids}
+    got = {ep: v.get("reference_resistor_ohm") for ep, v in a.items()}
+    assert sorted(got.values(), key=str) == [4700.0, None], got
+    assert "not in the file name: reference_resistor_ohm" in res.output

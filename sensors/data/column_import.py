@@ -100,8 +100,22 @@ class Column(_M):
 
 
 class NameAttr(_M):
-    regex: str  # one group, a number, searched in the file name
+    regex: str  # one group, a number (or a resistance), searched in the file name
     scale: float = 1.0
+    kind: Literal["number", "resistance"] = "number"  # resistance: "10k", "4.7k", "4k7", "470R", "1M" (IEC 60062 RKM)
+
+
+_RKM = re.compile(r"^(\d+(?:\.\d+)?)([RrKkMm]?)(\d*)$")
+
+
+def parse_resistance(text: str) -> float | None:
+    """Ohms from a resistor's value as written in a file name: 10k, 4.7k, 4k7, 2K2, 470R, 470, 1M (the RKM code of
+    IEC 60062: the letter is the decimal point and the multiplier); None where it is none of these."""
+    m = _RKM.match(text.strip())
+    if not m or (m[3] and ("." in m[1] or not m[2])):
+        return None
+    mult = {"": 1.0, "r": 1.0, "k": 1e3, "m": 1e6}[m[2].lower()]
+    return float(f"{m[1]}.{m[3]}" if m[3] else m[1]) * mult
 
 
 class Stream(_M):
@@ -202,7 +216,7 @@ LAYOUTS: dict[str, dict[str, Any]] = {
         "streams": [
             {"name": "log", "glob": "*-*-*.txt", "key": r"(?P<key>[^/]+)\.\d+\.\d+\.txt$",
              "sample_period_range_s": [0.010, 0.020],
-             "name_attrs": {"reference_resistor_ohm": {"regex": r"^(\d+(?:\.\d+)?)k-", "scale": 1000.0}},
+             "name_attrs": {"reference_resistor_ohm": {"regex": r"^(\d+(?:\.\d+)?[RrKkMm]?\d*)-", "kind": "resistance"}},
              "columns": [{"index": 0, "name": "force", "units": "N", "calibration": {"file": "calibration2.txt"}},
                          {"index": 1, "name": "sensor", "units": "counts"}]},
         ],
@@ -447,8 +461,11 @@ def import_columns(root: str | os.PathLike, spec: ImportSpec | str | dict, out: 
                 attrs["time_uncertain"] = True
             for an, na in st.name_attrs.items():
                 m = re.search(na.regex, Path(p).name)
-                if m:
-                    attrs[an] = float(m.group(1)) * na.scale
+                v = None if not m else parse_resistance(m.group(1)) if na.kind == "resistance" else float(m.group(1))
+                if v is not None:
+                    attrs[an] = v * na.scale
+                else:  # named in the import's summary line
+                    attrs.setdefault("name_attrs_missing", []).append(an)
             if len(streams) == 2:
                 ch[f"{st.name}_time"] = Channel(t - t0, "s", (f"{st.name}_sample",), f"time of each {st.name} sample as logged")
             for c in st.columns:
