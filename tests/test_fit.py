@@ -605,6 +605,9 @@ def test_dropped_samples_are_bridged_and_a_long_gap_cuts_the_episode(tmp_path):
     assert [s.key for s in load_recording(tmp_path / "gap.h5", ["sensor"], ["force"], rate_hz=20.0)] == [r.key for r in runs]
     assert key_matches("run0@2", "run0") and key_matches("run0@2", "run0@*") and not key_matches("run10@1", "run1")
     assert CF.fit_chain(runs[:6], _chain_prior("divider", runs), n_boot=0).error["rms_log_reading_within_press"] < 0.02
+    from sensors.velostat.fit import load_runs  # `piezotwin fit velostat` reads the same parts
+
+    assert [r.key for r in load_runs(tmp_path / "gap.h5")] == [r.key for r in runs]
 
 
 def test_a_board_run_without_an_unloaded_moment_is_refused(tmp_path):

@@ -138,7 +138,7 @@ def load_runs(recording: str | Path, *, input_channel: str = "sensor", target: s
               episodes: str | None = None, min_force_n: float = 0.5) -> list[Run]:
     from sensors.data.column_import import to_newtons
     from sensors.data.recording import Recording, split_column
-    from sensors.data.resample import resample
+    from sensors.data.resample import PART_SEP, resample_parts
 
     runs = []
     with Recording(recording) as rec:
@@ -155,12 +155,12 @@ def load_runs(recording: str | Path, *, input_channel: str = "sensor", target: s
             if len(s) != len(f):
                 raise ValueError(f"{recording}: episode {ep}: '{input_channel}' is not one value per sample")
             sig = noise_estimate(s, f > min_force_n)
-            try:  # dropped samples (NaN) are bridged up to sensors.data.resample.MAX_GAP_S
-                _, sr = resample(t, s, rate_hz)
-                _, fr = resample(t, f, rate_hz)
+            try:  # dropped samples (NaN) bridged up to MAX_GAP_S; cut at a longer stall into parts EP@k
+                parts = resample_parts(t, [s, f], rate_hz)
             except ValueError as exc:
                 raise ValueError(f"{recording}: episode {ep}: {exc}") from None
-            runs.append(Run(ep, fr[:, 0], sr[:, 0], 1.0 / rate_hz, sig))
+            for k, (_, (sr, fr)) in enumerate(parts):
+                runs.append(Run(ep if len(parts) == 1 else f"{ep}{PART_SEP}{k + 1}", fr[:, 0], sr[:, 0], 1.0 / rate_hz, sig))
     if not runs:
         raise ValueError(f"{recording}: no episode" + (f" matches '{episodes}'" if episodes else ""))
     return runs
