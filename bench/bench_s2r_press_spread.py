@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import fnmatch
 import json
+import os
+import platform
 import tempfile
 from pathlib import Path
 
@@ -57,6 +59,7 @@ def main() -> None:
                   f"{sp.get('real_outlier_share', float('nan')):.3f} / {sp.get('sim_outlier_share', float('nan')):.3f} "
                   f"({sp.get('n_real')} / {sp.get('n_sim')} presses)", flush=True)
         res["splits"].append(row)
+    res["machine"] = {"platform": platform.platform(), "cpus": os.cpu_count(), "note": "the 2-core development machine"}
     a.out.write_text(json.dumps(res, indent=1))
     print(f"wrote {a.out}")
 

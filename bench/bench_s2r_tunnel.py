@@ -37,6 +37,8 @@ from __future__ import annotations
 import argparse
 import fnmatch
 import json
+import os
+import platform
 import time
 from pathlib import Path
 
@@ -117,6 +119,7 @@ def main() -> None:
     for family in ("divider", "velostat"):
         res["decision"][family] = decide([r for r in res["splits"] if r["family"] == family])
         print(family, res["decision"][family])
+    res["machine"] = {"platform": platform.platform(), "cpus": os.cpu_count(), "note": "the 2-core development machine"}
     a.out.write_text(json.dumps(res, indent=1))
     print(f"wrote {a.out}")
 

@@ -262,8 +262,9 @@ def load_real_runs(recording: str | Path, *, input_channel: str = "sensor", targ
             if rate_hz:
                 try:  # dropped samples (NaN, as `piezotwin capture` leaves them) bridged up to MAX_GAP_S; an episode
                     # is cut at a longer stretch without a sample and read as its parts EP@1, EP@2, ...
-                    parts = [(ep if len(pp) == 1 else f"{ep}{PART_SEP}{k + 1}", sf[0][:, 0], sf[1][:, 0])
-                             for pp in [resample_parts(t, [s, f], rate_hz)] for k, (_, sf) in enumerate(pp)]
+                    pp = resample_parts(t, [s, f], rate_hz)
+                    parts = [(ep if len(pp) == 1 else f"{ep}{PART_SEP}{k + 1}", s2[:, 0], f2[:, 0])
+                             for k, (_, (s2, f2)) in enumerate(pp)]
                 except ValueError as exc:
                     raise ValueError(f"{recording}: episode {ep}: {exc}") from None
                 if not parts:
