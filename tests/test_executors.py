@@ -2,6 +2,7 @@
 a killed worker's shard is retried, exhausted retries give a clear error and a rerun resumes."""
 
 import importlib.util
+import os
 from pathlib import Path
 
 import numpy as np
@@ -496,12 +497,15 @@ def test_feed_schedules_mixed_lengths_short_first_and_writes_the_serial_files(tm
     monkeypatch.setattr(feed, "LENGTH_SCHEDULE", True)
     ref, out = tmp_path / "serial", tmp_path / "feed"
     run.generate(mixed, ref)
-    seen = []
+    seen, made, new_turns = [], [], feed.new_turns
+    monkeypatch.setattr(feed, "new_turns", lambda: made.append(new_turns()) or made[-1])
     executors.generate(mixed, out, workers=2, feed=True, on_shard=lambda s, n, skip: seen.append((s, n)))
     assert [(b["select"], b["episodes"], b["max_samples"]) for b in feed.LAST_RUN_BATCHES] == [
         ("short <= 60 samples", 3, 45), ("short <= 60 samples", 2, 45), ("long > 60 samples", 2, 120),
         ("long > 60 samples", 1, 120), ("long > 60 samples", 1, 120), ("long > 60 samples", 0, 0)]  # shard 4: none
     assert sorted(seen) == [(0, 2), (1, 2), (2, 2), (3, 2), (4, 1)]
+    assert "physics: waiting for the GPU turn" in feed.LAST_RUN_SECONDS  # six batches, two processes, in turns
+    assert made and not os.path.exists(made[0])  # the turn file is gone
     a, b = _episodes(ref, 5), _episodes(out, 5)
     assert list(a) == list(b) == [f"ep-{k:06d}" for k in range(9)]
     for ep in a:

@@ -4,9 +4,13 @@ Why (bench/README.md): MuJoCo Warp runs near its peak only with 16k-32k worlds p
 needs several host cores; worker processes that each simulate their own shard time-slice the GPU with smaller
 batches. Here a three-stage pipeline runs over batches of several shards' episodes (FEED_WORLDS):
 
-1. PHYSICS_PROCESSES processes step the next batches (`step_worlds`: protocols, controls, MuJoCo Warp; the
-   GPU time-slices between them, so one's host work overlaps the other's physics) and write the sensordata
-   straight into shared memory; the first batch's protocols are made by the driver while they import;
+1. PHYSICS_PROCESSES processes step the next batches (`step_worlds`: protocols, controls, MuJoCo Warp) and write
+   the sensordata straight into shared memory; the first batch's protocols are made by the driver while they
+   import. One's host work (protocols) overlaps the other's physics, but their GPU stepping takes turns in batch
+   order (GPU_TURNS): two batches stepped at once time-slice the GPU, so both came back at the end of twice one
+   batch's stepping and the driver idled through it (velostat 16384 on an H200: 31 s per batch side by side
+   against 16 s alone); in turns the first comes back after one batch's stepping and is run and written while
+   the next steps;
 2. the driver runs the load field and the sensor chain of batch b on the same GPU, slice by slice; each slice's
    outputs come back into reused page-locked buffers and are packed (before the next slice runs; PACK_OVERLAP:
    while it runs) into shared blocks that a `BlockPool`
@@ -46,6 +50,8 @@ PENDING_PER_WRITER = 2  # shards handed to the writers and not yet written, per 
 PENDING_RAM_FRACTION = 0.25  # ... and no more bytes pending than this fraction of the host's memory
 RAMP_BATCHES = 2  # batches of worlds / 4 and worlds / 2 episodes before the full ones (see _groups)
 PHYSICS_PROCESSES = 2  # each steps its own batch: one's host work (protocols, controls) overlaps the other's GPU work
+GPU_TURNS = os.environ.get("PIEZOTWIN_GPU_TURNS", "1") == "1"  # their GPU stepping in turns, in batch order (see
+# `_gpu_turn`); the variable: the bench's A/B (0: side by side, as before session 22)
 # where the driver's time went in the last generate_feed of this process (for bench/): "protocols (first batch, in
 # the driver)" (made while the physics processes import), "start-up" (Warp, the
 # sensor), "simulate" (load field, sensor chain, channel arrays; protocols and physics too for kinds with their
@@ -110,23 +116,83 @@ def _discard_stepped(stepped: tuple | None) -> None:
         shm.unlink()
 
 
+TURN_ABORT = -1  # the turn file's value once the feed stops: a physics task still waiting for its turn raises
+
+
+def new_turns() -> str:
+    """A file holding the batch whose GPU stepping is due (int64, starting at batch 0), in /dev/shm where there is
+    one; the feed passes its path to the physics tasks (`_gpu_turn`) and removes it when they are done."""
+    import tempfile
+
+    fd, path = tempfile.mkstemp(prefix="piezotwin-turn-", dir="/dev/shm" if os.path.isdir("/dev/shm") else None)
+    os.pwrite(fd, np.int64(0).tobytes(), 0)
+    os.close(fd)
+    return path
+
+
+def _turn_update(path: str, update: Callable[[int], int | None]) -> int:
+    """Read the turn file under an exclusive lock and write update(value) where that is not None; the value read."""
+    import fcntl
+
+    fd = os.open(path, os.O_RDWR)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        now = int(np.frombuffer(os.pread(fd, 8, 0), np.int64)[0])
+        new = update(now)
+        if new is not None:
+            os.pwrite(fd, np.int64(new).tobytes(), 0)
+        return now
+    finally:
+        os.close(fd)  # (releases the lock)
+
+
+def stop_turns(path: str) -> None:
+    """The feed stops: every task waiting for its turn raises instead of stepping (a task stepping finishes)."""
+    _turn_update(path, lambda now: TURN_ABORT)
+
+
+class _gpu_turn:
+    """`with _gpu_turn(path, b):` waits until batch b's GPU stepping is due (the batches before it have stepped),
+    then hands the turn to batch b + 1 on the way out, failed or not (unless the feed stopped meanwhile)."""
+
+    POLL_S = 0.002
+
+    def __init__(self, path: str, b: int):
+        self.path, self.b = path, b
+
+    def __enter__(self):
+        import time
+
+        while True:
+            now = _turn_update(self.path, lambda now: None)
+            if now == self.b:
+                return self
+            if now == TURN_ABORT:
+                raise RuntimeError(f"the feed stopped before batch {self.b}'s turn on the GPU")
+            time.sleep(self.POLL_S)
+
+    def __exit__(self, *exc):
+        _turn_update(self.path, lambda now: self.b + 1 if now == self.b else None)
+        return False
+
+
 def step_worlds(cfg: SceneConfig, gids: list[int], threads: int = 1, submitted: float | None = None,
-                select: Select | None = None, protos: list | None = None) -> tuple[list, dict, dict]:
+                select: Select | None = None, protos: list | None = None,
+                turn: tuple[str, int] | None = None) -> tuple[list, dict, dict]:
     """Physics task (in the feed's physics process): the protocols of episodes `gids` (made here unless `protos`
     brings them, made by the driver; with `select`, only those it keeps, in the order of gids; each protocol's
     `index` is its episode's id) and, per length group,
     their (sensordata, target) from `simulate_sensors`, written straight into a shared-memory block the
     receiver unlinks: ({n_samples: (block name, layout)} or the arrays themselves where /dev/shm has no room);
     and where the task's time went ("waiting to start" since `submitted`, a time.time(), "imports", "protocols",
-    "worlds": initial states, controls, MuJoCo Warp)."""
+    "waiting for the GPU turn", "worlds": initial states, controls, MuJoCo Warp). turn: (turn file, this batch's
+    index): the worlds step in the batch's turn (`_gpu_turn`), after the batches before it."""
     import time
 
     t0 = time.time()
-    from multiprocessing import shared_memory
-
+    import simulate.contact.load_field  # noqa: F401 - the physics' imports, timed here ("imports")
     from sensors.data.manifest import episode_seed
-    from simulate.contact.load_field import simulate_sensors, simulate_sensors_padded
-    from simulate.generation.run import episode_protocols, physics_runs
+    from simulate.generation.run import episode_protocols
 
     t1 = time.time()
     if protos is None:
@@ -135,6 +201,21 @@ def step_worlds(cfg: SceneConfig, gids: list[int], threads: int = 1, submitted: 
         protos = [p for p in protos if select.keeps(p.n_samples)]
     t2 = time.time()
     spent = {"waiting to start": t0 - (submitted or t0), "imports": t1 - t0, "protocols": t2 - t1}
+    if turn is None:
+        return protos, _step_groups(cfg, protos, threads), spent | {"worlds": time.time() - t2}
+    with _gpu_turn(*turn):
+        t3 = time.time()
+        out = _step_groups(cfg, protos, threads)
+    return protos, out, spent | {"waiting for the GPU turn": t3 - t2, "worlds": time.time() - t3}
+
+
+def _step_groups(cfg: SceneConfig, protos: list, threads: int) -> dict:
+    """`step_worlds`' physics: per length group of `protos`, (sensordata, target) into shared memory (see there)."""
+    from multiprocessing import shared_memory
+
+    from simulate.contact.load_field import simulate_sensors, simulate_sensors_padded
+    from simulate.generation.run import physics_runs
+
     out = {}
     groups = []
     for run in physics_runs(cfg, protos):
@@ -167,8 +248,7 @@ def step_worlds(cfg: SceneConfig, gids: list[int], threads: int = 1, submitted: 
         out[n] = (shm.name, [(0, sens.dtype.str, sens.shape), (sens.nbytes, "<f8", target.shape)])
         sens = None
         shm.close()
-    spent["worlds"] = time.time() - t2
-    return protos, out, spent
+    return out
 
 
 # ---------------------------------------------------------------- physics processes started ahead of the feed
@@ -884,9 +964,11 @@ def generate_feed(
                else [(g, None) for g in _groups(cfg, todo, worlds or feed_worlds(cfg), ramp=0)])
     groups = [g for g, _ in batches]
 
+    turns = new_turns() if physics and GPU_TURNS else None
+
     def step(b: int, protos: list | None = None):
         return physics.submit(step_worlds, cfg, [k for s in groups[b] for k in episode_ids_of_shard(cfg, s)], threads,
-                              time.time(), batches[b][1], protos)
+                              time.time(), batches[b][1], protos, (turns, b) if turns else None)
 
     ahead = []
     try:
@@ -905,6 +987,9 @@ def generate_feed(
         mjcf, sha = build_mjcf(cfg), config_sha256(cfg)
         sensor_attrs = shard_sensor_attrs(cfg, sensor)
     except BaseException:
+        if turns:  # a task waiting for its turn raises (a removed file too)
+            stop_turns(turns)
+            os.unlink(turns)
         if physics:
             physics.shutdown(wait=False, cancel_futures=True)
         raise
@@ -1052,8 +1137,12 @@ def generate_feed(
     finally:
         t0 = time.perf_counter()
         pool.shutdown(wait=True, cancel_futures=True)
+        if turns:  # (a failure: no task still waits for a turn that will not come)
+            stop_turns(turns)
         if physics:
             physics.shutdown(wait=True, cancel_futures=True)
+        if turns:
+            os.unlink(turns)
             for fut in ahead:  # batches stepped ahead that no Producer took (a failure): their blocks go too
                 if fut.done() and not fut.cancelled() and fut.exception() is None:
                     _discard_stepped(fut.result())
