@@ -42,6 +42,13 @@ mean +- 1.645 sqrt(sd_w^2 + sd_run^2 + se^2), se^2 = sd_run^2 / runs + sd_w^2 / 
 shape; see fit_chain and new_run_band90).
 Hysteresis: the creep bank is the chain's (rate-dependent) hysteresis; no rate-independent (play) bank is
 fitted (the velostat model has none).
+Label latency (label_latency_s, a property of the rig, not of the sensor): two streams stamped by one host clock on
+receipt carry each instrument's own delay (serial buffering, a load-cell amplifier's filter), so the recorded force
+may arrive late against the reading. A reading cannot respond before its load (causality), so where the reading
+leads the force label (the peak of their correlation, `reading_lag_s`, at a negative lag) the label is late by at
+least that much: the Lupasic load cell by 0.10-0.17 s (session 22). The fit then reads each force label that much
+earlier (`align_labels`), and the generation records its labels that much late, as the rig does. A reading that
+follows its force (a positive lag) may be the film's own creep, which the chain models: no latency is read then.
 """
 
 from __future__ import annotations
@@ -61,7 +68,9 @@ __all__ = [
     "Press",
     "RealRun",
     "evaluate",
+    "align_labels",
     "fit_chain",
+    "label_latency",
     "load_real_runs",
     "reading_from_resistance",
     "resistance_from_reading",
@@ -103,6 +112,8 @@ class ChainParams:
     tunnel_force_n: float = 0.0
     contact_area_exponent: float = 2.0 / 3.0  # estimate: Hertz, a rounded tip's contact area grows as F^(2/3)
     # (Johnson, Contact Mechanics 1985, eq. 4.22) before it spans the face; held, not fitted (one term: F_a)
+    label_latency_s: float = 0.0  # how late the rig records the force label against the reading (module doc,
+    # "Label latency"; label_latency); 0: none
 
     @property
     def times_s(self) -> list[float]:
@@ -214,6 +225,65 @@ class RealRun:
     fs: float  # full scale of this run (rest level for a board whose full scale is its rest)
     noise_sd: float
     attrs: dict = field(default_factory=dict)
+
+
+MAX_LAG_S = 0.5  # estimate: the widest lag looked for between the reading and its force label (a serial link's
+# buffering or a load-cell amplifier's filter: tens to hundreds of ms)
+
+
+def reading_lag_s(run: RealRun, max_lag_s: float = MAX_LAG_S) -> float:
+    """The lag (s) of the reading behind the force label that lines them up best: the peak, refined between samples
+    (parabola through the best three), of the correlation of ln force with the log of the reading's headroom toward
+    full load (ln reading where it falls with force, ln(FS - reading) where it rises) over the loaded samples (force
+    >= 10 % of the run's peak), the reading shifted by -max_lag_s .. max_lag_s. Positive: the reading follows the
+    force; negative: it leads it. nan where the run has too few loaded samples."""
+    f, y = np.asarray(run.force, np.float64), np.asarray(run.reading, np.float64)
+    x = np.where(f >= 0.1 * np.nanmax(f), np.log(np.maximum(f, 1e-12)), np.nan)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.log(run.fs - y) if run.attrs.get("reading_rises_with_force") else np.log(y)
+    z = np.where(np.isfinite(z), z, np.nan)
+    K = max(1, int(round(max_lag_s / run.dt)))
+    score = np.full(2 * K + 1, np.nan)
+    for i, k in enumerate(range(-K, K + 1)):  # z[t + k] against x[t]
+        a, b = x[max(0, -k):len(x) - max(0, k)], z[max(0, k):len(z) - max(0, -k)]
+        m = np.isfinite(a) & np.isfinite(b)
+        if m.sum() >= 20 and np.std(a[m]) > 0 and np.std(b[m]) > 0:
+            score[i] = -np.corrcoef(a[m], b[m])[0, 1]  # the headroom falls as the force rises
+    if not np.isfinite(score).any():
+        return float("nan")
+    i = int(np.nanargmax(score))
+    frac = 0.0
+    if 0 < i < 2 * K and np.isfinite(score[i - 1]) and np.isfinite(score[i + 1]):
+        den = score[i - 1] - 2 * score[i] + score[i + 1]
+        frac = 0.5 * (score[i - 1] - score[i + 1]) / den if den < 0 else 0.0
+    return float((i - K + frac) * run.dt)
+
+
+def label_latency(runs: Seq[RealRun], max_lag_s: float = MAX_LAG_S) -> tuple[float, list[float]]:
+    """The rig's label latency (s, >= 0) from its runs (module doc, "Label latency"): minus the median of the runs'
+    `reading_lag_s` where the reading leads its force label, else 0; and the per-run lags."""
+    lags = [reading_lag_s(r, max_lag_s) for r in runs]
+    ok = [v for v in lags if np.isfinite(v)]
+    return (max(0.0, -float(np.median(ok))) if ok else 0.0), lags
+
+
+def shift_label(force: np.ndarray, dt: float, by_s: float) -> np.ndarray:
+    """The force label read by_s later (by_s > 0: the value recorded by_s after each sample, the ends held):
+    with by_s = the latency it lines the label up with its reading; with -latency it delays a true force as the rig
+    records it."""
+    f = np.asarray(force, np.float64)
+    if by_s == 0.0 or len(f) < 2:
+        return f
+    t = np.arange(len(f)) * dt
+    return np.interp(t + by_s, t, f)
+
+
+def align_labels(runs: Seq[RealRun], latency_s: float) -> list[RealRun]:
+    """The runs with each force label read latency_s later (`shift_label`), so that it is the force on the sensor
+    at the reading's time; the runs themselves where latency_s is 0."""
+    if latency_s <= 0.0:
+        return list(runs)
+    return [replace(r, force=shift_label(r.force, r.dt, latency_s)) for r in runs]
 
 
 def presses_of(force: np.ndarray, min_force_n: float) -> list[slice]:
@@ -549,8 +619,13 @@ N_RUN_BOOT = 200  # replicates of the run bootstrap of level_run_sd (no refit: c
 def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = None, n_boot: int = 16,
               min_force_frac: float = 0.1, min_force_n: float = 0.05, max_nfev: int = 60, seed: int = 0,
               progress=None, level_prior: bool = False, fit_threshold: bool = False,
-              creep_linear: bool = False, fit_contact: bool = False, fit_tunnel: bool = False) -> ChainFit:
+              creep_linear: bool = False, fit_contact: bool = False, fit_tunnel: bool = False,
+              latency: bool = False) -> ChainFit:
     """Fit the chain to real runs (see the module docstring); progress(k, n) is called after each fit.
+
+    latency: read the rig's label latency from the runs (`label_latency`), fit on the runs with their labels
+    lined up (`align_labels`) and keep it in the params (label_latency_s; `evaluate` lines up other runs of the
+    rig by it, the generation delays its labels by it); off, p0's label_latency_s is used as given (0: none).
 
     level_prior: the press levels are draws l_j ~ N(mu, sd^2) of a placement chosen before the press, so
     independent of its force; free levels (the default) let them absorb a force law that is too flat. With the
@@ -574,6 +649,9 @@ def fit_chain(runs: Seq[RealRun], p0: ChainParams, *, fit_series: bool | None = 
     fit_tunnel: fit the tunneling force F_t (module doc, "tunneling"), started where p0 has none at the median peak
     force of the runs' presses (there the term moves ln R by ~1 over a press, so its gradient is alive); off, F_t
     stays p0's (0: no tunneling term)."""
+    if latency:
+        p0 = replace(p0, label_latency_s=label_latency(runs)[0])
+    runs = align_labels(runs, p0.label_latency_s)
     p0 = replace(p0, r_leak_ohm=leak_from_unloaded(runs, p0))
     if fit_contact and p0.contact_force_n <= 0.0:
         p0 = replace(p0, contact_force_n=CONTACT_START_N)
@@ -710,7 +788,7 @@ def evaluate(fit: ChainFit, runs: Seq[RealRun], min_force_frac: float = 0.1, min
     presses' levels inside the fitted 90 % band, and the plateau drop (reading at the end of the plateau /
     at its start, real vs simulated)."""
     p = fit.params
-    data = _Data(runs, p, min_force_frac, min_force_n)
+    data = _Data(align_labels(runs, p.label_latency_s), p, min_force_frac, min_force_n)
     idx = np.arange(len(data.presses))
     if not len(idx):
         return {"n_presses": 0}

@@ -5,7 +5,8 @@ bootstrap replicate of the fit, the board gain, the tip area, the rest level, th
 of presses (peak force, rise, hold, fall, gap from the Randomization's press distributions), each landing
 at its own place on the film (ln level ~ N(0, level_log_sd); a miss with probability miss_prob), forward
 through sensors.chain_fit.simulate_reading with the readout noise. Written as one recording (source "sim")
-with ``sensor`` ([T, 1], the reading, the real board's units) and ``force`` (N); the seed and every drawn
+with ``sensor`` ([T, 1], the reading, the real board's units) and ``force`` (N, recorded the chain's
+label_latency_s late, as the rig records it); the seed and every drawn
 value are episode attributes. A fast alternative to the MuJoCo pipeline for one tip on one taxel/film,
 the case of a press rig (no contact mechanics: the recorded force is the input, as in the fit).
 """
@@ -21,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from scenes.randomize import Randomization, draw, draw_one
-from sensors.chain_fit import ChainParams, simulate_reading
+from sensors.chain_fit import ChainParams, shift_label, simulate_reading
 from sensors.data.manifest import episode_seed
 
 __all__ = ["episode", "generate_chain", "press_protocol"]
@@ -108,7 +109,8 @@ def episode(p0: ChainParams, rand: Randomization, seed: int, duration_s: float, 
     lvl = np.where((pid >= 0) & miss[np.maximum(pid, 0)], 60.0, level)  # a miss: the film stays open
     y = simulate_reading(force, dt, p, level=lvl, fs=fs, rng=rng)
     y = np.maximum(y, 1e-6)
-    ch = {"force": force, "sensor": y}
+    # the label as the rig records it: p.label_latency_s late against the reading (sensors/chain_fit.py, "Label latency")
+    ch = {"force": shift_label(force, dt, -p.label_latency_s), "sensor": y}
     attrs = {"seed": int(seed), "randomized": {k: float(v) for k, v in vals.items()}, "n_presses": n_press,
              "n_missed_presses": int(miss.sum()), "press_levels_log": lev.tolist(),
              **({"press_slope_offsets": slopes[0].tolist()} if slopes is not None else {}),
