@@ -260,8 +260,11 @@ S2R_BUDGET = {  # the default budget of `piezotwin sim2real` (2 CPU cores, <= 15
     "finetune_norm": "checkpoint", "rehearsal": 0.0, "n_train_seeds": 3, "time_budget_s": 900.0, "valid_tail": 0.25,
     "press_slope": False, "rated_force_n": None, "run_level": False, "fit_threshold": False,
     "creep_linear": False, "finetune_method": "plain", "l2sp_alpha": 0.1, "l2sp_beta": 0.01, "pipeline_seed": 0,
-    "fit_contact": False, "tail_by": "presses", "static_blend": False, "fit_tunnel": False,
+    "fit_contact": False, "tail_by": "presses", "static_blend": False, "fit_tunnel": False, "latency": False,
 }
+# latency: the rig's label latency read from the training runs and lined up in the fit (sensors.chain_fit, "Label
+# latency"), the generated labels delayed by it; round 13 (session 22), scored by the rule in
+# bench/bench_s2r_latency.py written before scoring: not adopted (the Lupasic fits get worse)
 # fit_tunnel: the chain's tunneling term (R_film x exp(-F_e / F_t), sensors.chain_fit, Zhang et al. 2000) with F_t
 # fitted; round 12 (session 21), scored by the rule in bench/bench_s2r_tunnel.py written before scoring
 # tail_by: how learn.finetune.split_tail cuts each training run's validation tail: "presses" (round 11, adopted on its
@@ -592,7 +595,8 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
             fit = C.fit_chain(train_runs, p0, n_boot=int(B["n_boot"]), seed=seed,
                               progress=lambda k, n: bar.update(task, completed=k), level_prior=not any(r.attrs.get("adc_full_scale") for r in runs),
                               fit_threshold=bool(B.get("fit_threshold")), creep_linear=bool(B.get("creep_linear")),
-                              fit_contact=bool(B.get("fit_contact")), fit_tunnel=bool(B.get("fit_tunnel")))
+                              fit_contact=bool(B.get("fit_contact")), fit_tunnel=bool(B.get("fit_tunnel")),
+                              latency=bool(B.get("latency")))
             held = C.evaluate(fit, [r for r in runs if r.key in test_keys])
             rand = C.randomization_from_fit(fit, train_runs, press_slope=bool(B["press_slope"]),
                                             rated_force_n=B.get("rated_force_n"), run_level=bool(B.get("run_level")))

@@ -236,6 +236,9 @@ def sim2real(
                            "the tip in contact grows as F^(2/3) below the fitted force F_a: a steeper law at small force).")] = False,
     fit_tunnel: Annotated[bool, typer.Option("--fit-tunnel", help="Fit the chain's tunneling term (R_film x "
                           "exp(-F / F_t): the filler gaps close with strain, a law that steepens with force).")] = False,
+    latency: Annotated[bool, typer.Option("--latency", help="Read the rig's label latency (the reading leading its "
+                       "force label) from the training runs, line the labels up for the fit and delay the generated "
+                       "labels by it.")] = False,
     finetune_method: Annotated[str | None, typer.Option("--finetune-method", help="plain, l2sp (L2-SP, Li et al. 2018) "
                                "or lpft (LP-FT, Kumar et al. 2022); default: the budget's.")] = None,
     pipeline_seed: Annotated[int, typer.Option("--pipeline-seed", help="Redraw the generation and the pre-training "
@@ -268,6 +271,8 @@ def sim2real(
         b["fit_contact"] = True
     if fit_tunnel:
         b["fit_tunnel"] = True
+    if latency:
+        b["latency"] = True
     if finetune_method is not None:
         from learn.finetune import FINETUNE_METHODS
 

@@ -49,6 +49,9 @@ leads the force label (the peak of their correlation, `reading_lag_s`, at a nega
 least that much: the Lupasic load cell by 0.10-0.17 s (session 22). The fit then reads each force label that much
 earlier (`align_labels`), and the generation records its labels that much late, as the rig does. A reading that
 follows its force (a positive lag) may be the film's own creep, which the chain models: no latency is read then.
+The premise holds where the label is the force on the film; a load cell under a mount that carries force past the
+film breaks it. On the Lupasic runs (a curved leg) the lined-up fits were worse (bench/bench_s2r_latency.py), so it
+is an option (`fit_chain(latency=True)`, `piezotwin sim2real --latency`), not the default.
 """
 
 from __future__ import annotations

@@ -689,3 +689,39 @@ def test_a_run_read_through_another_reference_resistor_is_evaluated_through_it()
     assert CF.run_params(fit.params, held[0]).r_ref_ohm == 2.2e3 and CF.run_params(fit.params, runs[0]) is fit.params
     held[0].attrs.pop("reference_resistor_ohm")  # read as if through the fit's own 10 kOhm
     assert abs(CF.evaluate(fit, held)["level_mean_log_vs_fit"]) > 0.3
+
+
+def test_label_latency_is_read_from_a_late_label_lined_up_and_recovers_the_chain():
+    """A rig that records the force 0.15 s late (label_latency_s): `label_latency` reads it from the runs (the
+    reading leads its label), `fit_chain(latency=True)` lines the labels up and fits the chain as well as on the
+    true force; a chain whose reading follows its force (creep, no latency) reads no latency (causality)."""
+    true = CF.ChainParams(exponent=1.2, r0_ohm=3000.0, creep_amplitude=2.0, creep_force_n=4.0, tau_min_s=0.1,
+                          tau_max_s=5.0, n_creep=4, level_log_sd=0.4, r_ref_ohm=1e4, full_scale=1000.0, noise_sd=0.0)
+    on_time = _synthetic_runs(true, rate=50.0)
+    assert CF.label_latency(on_time)[0] == 0.0  # the creep makes the reading follow its force: no latency read
+    late = [_replace(r, force=CF.shift_label(r.force, r.dt, -0.15)) for r in on_time]
+    lat, lags = CF.label_latency(late)
+    assert abs(lat - 0.15) < 0.03, (lat, lags)
+    p0 = CF.ChainParams(r_ref_ohm=1e4, full_scale=1000.0, n_creep=4)
+    fit_late = CF.fit_chain(late, p0, n_boot=0)
+    fit = CF.fit_chain(late, p0, n_boot=0, latency=True)
+    assert abs(fit.params.label_latency_s - lat) < 1e-12
+    assert fit.error["rms_log_reading_within_press"] < 0.5 * fit_late.error["rms_log_reading_within_press"]
+    assert abs(fit.params.exponent - 1.2) < 0.1
+    # other runs of the rig are lined up by the fit's latency when evaluated
+    held = [_replace(r, force=CF.shift_label(r.force, r.dt, -0.15)) for r in _synthetic_runs(true, n_runs=2, seed=7, rate=50.0)]
+    assert CF.evaluate(fit, held)["rms_log_reading_within_press"] < 0.5 * CF.evaluate(fit_late, held)["rms_log_reading_within_press"]
+
+
+def test_generated_labels_are_recorded_as_late_as_the_rig_records_them():
+    from simulate.generation.chain_gen import episode
+
+    p = CF.ChainParams(exponent=1.2, r0_ohm=3000.0, creep_amplitude=0.0, n_creep=1, tau_min_s=1.0, level_log_sd=0.0,
+                       r_ref_ohm=1e4, full_scale=1000.0, label_latency_s=0.2)
+    rand = Randomization(press={"peak_force_n": Dist(kind="loguniform", low=2.0, high=30.0)})
+    ch, _ = episode(p, rand, 3, 60.0, 0.02)
+    ch0, _ = episode(_replace(p, label_latency_s=0.0), rand, 3, 60.0, 0.02)
+    assert np.array_equal(ch["sensor"], ch0["sensor"])  # the sensor sees the same force ...
+    np.testing.assert_allclose(ch["force"][10:], ch0["force"][:-10], atol=1e-9)  # ... its label comes 0.2 s (10 samples) late
+    run = CF.RealRun("ep", ch["force"], ch["sensor"], 0.02, 1000.0, 0.0)
+    assert abs(CF.label_latency([run])[0] - 0.2) < 0.02
