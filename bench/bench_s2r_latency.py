@@ -52,11 +52,10 @@ import fnmatch
 import json
 import os
 import platform
-import time
 
 import numpy as np
 
-from bench_s2r_tunnel import SPLITS, decide, real_recordings
+from bench_s2r_tunnel import SPLITS, compare_splits, decide, fit_and_score, real_recordings, written_rule
 from learn.sim2real import _chain_prior
 from sensors import chain_fit as C
 
@@ -112,44 +111,20 @@ def branch_gap_reading(p, runs) -> float:
 
 
 def fit_split(runs, family: str, glob: str, latency: bool) -> dict:
-    train = [r for r in runs if not fnmatch.fnmatch(r.key, glob)]
-    test = [r for r in runs if fnmatch.fnmatch(r.key, glob)]
-    adc = any(r.attrs.get("adc_full_scale") for r in runs)
-    t0 = time.perf_counter()
-    fit = C.fit_chain(train, _chain_prior(family, runs), n_boot=0, seed=0, level_prior=not adc, latency=latency)
-    held = C.evaluate(fit, test)
-    th = C._theta(fit.params)
-    free = C._free(adc)
-    on_bound = [C.NAMES[i] for i in free if np.isclose(th[i], C.LB[i], rtol=1e-3, atol=1e-3)
-                or np.isclose(th[i], C.UB[i], rtol=1e-3, atol=1e-3)]
+    fit, train, test, out = fit_and_score(runs, family, glob, latency=latency)
     p = fit.params
-    return {"within_press_fit_runs": fit.error["rms_log_reading_within_press"],
-            "within_press_held_out": held["rms_log_reading_within_press"],
-            "held_out_levels_in_band90": held["level_in_band90"], "n_held_out_presses": held["n_presses"],
-            "label_latency_s": p.label_latency_s, "train_run_lags_s": C.label_latency(train)[1] if latency else None,
-            "exponent": p.exponent, "creep_amplitude": p.creep_amplitude, "creep_force_n": p.creep_force_n,
-            "tau_min_s": p.tau_min_s, "tau_max_s": p.tau_max_s, "threshold_force_n": p.threshold_force_n,
-            "r_series_ohm": p.r_series_ohm, "level_log_sd": p.level_log_sd, "plateau_drop_held_out": held["plateau_drop"],
+    return {**out, "label_latency_s": p.label_latency_s,
+            "train_run_lags_s": C.label_latency(train)[1] if latency else None, "level_log_sd": p.level_log_sd,
             "unloading_minus_loading_ln_r_held_out": branch_gap(p, test),
-            "unloading_minus_loading_ln_reading_held_out": branch_gap_reading(p, test),
-            "on_bound": on_bound, "seconds": time.perf_counter() - t0}
+            "unloading_minus_loading_ln_reading_held_out": branch_gap_reading(p, test)}
 
 
 def main() -> None:
     a, data = real_recordings("s2r-latency.json")
-    res: dict = {"recordings": {"tams": str(a.tams), "lupasic": str(a.lupasic)},
-                 "rule": __doc__.split("Rule, written before any candidate fit was scored (commit of this file):")[1]
-                 .split("Also recorded")[0].strip(), "splits": [], "decision": {}}
-    for family, rec, glob in SPLITS:
-        row = {"family": family, "recording": rec, "held_out": glob}
-        for name, latency in (("reference", False), ("candidate", True)):
-            row[name] = fit_split(data[rec], family, glob, latency)
-            r = row[name]
-            print(f"{family:8s} {glob:14s} {name:9s} within-press fit {r['within_press_fit_runs']:.3f} held-out "
-                  f"{r['within_press_held_out']:.3f} band {r['held_out_levels_in_band90']:.2f} n {r['exponent']:.2f} "
-                  f"latency {r['label_latency_s']:.3f} s gap ln R {r['unloading_minus_loading_ln_r_held_out']:+.2f} ln reading {r['unloading_minus_loading_ln_reading_held_out']:+.2f} on bounds: {', '.join(r['on_bound']) or '-'} ({r['seconds']:.0f} s)",
-                  flush=True)
-        res["splits"].append(row)
+    res: dict = {"recordings": {"tams": str(a.tams), "lupasic": str(a.lupasic)}, "rule": written_rule(__doc__),
+                 "splits": compare_splits(data, fit_split, lambda r: (
+                     f"latency {r['label_latency_s']:.3f} s gap ln R {r['unloading_minus_loading_ln_r_held_out']:+.2f} "
+                     f"ln reading {r['unloading_minus_loading_ln_reading_held_out']:+.2f}")), "decision": {}}
     # also recorded (after the rule's result, not part of it): the fit runs' within-press error at fixed latencies,
     # the first split of each family: which latency the chain itself prefers
     from dataclasses import replace

@@ -57,25 +57,34 @@ def _band_miss(c: float) -> float:
     return max(BAND[0] - c, c - BAND[1], 0.0)
 
 
-def fit_split(runs, family: str, glob: str, tunnel: bool) -> dict:
+def fit_and_score(runs, family: str, glob: str, **chain_kw) -> tuple:
+    """The split's training runs (those not matching glob) fitted as step 1 of sim2real fits them (its prior and level
+    prior, the point fit: no bootstrap) with `chain_kw` for fit_chain, scored on the held-out runs: (fit, training
+    runs, held-out runs, the measures every candidate records)."""
     train = [r for r in runs if not fnmatch.fnmatch(r.key, glob)]
     test = [r for r in runs if fnmatch.fnmatch(r.key, glob)]
     adc = any(r.attrs.get("adc_full_scale") for r in runs)
     t0 = time.perf_counter()
-    fit = C.fit_chain(train, _chain_prior(family, runs), n_boot=0, seed=0, level_prior=not adc, fit_tunnel=tunnel)
+    fit = C.fit_chain(train, _chain_prior(family, runs), n_boot=0, seed=0, level_prior=not adc, **chain_kw)
     held = C.evaluate(fit, test)
     th = C._theta(fit.params)
-    free = C._free(adc, fit_tunnel=tunnel)
+    free = C._free(adc, fit_tunnel=bool(chain_kw.get("fit_tunnel")))
     on_bound = [C.NAMES[i] for i in free if np.isclose(th[i], C.LB[i], rtol=1e-3, atol=1e-3)
                 or np.isclose(th[i], C.UB[i], rtol=1e-3, atol=1e-3)]
     p = fit.params
-    return {"within_press_fit_runs": fit.error["rms_log_reading_within_press"],
-            "within_press_held_out": held["rms_log_reading_within_press"],
-            "held_out_levels_in_band90": held["level_in_band90"], "n_held_out_presses": held["n_presses"],
-            "exponent": p.exponent, "tunnel_force_n": p.tunnel_force_n, "creep_amplitude": p.creep_amplitude,
-            "creep_force_n": p.creep_force_n, "tau_min_s": p.tau_min_s, "tau_max_s": p.tau_max_s,
-            "threshold_force_n": p.threshold_force_n, "r_series_ohm": p.r_series_ohm,
-            "on_bound": on_bound, "seconds": time.perf_counter() - t0}
+    return fit, train, test, {
+        "within_press_fit_runs": fit.error["rms_log_reading_within_press"],
+        "within_press_held_out": held["rms_log_reading_within_press"],
+        "held_out_levels_in_band90": held["level_in_band90"], "n_held_out_presses": held["n_presses"],
+        "exponent": p.exponent, "creep_amplitude": p.creep_amplitude, "creep_force_n": p.creep_force_n,
+        "tau_min_s": p.tau_min_s, "tau_max_s": p.tau_max_s, "threshold_force_n": p.threshold_force_n,
+        "r_series_ohm": p.r_series_ohm, "plateau_drop_held_out": held["plateau_drop"], "on_bound": on_bound,
+        "seconds": time.perf_counter() - t0}
+
+
+def fit_split(runs, family: str, glob: str, tunnel: bool) -> dict:
+    fit, _, _, out = fit_and_score(runs, family, glob, fit_tunnel=tunnel)
+    return {**out, "tunnel_force_n": fit.params.tunnel_force_n}
 
 
 def decide(rows: list[dict]) -> dict:
@@ -101,21 +110,30 @@ def real_recordings(default_out: str) -> tuple[argparse.Namespace, dict[str, lis
                for k, path in (("tams", a.tams), ("lupasic", a.lupasic))}
 
 
-def main() -> None:
-    a, data = real_recordings("s2r-tunnel.json")
-    res: dict = {"recordings": {"tams": str(a.tams), "lupasic": str(a.lupasic)},
-                 "rule": __doc__.split("Rule, written before any candidate fit was scored (commit of this file):")[1]
-                 .split("Also recorded")[0].strip(), "splits": [], "decision": {}}
+def compare_splits(data: dict[str, list], fit, describe) -> list[dict]:
+    """Every split of SPLITS fitted twice, `fit(runs, family, held_out_glob, candidate)` with candidate False
+    ("reference") and True ("candidate"); a line per fit, `describe(result)` naming the candidate's own values."""
+    rows = []
     for family, rec, glob in SPLITS:
         row = {"family": family, "recording": rec, "held_out": glob}
-        for name, tunnel in (("reference", False), ("candidate", True)):
-            row[name] = fit_split(data[rec], family, glob, tunnel)
-            r = row[name]
+        for name, cand in (("reference", False), ("candidate", True)):
+            row[name] = r = fit(data[rec], family, glob, cand)
             print(f"{family:8s} {glob:14s} {name:9s} within-press fit {r['within_press_fit_runs']:.3f} held-out "
                   f"{r['within_press_held_out']:.3f} band {r['held_out_levels_in_band90']:.2f} n {r['exponent']:.2f} "
-                  f"F_t {r['tunnel_force_n']:.3g} on bounds: {', '.join(r['on_bound']) or '-'} ({r['seconds']:.0f} s)",
-                  flush=True)
-        res["splits"].append(row)
+                  f"{describe(r)} on bounds: {', '.join(r['on_bound']) or '-'} ({r['seconds']:.0f} s)", flush=True)
+        rows.append(row)
+    return rows
+
+
+def written_rule(doc: str) -> str:
+    """The rule of a bench's docstring, as committed before its candidate was scored."""
+    return doc.split("Rule, written before any candidate fit was scored (commit of this file):")[1].split("Also recorded")[0].strip()
+
+
+def main() -> None:
+    a, data = real_recordings("s2r-tunnel.json")
+    res: dict = {"recordings": {"tams": str(a.tams), "lupasic": str(a.lupasic)}, "rule": written_rule(__doc__),
+                 "splits": compare_splits(data, fit_split, lambda r: f"F_t {r['tunnel_force_n']:.3g}"), "decision": {}}
     for family in ("divider", "velostat"):
         res["decision"][family] = decide([r for r in res["splits"] if r["family"] == family])
         print(family, res["decision"][family])
