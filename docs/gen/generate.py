@@ -789,6 +789,52 @@ def _rule_cells(v: dict, d: dict) -> list[str]:
             "yes" if d["training_side_not_worse"] else "no"]
 
 
+S2R_RULES = [("s2r-tunnel.json", "tunneling term (`--fit-tunnel`)"), ("s2r-latency.json", "label latency (`--latency`)")]
+S2R_LOOP_RULES = [("s2r-latency-loop.json", "label latency (`--latency`), whole loop")]
+
+
+def s2r_candidates() -> str:
+    """The chain-fit candidates of issue 15 scored by rules written before scoring (bench/bench_s2r_*.py): per split the
+    held-out within-press error and band coverage, reference -> candidate, and the decision; then the loop rules."""
+    rows = []
+    for name, what in S2R_RULES:
+        d = load(name)
+        if not d:
+            continue
+        dec = d.get("decision", {})
+        adopt = dec.get("adopt") if "adopt" in dec else any(v.get("adopt") for v in dec.values() if isinstance(v, dict))
+        for r in d["splits"]:
+            a, b = r["reference"], r["candidate"]
+            rows.append([what, f"{r['recording']} {r['held_out']}",
+                         f"{num(a['within_press_held_out'])} -> {num(b['within_press_held_out'])}",
+                         f"{pct(a['held_out_levels_in_band90'])} -> {pct(b['held_out_levels_in_band90'])}",
+                         "adopted" if adopt else "not adopted", f"`{name}`"])
+    out = []
+    if rows:
+        out += ["Chain-fit candidates, each scored by a rule committed before the candidate was scored (the bench's "
+                "docstring; held-out within-press rms ln-reading error, target <= 0.3, and the share of held-out "
+                "press levels inside the fitted 90 % band, target 80-95 %; reference -> candidate):\n",
+                table(["candidate", "split (held out)", "within-press", "in band", "decision", "file"], rows)]
+    loop = []
+    for name, what in S2R_LOOP_RULES:
+        d = load(name)
+        if not d:
+            continue
+        for tag, v in d["directions"].items():
+            a, b = v["reference"], v["candidate"]
+            loop.append([what, tag, d["pipeline_seed"],
+                         " / ".join(f"{num(a['curve'][n]['finetuned_rmse'])} -> {num(b['curve'][n]['finetuned_rmse'])}"
+                                    for n in a["curve"]),
+                         f"{num(a['finetuned_pct_full_scale'])} -> {num(b['finetuned_pct_full_scale'])} %",
+                         "adopted" if d["decision"]["adopt"] else "not adopted", f"`{name}`"])
+    if loop:
+        out += ["\nThe same through the whole loop (fine-tuned test RMSE in N at 1 / 2 / 4 / all training runs, and "
+                "with all runs in % of full scale; reference -> candidate, same pipeline seed):\n",
+                table(["candidate", "direction", "pipeline seed", "fine-tuned by budget (N)", "all runs", "decision",
+                       "file"], loop)]
+    return "\n".join(out) if out else "No candidate scored yet."
+
+
 def sim2real_results() -> str:
     """Tables of the `piezotwin sim2real` runs recorded as bench/results/experiments/sim2real-<family>-<split>.json
     (Lupasic directions and TAMS covers left out one at a time)."""
@@ -1990,6 +2036,7 @@ def outputs() -> dict[Path, Callable[[], str]]:
         GEN / "channels-common.md": channels_common,
         GEN / "cli.md": cli,
         GEN / "sim2real.md": sim2real_results,
+        GEN / "s2r-candidates.md": s2r_candidates,
         GEN / "train-device.md": train_device,
     }
     for fam, presets in presets_by_family().items():
