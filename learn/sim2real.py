@@ -601,8 +601,15 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
             rand = C.randomization_from_fit(fit, train_runs, press_slope=bool(B["press_slope"]),
                                             rated_force_n=B.get("rated_force_n"), run_level=bool(B.get("run_level")))
             spread = C.press_slope_spread(fit, train_runs)  # measured whether drawn or not (reported)
+            lead, lags = C.label_latency(train_runs)  # read whether lined up or not (reported; sensors.chain_fit)
+            lag = {"reading_leads_label_s": lead, "lined_up": bool(B.get("latency")),
+                   "run_lags_s": {r.key: v for r, v in zip(train_runs, lags)}}
             C.save_fit(fit, fit_f, {"family": family, "recording": str(recording), "fit_runs": [r.key for r in train_runs],
-                                    "held_out": held, "randomization": rand.model_dump(mode="json"), "press_slope_spread": spread})
+                                    "held_out": held, "randomization": rand.model_dump(mode="json"), "press_slope_spread": spread,
+                                    "label_lag": lag})
+            if lead > 0 and not B.get("latency"):
+                log(f"fit: the reading leads its force label by {lead:.3f} s (median over the training runs); the labels "
+                    "were not lined up (--latency does: see docs/real-sensors.md)")
             mark("fit", {"within_press_fit": fit.error["rms_log_reading_within_press"], "held_out": held,
                          "press_slope_spread": spread})
             log(f"fit: within-press rms ln reading {fit.error['rms_log_reading_within_press']:.3f} (fit runs), "
