@@ -400,22 +400,31 @@ def test_contact_area_term_steepens_the_law_below_its_force_and_is_off_by_defaul
     assert np.isinf(CF.film_resistance(g, 0.05, p)[0])
 
 
+def _fit_with_term(term: str, value: float, high_n: float, exponent_tol: float):
+    """A chain made with one optional term (`term` = value), fitted with that term free on 3 runs of 0.5-high_n N:
+    the term and the exponent recovered, a small within-press error, the term's bootstrap range and its draw in
+    the randomization. Returns (true chain, prior, runs, fit)."""
+    true = CF.ChainParams(exponent=0.8, r0_ohm=3000.0, creep_amplitude=1.0, creep_force_n=10.0, tau_min_s=0.1,
+                          tau_max_s=3.0, n_creep=4, level_log_sd=0.3, r_ref_ohm=1e4, full_scale=1000.0, noise_sd=0.0,
+                          **{term: value})
+    p0 = CF.ChainParams(r_ref_ohm=1e4, full_scale=1000.0, n_creep=4)
+    runs = _synthetic_runs(true, n_runs=3, low_n=0.5, high_n=high_n)
+    flag = {"contact_force_n": "fit_contact", "tunnel_force_n": "fit_tunnel"}[term]
+    fit = CF.fit_chain(runs, p0, n_boot=2, level_prior=True, **{flag: True})
+    q = fit.params
+    assert abs(np.log(getattr(q, term) / value)) < 0.25, getattr(q, term)
+    assert abs(q.exponent - 0.8) < exponent_tol, q.exponent
+    assert fit.error["rms_log_reading_within_press"] < 0.03
+    assert f"ln_{term}" in fit.result["names"] and term in fit.ranges
+    assert all(term in b for b in CF.randomization_from_fit(fit, runs).boot)
+    return true, p0, runs, fit
+
+
 def test_chain_fit_contact_force_recovers_known_parameters():
     """fit_contact: a chain made with F_a = 3 N (runs pressed 0.5-40 N) is recovered (F_a, exponent, within-press
     error, a bootstrap range around it); on a chain without the term the fitted F_a stays small; off (the default)
     F_a is not fitted and stays 0."""
-    true = CF.ChainParams(exponent=0.8, r0_ohm=3000.0, creep_amplitude=1.0, creep_force_n=10.0, tau_min_s=0.1,
-                          tau_max_s=3.0, n_creep=4, level_log_sd=0.3, r_ref_ohm=1e4, full_scale=1000.0, noise_sd=0.0,
-                          contact_force_n=3.0)
-    p0 = CF.ChainParams(r_ref_ohm=1e4, full_scale=1000.0, n_creep=4)
-    runs = _synthetic_runs(true, n_runs=3, low_n=0.5, high_n=40.0)
-    fit = CF.fit_chain(runs, p0, n_boot=2, level_prior=True, fit_contact=True)
-    q = fit.params
-    assert abs(np.log(q.contact_force_n / 3.0)) < 0.25, q.contact_force_n
-    assert abs(q.exponent - 0.8) < 0.06, q.exponent
-    assert fit.error["rms_log_reading_within_press"] < 0.03
-    assert "ln_contact_force_n" in fit.result["names"] and "contact_force_n" in fit.ranges
-    assert all("contact_force_n" in b for b in CF.randomization_from_fit(fit, runs).boot)
+    true, p0, runs, fit = _fit_with_term("contact_force_n", 3.0, 40.0, 0.06)
     # the default fit of the same runs has no term and a flatter law (the exponent takes part of it)
     off = CF.fit_chain(runs, p0, n_boot=0, level_prior=True)
     assert off.params.contact_force_n == 0.0 and "ln_contact_force_n" not in off.result["names"]
@@ -430,21 +439,10 @@ def test_chain_fit_tunnel_force_recovers_known_parameters_and_steepens_the_law()
     exponent, within-press error, a bootstrap range); the default fit of the same runs leaves a larger error; on a
     power-law chain the fitted F_t runs off to large forces (the term switches itself off); F_t = 0 is the power law
     bit for bit."""
-    true = CF.ChainParams(exponent=0.8, r0_ohm=3000.0, creep_amplitude=1.0, creep_force_n=10.0, tau_min_s=0.1,
-                          tau_max_s=3.0, n_creep=4, level_log_sd=0.3, r_ref_ohm=1e4, full_scale=1000.0, noise_sd=0.0,
-                          tunnel_force_n=8.0)
+    true, p0, runs, fit = _fit_with_term("tunnel_force_n", 8.0, 30.0, 0.1)
     g = np.array([1.0, 10.0, 20.0])
     slope = np.diff(np.log(CF.film_resistance(g, 1e3, _replace(true, creep_amplitude=1e-9)))) / np.diff(np.log(g))
     assert slope[0] > -0.8 - 10.0 / 8.0 * 0.9 and slope[1] < -0.8 - 10.0 / 8.0  # steepens with force
-    p0 = CF.ChainParams(r_ref_ohm=1e4, full_scale=1000.0, n_creep=4)
-    runs = _synthetic_runs(true, n_runs=3, low_n=0.5, high_n=30.0)
-    fit = CF.fit_chain(runs, p0, n_boot=2, level_prior=True, fit_tunnel=True)
-    q = fit.params
-    assert abs(np.log(q.tunnel_force_n / 8.0)) < 0.25, q.tunnel_force_n
-    assert abs(q.exponent - 0.8) < 0.1, q.exponent
-    assert fit.error["rms_log_reading_within_press"] < 0.03
-    assert "ln_tunnel_force_n" in fit.result["names"] and "tunnel_force_n" in fit.ranges
-    assert all("tunnel_force_n" in b for b in CF.randomization_from_fit(fit, runs).boot)
     off = CF.fit_chain(runs, p0, n_boot=0, level_prior=True)
     assert off.params.tunnel_force_n == 0.0 and off.error["rms_log_reading_within_press"] > 2 * fit.error["rms_log_reading_within_press"]
     none = CF.fit_chain(_synthetic_runs(_replace(true, tunnel_force_n=0.0), n_runs=3, low_n=0.5, high_n=30.0), p0,
