@@ -48,7 +48,8 @@ FEED_WORLDS = 32768  # episodes per batch of worlds: 2.4e7 world-steps/s on an H
 PENDING_PER_WRITER = 2  # shards handed to the writers and not yet written, per writer: one being written, one
 # queued, so no writer idles while the driver packs the next batch (~1.4 GB per shard of 8192 bench episodes) ...
 PENDING_RAM_FRACTION = 0.25  # ... and no more bytes pending than this fraction of the host's memory
-RAMP_BATCHES = 2  # batches of worlds / 4 and worlds / 2 episodes before the full ones (see _groups)
+RAMP_BATCHES = int(os.environ.get("PIEZOTWIN_RAMP_BATCHES", "2"))  # batches of worlds / 4 and worlds / 2 episodes before
+# the full ones (see _groups); the variable: the bench's A/B (0: full batches from the first)
 PHYSICS_PROCESSES = 2  # each steps its own batch: one's host work (its protocols) overlaps the other's GPU stepping
 GPU_TURNS = os.environ.get("PIEZOTWIN_GPU_TURNS", "1") == "1"  # their GPU stepping in turns, in batch order (see
 # `_gpu_turn`); the variable: the bench's A/B (0: side by side, as before session 22)

@@ -1,0 +1,16 @@
+#!/usr/bin/env bash
+# The device calls of session 23 (issue 16), one H200: `bash bench/h200_s23.sh A`. Logs and result files go to $OUT.
+# A: cnt_pdms 8192 as typed, now that the physics processes step in turns (session 22 measured it before), then
+#    stepping alone; velostat 16384 stepped alone in one batch of 16384 worlds (the default plan: a ramp batch of
+#    8192, then 8192) and the plain CLI without the ramp (PIEZOTWIN_RAMP_BATCHES=0: one batch), against
+#    user-cli-h200-s22-velostat-turns.json (the default plan, 54.2 s).
+source "$(dirname "$0")/h100_lib.sh"  # environment, cli (plain CLI + MuJoCo Warp alone), pack, warm
+case "$1" in
+A)  warm cnt_pdms; cli cnt_pdms 8192 h200-s23-cnt_pdms
+    warm velostat
+    timeout 200 python3 bench/bench_mjw_alone.py --family velostat --episodes 16384 --worlds 16384 \
+        --tag h200-s23-velostat-one-batch 2>&1 | grep -v "^Module" | tee $OUT/r/logs/mjw-alone-h200-s23-velostat-one-batch.log | tail -3
+    cp bench/results/mjw-alone-h200-s23-velostat-one-batch*.json $OUT/r/ 2>/dev/null
+    PIEZOTWIN_RAMP_BATCHES=0 cli velostat 16384 h200-s23-velostat-noramp noalone
+    pack A ;;
+esac
