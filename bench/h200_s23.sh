@@ -13,4 +13,11 @@ A)  warm cnt_pdms; cli cnt_pdms 8192 h200-s23-cnt_pdms
     cp bench/results/mjw-alone-h200-s23-velostat-one-batch*.json $OUT/r/ 2>/dev/null
     PIEZOTWIN_RAMP_BATCHES=0 cli velostat 16384 h200-s23-velostat-noramp noalone
     pack A ;;
+B)  # cnt_pdms 8192 as typed, the GPU turns off (side by side, as before session 22) then on, back to back in one
+    # call (A's run with turns took 56.4 s against session 22's 50.2 s without, in another call whose disk wrote
+    # 13 % slower)
+    warm cnt_pdms
+    PIEZOTWIN_GPU_TURNS=0 cli cnt_pdms 8192 h200-s23-cnt_pdms-sidebyside noalone
+    cli cnt_pdms 8192 h200-s23-cnt_pdms-turns noalone
+    pack B ;;
 esac
