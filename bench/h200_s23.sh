@@ -20,4 +20,12 @@ B)  # cnt_pdms 8192 as typed, the GPU turns off (side by side, as before session
     PIEZOTWIN_GPU_TURNS=0 cli cnt_pdms 8192 h200-s23-cnt_pdms-sidebyside noalone
     cli cnt_pdms 8192 h200-s23-cnt_pdms-turns noalone
     pack B ;;
+C)  # cnt_pdms 8192 in turns, the feed populating its first batch's blocks through that batch's pack
+    # (PIEZOTWIN_POPULATE_THROUGH=1) or stopping when the batch is back (0, the default then), alternated in one call
+    warm cnt_pdms
+    PIEZOTWIN_POPULATE_THROUGH=1 cli cnt_pdms 8192 h200-s23-cnt_pdms-through1 noalone
+    cli cnt_pdms 8192 h200-s23-cnt_pdms-stop1 noalone
+    PIEZOTWIN_POPULATE_THROUGH=1 cli cnt_pdms 8192 h200-s23-cnt_pdms-through2 noalone
+    cli cnt_pdms 8192 h200-s23-cnt_pdms-stop2 noalone
+    pack C ;;
 esac

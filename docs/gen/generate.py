@@ -80,11 +80,25 @@ USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w
             "user-cli-h200-s20-cnt_pdms-noreserve.json", "user-cli-h200-s20-velostat-residual.json",
             "user-cli-h200-s20-cnt_pdms-residual.json", "user-cli-h200-s22-cnt_pdms.json", "user-cli-h200-s22-velostat.json",
             "user-cli-h200-s22-velostat-turns.json", "user-cli-h200-s22-velostat-sidebyside.json",
-            "user-cli-h200-s22-ntype.json", "user-cli-h200-s22-fabric_1.json"]
+            "user-cli-h200-s22-ntype.json", "user-cli-h200-s22-fabric_1.json", "user-cli-h200-s23-cnt_pdms.json",
+            "user-cli-h200-s23-velostat-noramp.json", "user-cli-h200-s23-cnt_pdms-sidebyside.json",
+            "user-cli-h200-s23-cnt_pdms-turns.json"]
 # session 22: the physics processes' GPU stepping in turns against side by side (PIEZOTWIN_GPU_TURNS=0), velostat
 # 16384 episodes, (file, turns); the first pair in one call in the order run, the third an earlier call on the same day
-TURNS_AB = [("user-cli-h200-s22-velostat-turns.json", True), ("user-cli-h200-s22-velostat-sidebyside.json", False),
-            ("user-cli-h200-s22-velostat.json", False)]
+# session 23: the same for cnt_pdms 8192 (bench/h200_s23.sh; A: in turns with stepping alone, another call; B: side by side
+# then in turns, one call): (file, family, turns)
+TURNS_AB = [("user-cli-h200-s22-velostat-turns.json", "velostat", True),
+            ("user-cli-h200-s22-velostat-sidebyside.json", "velostat", False),
+            ("user-cli-h200-s22-velostat.json", "velostat", False),
+            ("user-cli-h200-s23-cnt_pdms-sidebyside.json", "cnt_pdms", False),
+            ("user-cli-h200-s23-cnt_pdms-turns.json", "cnt_pdms", True),
+            ("user-cli-h200-s23-cnt_pdms.json", "cnt_pdms", True)]
+# session 23: velostat 16384 without the feed's ramp (PIEZOTWIN_RAMP_BATCHES=0: one batch of 16384 worlds) against the
+# default plan (a ramp batch of 8192, then 8192; session 22's run in turns), plain CLI and stepping alone (files: the
+# CLI run, its stepping alone as its own file or merged)
+RAMP_AB = [("default plan (8192 + 8192)", "user-cli-h200-s22-velostat-turns.json", None),
+           ("no ramp (one batch of 16384)", "user-cli-h200-s23-velostat-noramp.json",
+            "mjw-alone-h200-s23-velostat-one-batch-velostat.json")]
 # session 20's A/B of the staging buffers page-locked while the first batch steps (bench/h200_s20.sh R; in the
 # order run on one machine): (file, family, reserved)
 STAGING_AB = [("user-cli-h200-s20-velostat-reserve1.json", "velostat", True),
@@ -132,7 +146,8 @@ MULTI_GPU = "gpu-pipeline-h200x2.json"
 # session 22: all four on one H200 in one session, N chosen for about a minute (issue 16); cnt_pdms ran before the
 # GPU turns (its mixed lengths step in several batches; not re-run: no device time left), the others with them (fabric_1
 # 4096 and ntype are one batch or driver-stepped: the turns do not apply)
-USER_CLI_LATEST = [("user-cli-h200-s22-cnt_pdms.json", "cnt_pdms"), ("user-cli-h200-s22-velostat-turns.json", "velostat"),
+# session 23: cnt_pdms re-run with the turns (bench/h200_s23.sh A), the others as in session 22
+USER_CLI_LATEST = [("user-cli-h200-s23-cnt_pdms.json", "cnt_pdms"), ("user-cli-h200-s22-velostat-turns.json", "velostat"),
                    ("user-cli-h200-s22-ntype.json", "ntype"), ("user-cli-h200-s22-fabric_1.json", "fabric_1")]
 
 
@@ -409,21 +424,42 @@ def bench_user_cli() -> str:
                 "its launch queue meanwhile:\n",
                 table(["family", "episodes", "file", "code", "worlds s", "wall s"], chunks)]
     turns = []
-    for name, on in TURNS_AB:
-        r = (load(name) or {}).get("runs", {}).get("velostat")
+    for name, fam, on in TURNS_AB:
+        r = (load(name) or {}).get("runs", {}).get(fam)
         if r and "timings" in r:
             t = r["timings"]["feed"]
-            turns.append([r["episodes"], f"`{name}`", "in turns" if on else "side by side",
+            turns.append([fam, r["episodes"], f"`{name}`", "in turns" if on else "side by side",
                           num(t.get("physics (first batch): worlds")), num(t.get("physics: worlds")),
-                          num(t.get("wait for physics (first batch)")), num(r["seconds"]),
+                          num(t.get("wait for physics (first batch)")),
+                          num(t.get("populate ahead: GB populated (a size, not seconds)")), num(t.get("pack")),
+                          num(r["seconds"]),
                           pct(r["mjw_alone"]["seconds"] / r["seconds"]) if r.get("mjw_alone") else "–"])
     if turns:
         out += ["The physics processes' GPU stepping in turns (session 22, one H200): two batches stepped side by side "
                 "time-slice the GPU, so each took twice one batch's stepping and the driver waited for the first "
                 "through both; in turns (`GPU_TURNS`, batch order, `PIEZOTWIN_GPU_TURNS=0`: off) the first comes back "
-                "after one batch's stepping and its sensor stage and writes overlap the second's:\n",
-                table(["episodes", "file", "stepping", "first batch worlds s", "later worlds s",
-                       "wait for the first batch s", "wall s", "of stepping alone"], turns)]
+                "after one batch's stepping and its sensor stage and writes overlap the second's. cnt_pdms (session 23) "
+                "is bound by its writers and its pack, not by the stepping: in turns its first batch comes back sooner, "
+                "so the driver stops populating its blocks earlier (`populate ahead: GB populated`) and packs into "
+                "fresh pages; its two runs of one call differ by about what two calls of one setting do:\n",
+                table(["family", "episodes", "file", "stepping", "first batch worlds s", "later worlds s",
+                       "wait for the first batch s", "GB populated ahead", "pack s", "wall s", "of stepping alone"],
+                      turns)]
+    ramp = []
+    for label, name, alone_name in RAMP_AB:
+        r = (load(name) or {}).get("runs", {}).get("velostat")
+        a = load(alone_name) if alone_name else (r or {}).get("mjw_alone")
+        if r and "timings" in r and a:
+            t = r["timings"]["feed"]
+            ramp.append([label, f"`{name}`", num(t.get("wait for physics (first batch)")), num(t.get("simulate")),
+                         num(t.get("pack")), num(r["seconds"]), num(a["worlds_seconds"]), num(a["seconds"]),
+                         pct(a["seconds"] / r["seconds"])])
+    if ramp:
+        out += ["The feed's ramp on a stepping-bound run (session 23, velostat 16384, one H200): one batch of 16384 "
+                "worlds steps in less time than two of 8192, but nothing then overlaps its sensor stage, pack and "
+                "writes, and the plain CLI is slower; the ramp stays:\n",
+                table(["plan", "file", "wait for the first batch s", "sensor stage s", "pack s", "wall s",
+                       "stepping alone: worlds s", "stepping alone s", "of stepping alone"], ramp)]
     staging = []
     for name, fam, reserved in STAGING_AB:
         r = (load(name) or {}).get("runs", {}).get(fam)
