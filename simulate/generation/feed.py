@@ -359,10 +359,12 @@ ARENA_ALIGN = 64  # bytes: a carved piece starts on this boundary (every dtype's
 POPULATE_MARGIN = 1.05  # populated ahead: the estimate (`batch_pack_bytes`) and this share more (alignment, lengths)
 POPULATE_AHEAD = os.environ.get("PIEZOTWIN_POPULATE_AHEAD", "1") == "1"  # the GPU feed populates its first batch's
 # blocks while that batch steps (`BlockPool.populate_ahead`); "0": off (the bench's A/B) ...
-POPULATE_THROUGH = os.environ.get("PIEZOTWIN_POPULATE_THROUGH", "0") == "1"  # ... and, "1", goes on populating them
-# (its thread; madvise releases the GIL) while the driver packs that batch, instead of stopping when the batch is
-# back: in turns the first batch comes back sooner, with fewer GB populated (cnt_pdms 8192 on an H200, session 23:
-# 4.8-8.1 GB against 16.1 side by side; pack 16.3-16.5 s against 11.5 s)
+POPULATE_THROUGH = os.environ.get("PIEZOTWIN_POPULATE_THROUGH", "1") == "1"  # ... and goes on populating them (its
+# thread; madvise releases the GIL) while the driver packs that batch, instead of stopping when the batch is back
+# ("0", as before session 23: the bench's A/B): in turns the first batch comes back sooner, with fewer GB populated
+# (cnt_pdms 8192 on an H200, session 23: 4.8-8.1 GB against 16.1 side by side; pack 16.3-16.5 s against 11.5 s).
+# Alternated in one call (bench/h200_s23.sh C): pack 12.0 / 9.9 s through against 16.4 / 16.2 s stopping, wall
+# 58.5 / 55.0 s against 58.2 / 59.8 s (the writers bound the wall)
 RESERVE_STAGING = os.environ.get("PIEZOTWIN_RESERVE_STAGING", "1") == "1"  # ... and, on a GPU, page-locks the staging
 # buffers its first slice copies back into (`probe_batch`'s plan; ~0.35 s per GB on the H200 host, 7.3 GB for velostat's
 # 2048-episode slices); "0": off (the bench's A/B)
