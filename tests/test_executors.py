@@ -446,6 +446,39 @@ def test_pack_into_blocks_populated_ahead_from_the_estimate(monkeypatch, split):
     assert not pool.blocks and not pool.arenas
 
 
+def test_pool_packs_while_arenas_are_populated(monkeypatch):
+    """POPULATE_THROUGH: the driver packs while the populating thread is still adding arenas. Every piece lands
+    whole in one block (an arena populated by then or a block of its own), with the plain path's bytes, and the
+    thread goes on to its full size meanwhile (`populated_bytes` does not stop it)."""
+    from sensors.data.manifest import episode_seed
+    from simulate.generation import feed
+
+    cfg, sensor = _gpu_slicing_on_cpu(monkeypatch)
+    need = feed.batch_pack_bytes(cfg, sensor, list(range(7)))
+    monkeypatch.setattr(feed, "ARENA_BYTES", need // 7 + 4096)
+    pool = feed.BlockPool()
+    try:
+        pool.populate_ahead(7 * feed.ARENA_BYTES)
+        early = pool.populated_bytes()
+        packs = feed.produce(cfg, [0, 1, 2, 3], sensor, pool=pool)
+        pool._filler.join()
+        assert early <= pool.populated_bytes() == 7 * feed.ARENA_BYTES
+        seeds = [episode_seed(cfg.generation.root_seed, k) for k in range(7)]
+        ref = run.simulate_episodes(cfg, seeds, [f"ep-{k:06d}" for k in range(7)], sensor, indices=list(range(7)))
+        for p in packs:
+            assert all(n in pool.blocks for n in p.block_names)
+            pieces = p.arrays({n: pool.blocks[n].buf for n in p.block_names})
+            for ep_id, _, piece, row in p.episodes:
+                r = next(r for r in ref if r.ep_id == ep_id)
+                for n, c in r.channels.items():
+                    got = pieces[piece][n][row] if p.specs[n][3] else pieces[piece][n]
+                    np.testing.assert_array_equal(got, c.data, err_msg=f"{ep_id} {n}")
+            pieces = None
+    finally:
+        pool.close()
+    assert not pool.blocks and not pool.arenas
+
+
 # fabric_1's staircase, shortened (the same kind, controls and sensor; two levels, 1 s dwells)
 FABRIC_SHORT = ["protocol.stair_return_points_n=[1.0, 2.0]", "protocol.stair_dwell_s=1 s", "generation.episodes=3",
                 "generation.episodes_per_shard=2", "generation.root_seed=7"]

@@ -82,7 +82,9 @@ USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w
             "user-cli-h200-s22-velostat-turns.json", "user-cli-h200-s22-velostat-sidebyside.json",
             "user-cli-h200-s22-ntype.json", "user-cli-h200-s22-fabric_1.json", "user-cli-h200-s23-cnt_pdms.json",
             "user-cli-h200-s23-velostat-noramp.json", "user-cli-h200-s23-cnt_pdms-sidebyside.json",
-            "user-cli-h200-s23-cnt_pdms-turns.json"]
+            "user-cli-h200-s23-cnt_pdms-turns.json", "user-cli-h200-s23-cnt_pdms-through1.json",
+            "user-cli-h200-s23-cnt_pdms-stop1.json", "user-cli-h200-s23-cnt_pdms-through2.json",
+            "user-cli-h200-s23-cnt_pdms-stop2.json"]
 # session 22: the physics processes' GPU stepping in turns against side by side (PIEZOTWIN_GPU_TURNS=0), velostat
 # 16384 episodes, (file, turns); the first pair in one call in the order run, the third an earlier call on the same day
 # session 23: the same for cnt_pdms 8192 (bench/h200_s23.sh; A: in turns with stepping alone, another call; B: side by side
@@ -93,6 +95,10 @@ TURNS_AB = [("user-cli-h200-s22-velostat-turns.json", "velostat", True),
             ("user-cli-h200-s23-cnt_pdms-sidebyside.json", "cnt_pdms", False),
             ("user-cli-h200-s23-cnt_pdms-turns.json", "cnt_pdms", True),
             ("user-cli-h200-s23-cnt_pdms.json", "cnt_pdms", True)]
+# session 23: the first batch's blocks populated through its pack (PIEZOTWIN_POPULATE_THROUGH, now the default) or
+# not, cnt_pdms 8192 in turns, alternated in one call (bench/h200_s23.sh C): (file, through)
+POPULATE_THROUGH_AB = [("user-cli-h200-s23-cnt_pdms-through1.json", True), ("user-cli-h200-s23-cnt_pdms-stop1.json", False),
+                       ("user-cli-h200-s23-cnt_pdms-through2.json", True), ("user-cli-h200-s23-cnt_pdms-stop2.json", False)]
 # session 23: velostat 16384 without the feed's ramp (PIEZOTWIN_RAMP_BATCHES=0: one batch of 16384 worlds) against the
 # default plan (a ramp batch of 8192, then 8192; session 22's run in turns), plain CLI and stepping alone (files: the
 # CLI run, its stepping alone as its own file or merged)
@@ -146,8 +152,9 @@ MULTI_GPU = "gpu-pipeline-h200x2.json"
 # session 22: all four on one H200 in one session, N chosen for about a minute (issue 16); cnt_pdms ran before the
 # GPU turns (its mixed lengths step in several batches; not re-run: no device time left), the others with them (fabric_1
 # 4096 and ntype are one batch or driver-stepped: the turns do not apply)
-# session 23: cnt_pdms re-run with the turns (bench/h200_s23.sh A), the others as in session 22
-USER_CLI_LATEST = [("user-cli-h200-s23-cnt_pdms.json", "cnt_pdms"), ("user-cli-h200-s22-velostat-turns.json", "velostat"),
+# session 23: cnt_pdms on the code now (the turns, its blocks populated through the first pack): the first such run of
+# bench/h200_s23.sh C (its stepping alone: 16.5 s in A, user-cli-h200-s23-cnt_pdms.json); the others as in session 22
+USER_CLI_LATEST = [("user-cli-h200-s23-cnt_pdms-through1.json", "cnt_pdms"), ("user-cli-h200-s22-velostat-turns.json", "velostat"),
                    ("user-cli-h200-s22-ntype.json", "ntype"), ("user-cli-h200-s22-fabric_1.json", "fabric_1")]
 
 
@@ -445,6 +452,22 @@ def bench_user_cli() -> str:
                 table(["family", "episodes", "file", "stepping", "first batch worlds s", "later worlds s",
                        "wait for the first batch s", "GB populated ahead", "pack s", "wall s", "of stepping alone"],
                       turns)]
+    through = []
+    for name, on in POPULATE_THROUGH_AB:
+        r = (load(name) or {}).get("runs", {}).get("cnt_pdms")
+        if r and "timings" in r:
+            t = r["timings"]["feed"]
+            through.append([r["episodes"], f"`{name}`", "through the pack" if on else "until the batch is back",
+                            num(t.get("populate ahead: GB populated (a size, not seconds)")), num(t.get("pack")),
+                            num(sum(t.get(f"writers: {k}", 0.0) for k in ("episodes", "close, fsync", "sha256"))),
+                            num(r["seconds"]), pct(r["of_raw"])])
+    if through:
+        out += ["The first batch's blocks populated through its pack (session 23, cnt_pdms in turns, alternated in one "
+                "call on one H200; `POPULATE_THROUGH`, `PIEZOTWIN_POPULATE_THROUGH=0`: stop when the batch is back, as "
+                "before): the populating thread goes on beside the pack, so fewer pieces land on fresh pages. The "
+                "pack is shorter in both pairs; the wall, bound by the writers, moves by about what repeats do:\n",
+                table(["episodes", "file", "populating", "GB populated when the batch was back", "pack s",
+                       "writer-seconds", "wall s", "of the disk's raw speed"], through)]
     ramp = []
     for label, name, alone_name in RAMP_AB:
         r = (load(name) or {}).get("runs", {}).get("velostat")
