@@ -398,6 +398,23 @@ def test_staging_plan_names_the_largest_slice_copies(monkeypatch):
     assert plan_two == {**plan, **{(site, 1): v for (site, _), v in plan.items()}}
 
 
+def _assert_packs_are_plain(cfg, sensor, pool, packs, n_episodes: int) -> None:
+    """Every channel of every packed episode (read from the pool's blocks) equals the plain path's."""
+    from sensors.data.manifest import episode_seed
+
+    seeds = [episode_seed(cfg.generation.root_seed, k) for k in range(n_episodes)]
+    ref = run.simulate_episodes(cfg, seeds, [f"ep-{k:06d}" for k in range(n_episodes)], sensor,
+                                indices=list(range(n_episodes)))
+    for p in packs:
+        pieces = p.arrays({n: pool.blocks[n].buf for n in p.block_names})
+        for ep_id, _, piece, row in p.episodes:
+            r = next(r for r in ref if r.ep_id == ep_id)
+            for n, c in r.channels.items():
+                got = pieces[piece][n][row] if p.specs[n][3] else pieces[piece][n]
+                np.testing.assert_array_equal(got, c.data, err_msg=f"{ep_id} {n}")
+        pieces = None
+
+
 @pytest.mark.parametrize("split", [False, True])
 def test_pack_into_blocks_populated_ahead_from_the_estimate(monkeypatch, split):
     """While a batch's physics steps, the feed populates shared blocks (arenas) for its pack from an estimate made
@@ -405,7 +422,6 @@ def test_pack_into_blocks_populated_ahead_from_the_estimate(monkeypatch, split):
     are carved from the arenas at aligned offsets (several per arena), the channels are the plain path's (each
     piece copied in the driver's thread, or split over the pack threads: split), and an arena is carved from its
     start again once every piece has come back."""
-    from sensors.data.manifest import episode_seed
     from simulate.generation import feed
 
     cfg, sensor = _gpu_slicing_on_cpu(monkeypatch)
@@ -426,16 +442,7 @@ def test_pack_into_blocks_populated_ahead_from_the_estimate(monkeypatch, split):
         offsets = [off for p in packs for b in p.blocks for off, _, _ in b[1].values()]
         assert all(o % feed.ARENA_ALIGN == 0 for o in offsets) and any(o > 0 for o in offsets)
         assert [pool.arenas[a][1] for a in arenas] == [2, 1, 1]  # pieces lent per arena (2 + 2 + 2 + 1 episodes)
-        seeds = [episode_seed(cfg.generation.root_seed, k) for k in range(7)]
-        ref = run.simulate_episodes(cfg, seeds, [f"ep-{k:06d}" for k in range(7)], sensor, indices=list(range(7)))
-        for p in packs:
-            pieces = p.arrays({n: pool.blocks[n].buf for n in p.block_names})
-            for ep_id, _, piece, row in p.episodes:
-                r = next(r for r in ref if r.ep_id == ep_id)
-                for n, c in r.channels.items():
-                    got = pieces[piece][n][row] if p.specs[n][3] else pieces[piece][n]
-                    np.testing.assert_array_equal(got, c.data, err_msg=f"{ep_id} {n}")
-            pieces = None
+        _assert_packs_are_plain(cfg, sensor, pool, packs, 7)
         for p in packs:  # the shards are written: their pieces come back
             for name in p.block_names:
                 pool.put(name)
@@ -450,7 +457,6 @@ def test_pool_packs_while_arenas_are_populated(monkeypatch):
     """POPULATE_THROUGH: the driver packs while the populating thread is still adding arenas. Every piece lands
     whole in one block (an arena populated by then or a block of its own), with the plain path's bytes, and the
     thread goes on to its full size meanwhile (`populated_bytes` does not stop it)."""
-    from sensors.data.manifest import episode_seed
     from simulate.generation import feed
 
     cfg, sensor = _gpu_slicing_on_cpu(monkeypatch)
@@ -463,17 +469,8 @@ def test_pool_packs_while_arenas_are_populated(monkeypatch):
         packs = feed.produce(cfg, [0, 1, 2, 3], sensor, pool=pool)
         pool._filler.join()
         assert early <= pool.populated_bytes() == 7 * feed.ARENA_BYTES
-        seeds = [episode_seed(cfg.generation.root_seed, k) for k in range(7)]
-        ref = run.simulate_episodes(cfg, seeds, [f"ep-{k:06d}" for k in range(7)], sensor, indices=list(range(7)))
-        for p in packs:
-            assert all(n in pool.blocks for n in p.block_names)
-            pieces = p.arrays({n: pool.blocks[n].buf for n in p.block_names})
-            for ep_id, _, piece, row in p.episodes:
-                r = next(r for r in ref if r.ep_id == ep_id)
-                for n, c in r.channels.items():
-                    got = pieces[piece][n][row] if p.specs[n][3] else pieces[piece][n]
-                    np.testing.assert_array_equal(got, c.data, err_msg=f"{ep_id} {n}")
-            pieces = None
+        assert all(n in pool.blocks for p in packs for n in p.block_names)
+        _assert_packs_are_plain(cfg, sensor, pool, packs, 7)
     finally:
         pool.close()
     assert not pool.blocks and not pool.arenas
