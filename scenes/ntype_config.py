@@ -33,6 +33,13 @@ class NtypeElementConfig(Strict):
       "eq8":     eq. 8 taken literally: the inclined columns' projections at +-phi from the x axis
                  (phi = inclined_azimuth_deg), n_{3,1} = (-s cos phi, -+s sin phi, c): each inclined column
                  observes F_x and F_y together (the paper's "strong coupling between F_x and F_y").
+      "decoupled": sect. 2.3's own model (eqs. 4-5 and "Delta l_i ~ Delta i"): column i shortens by the top
+                 electrode's displacement along axis i (columns 3, 1, 2 along x, y, z), each axis as stiff as its
+                 column, E S / l_i, so each column observes one component. With no filler and rho constant
+                 (filler moduli 0, piezo_coefficient 0: eq. 1) it gives the paper's ranges exactly: 4.8 N strains a
+                 column by 4.8 / (E S) = 19.7 % ("does not exceed 20 %"), R' / R = (1 - 0.197)^2 = 0.645, 50 ->
+                 32.3 and 25 -> 16.1 kOhm (`DECOUPLED_ELEMENT`). An idealisation: an inclined column also moves
+                 with the normal displacement in any real N.
     The element's top moves as one (Delta l_i ~ the electrode displacement, ntype sect. 2.3), resisted by the
     three columns and the insulating GD-401 rubber that fills the rest of its cell (the filler, a bonded
     elastic block: shear G A / h, compression E A / h; Timoshenko & Goodier 1970), so the shear coupling of
@@ -47,7 +54,7 @@ class NtypeElementConfig(Strict):
     normal_length_m: Pos(0.1) = 0.010  # ntype sect. 2.2: 1 cm
     inclined_length_m: Pos(0.1) = 0.014142135623730951  # ntype sect. 2.2: sqrt(2) cm
     inclination_deg: Annotated[float, Field(gt=0, lt=90)] = 45.0  # ntype sect. 2.2
-    reading: Literal["crossed", "coplanar", "eq8"] = "crossed"  # estimate: Figure 1 read as above (crossed wires)
+    reading: Literal["crossed", "coplanar", "eq8", "decoupled"] = "crossed"  # estimate: Figure 1 read as above (crossed wires)
     inclined_azimuth_deg: Annotated[float, Field(ge=0, le=90)] = 45.0  # "eq8" only: eq. 8's phi, not given; estimate: 45 puts the two projections at right angles like the wires
     filler_youngs_modulus_pa: NonNeg(1e10) = 6.1e6  # estimate: GD-401 filler as stiff as the conductive rubber (ntype sect. 2.1 gives only the latter)
     filler_shear_modulus_pa: NonNeg(1e10) = 2.05e6  # estimate: likewise, the paper's 2.05 MPa
@@ -140,6 +147,11 @@ class NtypeSensorConfig(Strict):
 # 150 episodes x 20 frames = 3000 samples. One frame a second:
 # estimate, long beside the 0.3 s lag so that each sample is a settled reading (the paper's are static).
 # (frequencies_hz is unused by this kind; set below the 1 Hz rate's limit.)
+# sect. 2.3's element as the paper models it (reading "decoupled"): no filler in the load path, rho constant (eq. 1)
+DECOUPLED_ELEMENT = [
+    "sensor.element.reading=decoupled", "sensor.element.filler_youngs_modulus_pa=0",
+    "sensor.element.filler_shear_modulus_pa=0", "sensor.resistance.piezo_coefficient=0",
+]
 PAPER_PROTOCOL = [
     "protocol.kind=element_loads", "protocol.amplitude_min=0", "protocol.amplitude_max=4.8",
     "protocol.force_distribution=uniform",

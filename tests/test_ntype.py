@@ -60,6 +60,23 @@ def test_column_reading_decides_what_each_column_observes(cfg, reading):
         assert rz[0] < 1e-9 and rz[1] < 1e-9
 
 
+def test_decoupled_reading_is_sect_2_3_and_gives_the_paper_ranges():
+    """Reading "decoupled" with DECOUPLED_ELEMENT (no filler, rho constant): each column observes its own component
+    only, strained by F / (E S) (eq. 5), so 4.8 N puts R_x, R_y at 50 (1 - 0.197)^2 = 32.3 kOhm and R_z at 16.1
+    kOhm, the paper's ranges (sect. 3.2), and the element is linear in its displacement (eq. 4)."""
+    from scenes.ntype_config import DECOUPLED_ELEMENT
+
+    c = load_scene("ntype", DECOUPLED_ELEMENT)
+    obs = np.array([np.abs(_rel_change(c, F)) > 1e-9 for F in ([1, 0, 0], [0, 1, 0], [0, 0, -1])])
+    np.testing.assert_array_equal(obs.astype(int), np.eye(3, dtype=int))
+    e = 4.8 / (c.sensor.element.youngs_modulus_pa * c.sensor.element.column_area_m2)
+    assert e == pytest.approx(0.1967, abs=1e-4)
+    full = [_rel_change(c, F) for F in ([4.8, 0, 0], [0, 4.8, 0], [0, 0, -4.8])]
+    assert 50e3 * (1 + full[0][RX]) == pytest.approx(32.26e3, rel=1e-3)
+    assert 50e3 * (1 + full[1][RY]) == pytest.approx(32.26e3, rel=1e-3)
+    assert 25e3 * (1 + full[2][RZ]) == pytest.approx(16.13e3, rel=1e-3)
+
+
 def test_normal_column_shear_coupling_follows_the_column_stiffness(cfg):
     """The R_z change under pure F_x comes from the inclined columns' off-diagonal stiffness: doubling the
     columns' modulus about doubles it (the filler block alone would leave it at zero)."""

@@ -92,7 +92,7 @@ def symmetric_frames(E: np.ndarray, F: np.ndarray, kind: str, grid: tuple[int, i
     return np.ascontiguousarray(Em.reshape(n, ny * nx, 3)), np.ascontiguousarray(Fm.reshape(n, ny * nx, 3))
 
 
-SYMMETRY_OF_READING = {"crossed": "transpose", "coplanar": "mirror_x", "eq8": "mirror_y"}
+SYMMETRY_OF_READING = {"crossed": "transpose", "coplanar": "mirror_x", "eq8": "mirror_y", "decoupled": "transpose"}
 
 
 class ElementMLP:

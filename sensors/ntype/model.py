@@ -49,6 +49,8 @@ def column_normals(cfg: SceneConfig) -> np.ndarray:
         n3, n1 = (-s, 0.0, c), (0.0, -s, c)
     elif el.reading == "coplanar":
         n3, n1 = (-s, 0.0, c), (s, 0.0, c)
+    elif el.reading == "decoupled":  # sect. 2.3: Delta l_i ~ the electrode's displacement along axis i
+        n3, n1 = (-1.0, 0.0, 0.0), (0.0, -1.0, 0.0)
     else:  # "eq8": projections at +-phi from the x axis
         a = math.radians(el.inclined_azimuth_deg)
         n3, n1 = (-s * math.cos(a), -s * math.sin(a), c), (-s * math.cos(a), s * math.sin(a), c)

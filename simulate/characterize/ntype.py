@@ -8,7 +8,8 @@
 3. MuJoCo: a batch of default press_stroke episodes (our harder task); the shear the stick-slip contact delivers
    against the protocol's target, and the ranges of labels and resistances in that data; the same ranges on the
    paper's experiment (protocol kind element_loads, scenes/ntype_config.py PAPER_PROTOCOL), side by side.
-4. Column readings of Figure 1 / eq. 8 (crossed, coplanar, eq8): each column's change under 4.8 N of each
+4. Column readings of Figure 1 / eq. 8 (crossed, coplanar, eq8) and sect. 2.3 (decoupled, with its element: no
+   filler, rho constant): each column's change under 4.8 N of each
    component alone, i.e. which component each column can observe.
 5. Scanned readout: mean deviation of the scanned from the true resistances on the paper-protocol data, and an
    unloaded element's reading change when all others load, per scan scheme (ideal, floating, grounded, feedback).
@@ -151,9 +152,11 @@ def readings(cfg: SceneConfig) -> dict:
     without lag or crosstalk: u = K^-1 F, e = N u / l, R = R0 (1 + e)^2 exp(beta e))."""
     from sensors.ntype.model import ntype_params
 
+    from scenes.ntype_config import DECOUPLED_ELEMENT
+
     out = {}
-    for r in ("crossed", "coplanar", "eq8"):
-        p = ntype_params(load_scene_from(cfg, [f"sensor.element.reading={r}"]))
+    for r in ("crossed", "coplanar", "eq8", "decoupled"):  # "decoupled": sect. 2.3's element (DECOUPLED_ELEMENT)
+        p = ntype_params(load_scene_from(cfg, DECOUPLED_ELEMENT if r == "decoupled" else [f"sensor.element.reading={r}"]))
         d = {}
         for name, F in (("Fx", [4.8, 0, 0]), ("Fy", [0, 4.8, 0]), ("Fz", [0, 0, -4.8])):
             e = p.normals @ (p.compliance @ np.array(F, float)) / p.lengths_m
@@ -189,7 +192,9 @@ def characterize_ntype(cfg: SceneConfig, backend: str = "warp", device: str = "c
     rows.append(["paper's experiment: labels F_x / F_y / F_z range (N)", f"{lr['x'][0]:.1f}..{lr['x'][1]:.1f}",
                  f"{lr['y'][0]:.1f}..{lr['y'][1]:.1f}", f"{lr['z'][0]:.1f}..{lr['z'][1]:.1f}", "0..4.8 each"])
     for r, d in rd.items():
-        rows.append([f"reading '{r}' ({'default' if r == cfg.sensor.element.reading else 'alternative'}): ΔR/R0 (%) under 4.8 N of F_x / F_y / F_z"]
+        what = ("sect. 2.3's element: no filler, rho constant" if r == "decoupled"
+                else "default" if r == cfg.sensor.element.reading else "alternative")
+        rows.append([f"reading '{r}' ({what}): ΔR/R0 (%) under 4.8 N of F_x / F_y / F_z"]
                     + [" / ".join(f"{d[k][j]:+.1f}" for k in ("Fx", "Fy", "Fz")) for j in range(3)]
                     + ["col 3 ~ F_x, col 1 ~ F_y, col 2 ~ F_z; F_z weakly coupled"])
     for sch, v in pp["scan"].items():
