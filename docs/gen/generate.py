@@ -1663,7 +1663,7 @@ def _ntype_decoupled(runs: dict[str, Any]) -> list[str]:
             "a column by 19.7 % (\"does not exceed 20 %\") and gives R' / R = 0.645: 50 -> 32.3 and 25 -> 16.1 kOhm, "
             "the paper's ranges, with no estimated coefficient. The default (`crossed`: inclined columns that also move "
             "with the normal displacement, in a filler block) needs an estimated exponent to reach them. On the paper's "
-            "task (quick, `" + m.get("command", "") + "`, and the same at seed 1 without ours), Table 1's errors come to the paper's size, because each "
+            "task (quick, `" + m.get("command", "") + "`, and the same at the other seeds without ours), Table 1's errors come to the paper's size, because each "
             "column now sees its own component only. But the best spread stays at the sweep's edge, and window 5 no "
             "longer beats Table 1 on F_z. The default stays; the reading is an option:\n",
             table(["run", "Table 1 at spread 7: E_Fx / E_Fy / E_Fz (%)", "at spread 10"], rows),
