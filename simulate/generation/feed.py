@@ -18,7 +18,7 @@ batches. Here a three-stage pipeline runs over batches of several shards' episod
    a shard goes to the writers as soon as its episodes are packed, and the first batches are smaller
    (RAMP_BATCHES), so the writers start early (a modest run is one batch); while the driver waits for the first
    batch, the blocks its pack will fill are populated ahead (`BlockPool.populate_ahead`, sized by
-   `batch_pack_bytes`). Kinds with their own contact stage (ntype's press_stroke) step their worlds here in the
+   `batch_pack_bytes`), and go on being populated beside that batch's pack (POPULATE_THROUGH). Kinds with their own contact stage (ntype's press_stroke) step their worlds here in the
    driver instead, in full batches from the first (no processes to overlap, no ramp);
 3. writer processes (spawned; one shard per task, at most PENDING_PER_WRITER queued each) write the shards and
    make their manifest entries.
