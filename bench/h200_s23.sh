@@ -28,4 +28,7 @@ C)  # cnt_pdms 8192 in turns, the feed populating its first batch's blocks throu
     PIEZOTWIN_POPULATE_THROUGH=1 cli cnt_pdms 8192 h200-s23-cnt_pdms-through2 noalone
     cli cnt_pdms 8192 h200-s23-cnt_pdms-stop2 noalone
     pack C ;;
+D)  # velostat 16384 as typed on the code now (blocks populated through the first pack), then stepping alone
+    warm velostat; cli velostat 16384 h200-s23-velostat
+    pack D ;;
 esac
