@@ -84,7 +84,7 @@ USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w
             "user-cli-h200-s23-velostat-noramp.json", "user-cli-h200-s23-cnt_pdms-sidebyside.json",
             "user-cli-h200-s23-cnt_pdms-turns.json", "user-cli-h200-s23-cnt_pdms-through1.json",
             "user-cli-h200-s23-cnt_pdms-stop1.json", "user-cli-h200-s23-cnt_pdms-through2.json",
-            "user-cli-h200-s23-cnt_pdms-stop2.json"]
+            "user-cli-h200-s23-cnt_pdms-stop2.json", "user-cli-h200-s23-velostat.json"]
 # session 22: the physics processes' GPU stepping in turns against side by side (PIEZOTWIN_GPU_TURNS=0), velostat
 # 16384 episodes, (file, turns); the first pair in one call in the order run, the third an earlier call on the same day
 # session 23: the same for cnt_pdms 8192 (bench/h200_s23.sh; A: in turns with stepping alone, another call; B: side by side
@@ -153,8 +153,10 @@ MULTI_GPU = "gpu-pipeline-h200x2.json"
 # GPU turns (its mixed lengths step in several batches; not re-run: no device time left), the others with them (fabric_1
 # 4096 and ntype are one batch or driver-stepped: the turns do not apply)
 # session 23: cnt_pdms on the code now (the turns, its blocks populated through the first pack): the first such run of
-# bench/h200_s23.sh C (its stepping alone: 16.5 s in A, user-cli-h200-s23-cnt_pdms.json); the others as in session 22
-USER_CLI_LATEST = [("user-cli-h200-s23-cnt_pdms-through1.json", "cnt_pdms"), ("user-cli-h200-s22-velostat-turns.json", "velostat"),
+# bench/h200_s23.sh C (its stepping alone: 16.5 s in A, user-cli-h200-s23-cnt_pdms.json); velostat on the code now
+# (bench/h200_s23.sh D, with stepping alone); ntype and fabric_1 as in session 22 (one batch or driver-stepped: the
+# session's changes do not reach their runs)
+USER_CLI_LATEST = [("user-cli-h200-s23-cnt_pdms-through1.json", "cnt_pdms"), ("user-cli-h200-s23-velostat.json", "velostat"),
                    ("user-cli-h200-s22-ntype.json", "ntype"), ("user-cli-h200-s22-fabric_1.json", "fabric_1")]
 
 
