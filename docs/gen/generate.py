@@ -273,6 +273,12 @@ def bench_cpu() -> str:
     return "\n".join(out) if out else missing("The CPU benchmark results", "Run `python bench/bench_pipeline.py`.")
 
 
+def _feed_run(name: str, family: str) -> tuple[dict, dict] | None:
+    """A plain-CLI results file's run of `family` and its feed timings, or None (missing file, error, no timings)."""
+    r = (load(name) or {}).get("runs", {}).get(family)
+    return (r, r["timings"]["feed"]) if r and "timings" in r else None
+
+
 def bench_user_cli() -> str:
     """Issue 16: `piezotwin generate <family> -o X --episodes N` with defaults, per family, against the raw write
     of the same bytes in the same run (`bench/bench_user_cli.py`)."""
@@ -434,9 +440,8 @@ def bench_user_cli() -> str:
                 table(["family", "episodes", "file", "code", "worlds s", "wall s"], chunks)]
     turns = []
     for name, fam, on in TURNS_AB:
-        r = (load(name) or {}).get("runs", {}).get(fam)
-        if r and "timings" in r:
-            t = r["timings"]["feed"]
+        if got := _feed_run(name, fam):
+            r, t = got
             turns.append([fam, r["episodes"], f"`{name}`", "in turns" if on else "side by side",
                           num(t.get("physics (first batch): worlds")), num(t.get("physics: worlds")),
                           num(t.get("wait for physics (first batch)")),
@@ -456,9 +461,8 @@ def bench_user_cli() -> str:
                       turns)]
     through = []
     for name, on in POPULATE_THROUGH_AB:
-        r = (load(name) or {}).get("runs", {}).get("cnt_pdms")
-        if r and "timings" in r:
-            t = r["timings"]["feed"]
+        if got := _feed_run(name, "cnt_pdms"):
+            r, t = got
             through.append([r["episodes"], f"`{name}`", "through the pack" if on else "until the batch is back",
                             num(t.get("populate ahead: GB populated (a size, not seconds)")), num(t.get("pack")),
                             num(sum(t.get(f"writers: {k}", 0.0) for k in ("episodes", "close, fsync", "sha256"))),
@@ -472,10 +476,10 @@ def bench_user_cli() -> str:
                        "writer-seconds", "wall s", "of the disk's raw speed"], through)]
     ramp = []
     for label, name, alone_name in RAMP_AB:
-        r = (load(name) or {}).get("runs", {}).get("velostat")
-        a = load(alone_name) if alone_name else (r or {}).get("mjw_alone")
-        if r and "timings" in r and a:
-            t = r["timings"]["feed"]
+        got = _feed_run(name, "velostat")
+        a = load(alone_name) if alone_name else (got[0].get("mjw_alone") if got else None)
+        if got and a:
+            r, t = got
             ramp.append([label, f"`{name}`", num(t.get("wait for physics (first batch)")), num(t.get("simulate")),
                          num(t.get("pack")), num(r["seconds"]), num(a["worlds_seconds"]), num(a["seconds"]),
                          pct(a["seconds"] / r["seconds"])])
@@ -487,9 +491,8 @@ def bench_user_cli() -> str:
                        "stepping alone: worlds s", "stepping alone s", "of stepping alone"], ramp)]
     staging = []
     for name, fam, reserved in STAGING_AB:
-        r = (load(name) or {}).get("runs", {}).get(fam)
-        if r and "timings" in r:
-            t = r["timings"]["feed"]
+        if got := _feed_run(name, fam):
+            r, t = got
             staging.append([fam, r["episodes"], f"`{name}`", "yes" if reserved else "no",
                             num(t.get("reserve staging: GB page-locked (a size, not seconds)")), num(t.get("reserve staging")),
                             num(t.get("simulate")), num(r["seconds"])])

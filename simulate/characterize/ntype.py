@@ -9,8 +9,8 @@
    against the protocol's target, and the ranges of labels and resistances in that data; the same ranges on the
    paper's experiment (protocol kind element_loads, scenes/ntype_config.py PAPER_PROTOCOL), side by side.
 4. Column readings of Figure 1 / eq. 8 (crossed, coplanar, eq8) and sect. 2.3 (decoupled, with its element: no
-   filler, rho constant): each column's change under 4.8 N of each
-   component alone, i.e. which component each column can observe.
+   filler, rho constant): each column's change under 4.8 N of each component alone, i.e. which component each
+   column can observe.
 5. Scanned readout: mean deviation of the scanned from the true resistances on the paper-protocol data, and an
    unloaded element's reading change when all others load, per scan scheme (ideal, floating, grounded, feedback).
 """
@@ -150,9 +150,8 @@ def load_scene_from(cfg: SceneConfig, overrides: list[str]) -> SceneConfig:
 def readings(cfg: SceneConfig) -> dict:
     """Per column reading: each column's relative change (%) under 4.8 N of F_x, F_y, F_z alone (element chain
     without lag or crosstalk: u = K^-1 F, e = N u / l, R = R0 (1 + e)^2 exp(beta e))."""
-    from sensors.ntype.model import ntype_params
-
     from scenes.ntype_config import DECOUPLED_ELEMENT
+    from sensors.ntype.model import ntype_params
 
     out = {}
     for r in ("crossed", "coplanar", "eq8", "decoupled"):  # "decoupled": sect. 2.3's element (DECOUPLED_ELEMENT)

@@ -18,8 +18,9 @@ batches. Here a three-stage pipeline runs over batches of several shards' episod
    a shard goes to the writers as soon as its episodes are packed, and the first batches are smaller
    (RAMP_BATCHES), so the writers start early (a modest run is one batch); while the driver waits for the first
    batch, the blocks its pack will fill are populated ahead (`BlockPool.populate_ahead`, sized by
-   `batch_pack_bytes`), and go on being populated beside that batch's pack (POPULATE_THROUGH). Kinds with their own contact stage (ntype's press_stroke) step their worlds here in the
-   driver instead, in full batches from the first (no processes to overlap, no ramp);
+   `batch_pack_bytes`), and go on being populated beside that batch's pack (POPULATE_THROUGH). Kinds with their
+   own contact stage (ntype's press_stroke) step their worlds here in the driver instead, in full batches from the
+   first (no processes to overlap, no ramp);
 3. writer processes (spawned; one shard per task, at most PENDING_PER_WRITER queued each) write the shards and
    make their manifest entries.
 
@@ -1111,11 +1112,10 @@ def generate_feed(
                     raise RuntimeError(f"the physics process died stepping shards {group} (complete shards are kept: "
                                        "rerun to resume)") from None
                 add("wait for physics (first batch)" if b == 0 else "wait for physics", t0)
-                if b == 0 and not POPULATE_THROUGH:  # the driver has work now: no more populating (the arenas made
-                    # so far are used first)
-                    seconds["populate ahead: GB populated (a size, not seconds)"] = shared.stop_populating() / 1e9
-                elif b == 0:  # populating goes on beside the pack: how far it had got when the batch came back
-                    seconds["populate ahead: GB populated (a size, not seconds)"] = shared.populated_bytes() / 1e9
+                if b == 0:  # the driver has work now: populating stops (the arenas made so far are used first) or,
+                    # POPULATE_THROUGH, goes on beside the pack; recorded: how far it had got
+                    done = shared.populated_bytes() if POPULATE_THROUGH else shared.stop_populating()
+                    seconds["populate ahead: GB populated (a size, not seconds)"] = done / 1e9
                 for k, v in stepped[2].items():  # the physics processes' own split (summed over batches)
                     key = f"physics{' (first batch)' if b == 0 else ''}: {k}"
                     seconds[key] = seconds.get(key, 0.0) + v
