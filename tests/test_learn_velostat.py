@@ -466,7 +466,7 @@ def test_kmeans_by_speed_slow_ramps_lower_the_loading_band():
 def test_targets_table_marks_each_target_from_the_findings():
     """targets_table: one column per run, each target met / not met by the issue's thresholds; a partial run (no
     TCN) says ours was not tested."""
-    from learn.experiments.velostat import targets_table
+    from learn.experiments.velostat import target_flags, targets_table
 
     def run(sil, k, removed, partial=False):
         m = {"mode": "x", "creep": {"silhouette": sil, "paper_reading": {"silhouette": 0.55}},
@@ -493,6 +493,12 @@ def test_targets_table_marks_each_target_from_the_findings():
     fr["machine"]["train_device_tcn"] = "cuda"
     t = targets_table({"full seed 1": fr}).splitlines()
     assert t[0] == "| target | full seed 1 |"
+    # the same thresholds as flags (the one-speed rule counts them): a partial run leaves ours unscored
+    assert target_flags(run(0.83, 4, 0.496)) == {"band": False, "sil": True, "ward": True, "drift": False,
+                                                 "literal": False, "ours": True}
+    assert target_flags(run(0.69, 3, 0.52, partial=True)) == {"band": False, "sil": False, "ward": False, "drift": True,
+                                                              "literal": False, "ours": None}
+    assert target_flags({"findings": {}})["band"] is None
     row = {r.split(" | ")[0].strip("| "): r.split(" | ")[1:] for r in t[2:]}
     assert row["Ward elbow 4-6 groups"] == ["5 (met); one calibration per unit 3 |"]
     assert row["wall time (quick: < 10 min on 2 shared cores); CPU time"] == ["5.0 min (device machine, ours on cuda) |"]

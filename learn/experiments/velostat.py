@@ -1007,6 +1007,29 @@ def findings(R: dict, creep: dict, cl: dict, bp: dict | None = None) -> dict[str
     return out
 
 
+TARGET_KEYS = ("band", "sil", "ward", "drift", "literal", "ours")  # issue 14's velostat targets an experiment run scores
+
+
+def target_flags(m: dict[str, Any]) -> dict[str, bool | None]:
+    """Which of issue 14's velostat targets one run's metrics meet (TARGET_KEYS; None where the run has no figure):
+    K-means band (eq. 3 as printed) within 2x, silhouette >= 0.8 (the run's delta period), Ward elbow 4-6, creep
+    compensation >= 50 % of the hold drift (R), both literal chains inside their bound, ours beating every chain."""
+    F, C, K = m.get("findings", {}), m.get("creep", {}), m.get("clustering", {})
+    get = {"band": lambda: bool(F["kmeans_paper_reading"]["band_within_2x"]),
+           "sil": lambda: C["silhouette"] >= 0.8,
+           "ward": lambda: 4 <= K["k_elbow"] <= 6,
+           "drift": lambda: bool(F["creep_target"]["met"]),
+           "literal": lambda: all(v["met"] for v in F["literal_bound"].values()),
+           "ours": lambda: bool(F["ours_beats_every_paper_model_on_every_metric"]) if "tcn" in m.get("models", {}) else None}
+    out: dict[str, bool | None] = {}
+    for k, f in get.items():
+        try:
+            out[k] = f()
+        except (KeyError, TypeError):
+            out[k] = None
+    return out
+
+
 def targets_table(runs: dict[str, dict[str, Any]]) -> str:
     """Issue 14's velostat targets of the experiment, one column per recorded run (mode -> metrics.json), each
     cell the measured value and met / not met. The characterization's targets (R at full load vs speed, hold creep
