@@ -979,6 +979,19 @@ def sim2real_results() -> str:
            + (f"; validation: {valid_note}" if valid_note else "") + "):\n\n"
            + table(["split", "real runs", "fine-tuned", "scratch", "static curve", "fine-tuned best",
                     "validation RMSE (training runs), ft / scratch"], curve))
+    orc = load("s2r-static-oracle.json")
+    if orc:
+        out += ("\n\nHow far a static reading can go on each split's test runs (`bench/bench_s2r_static_oracle.py`, "
+                "`bench/results/s2r-static-oracle.json`): the static curve fitted on the test runs themselves (in-sample, "
+                "an oracle no memoryless map of the reading beats on them; what the press-to-press level spread at equal "
+                "reading leaves) beside the recorded models (% of full scale). The check column refits the recorded "
+                "static curve on the training runs from the same files: it must equal the recorded figure.\n\n"
+                + table(["split", "oracle: static curve fitted on the test runs", "pooled target / oracle",
+                         "fine-tuned", "scratch", "static curve (training runs)", "check: refitted / recorded (N)"],
+                        [[k, f"{num(v['oracle_in_sample_rmse_n'])} N ({num(v['oracle_pct_full_scale'])} %)",
+                          f"{num(v['target_over_oracle'], 2)}x", f"{num(v['finetuned_pct'])} %", f"{num(v['scratch_pct'])} %",
+                          f"{num(v['static_pct'])} %", f"{num(v['static_train_rmse_n'])} / {num(v['static_train_recorded_n'])}"]
+                         for k, v in orc["splits"].items()]))
     if slopes:
         out += ("\n\nPress-to-press sensitivity (contact variation; `sensors.chain_fit.press_slope_spread` on the training "
                 "runs): within-run sd of the presses' local d ln R / d ln F, its correlation with the press level, the "
