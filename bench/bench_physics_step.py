@@ -1,6 +1,7 @@
 """The largest physics step per family that keeps the contact force within 0.5 % of full scale of a 1 ms reference.
 
     python bench/bench_physics_step.py [--families fabric_1,velostat,ntype,cnt_pdms] [--episodes 8]
+                                       [--steps-ms 5,7.14,7.69 --tag=-check32]   (a subset, e.g. with more episodes)
 
 The physics step is the model's time step (`sampling.physics_timestep_s`): it also sets the indenter's armature
 and the servo gains (`simulate.contact.mjcf.contact_design`: sqrt(k / m) dt = SERVO_OMEGA_DT), so a step is a
@@ -27,6 +28,10 @@ import numpy as np
 REFERENCE_S = 1e-3
 TOLERANCE = 5e-3  # of full scale (issue 16)
 CANDIDATES_MS = (1.0, 2.0, 2.5, 4.0, 5.0, 10.0, 12.5, 20.0, 25.0, 50.0)
+# and the sample period / k for k = 10-20 (at 10 Hz: 10, 9.09, 8.33, 7.69, 7.14, 6.67, 6.25, 5.88, 5.56, 5.26, 5 ms):
+# the steps between 5 and 10 ms that still divide the period, so "the largest step within tolerance" is not only
+# the largest round one (session 24)
+PERIOD_DIVISORS = range(10, 21)
 
 
 def contact_forces(cfg, protos) -> np.ndarray:
@@ -51,13 +56,17 @@ def contact_forces(cfg, protos) -> np.ndarray:
     return np.concatenate([per[i] for i in range(len(protos))])
 
 
-def study(family: str, n_episodes: int, overrides: list[str]) -> dict:
+def study(family: str, n_episodes: int, overrides: list[str], steps_ms: list[float] | None = None) -> dict:
     from scenes import load_scene
     from simulate.generation.run import episode_protocols
 
     base = load_scene(family, overrides)
     period = 1.0 / base.sampling.sample_rate_hz
     steps = [s / 1e3 for s in CANDIDATES_MS if abs(period / (s / 1e3) - round(period / (s / 1e3))) < 1e-9]
+    steps = sorted({round(s, 12) for s in steps} | {round(period / k, 12) for k in PERIOD_DIVISORS
+                                                   if period / k >= REFERENCE_S - 1e-12})
+    if steps_ms:  # a subset (a check with more episodes): the candidates nearest these
+        steps = sorted({min(steps, key=lambda s: abs(s - m / 1e3)) for m in steps_ms})
     protos = episode_protocols(base, list(range(n_episodes)), list(range(n_episodes)))
     t0 = time.perf_counter()
     ref = contact_forces(load_scene(family, overrides + [f"sampling.physics_timestep_s={REFERENCE_S}"]), protos)
@@ -116,11 +125,14 @@ def main() -> None:
     ap.add_argument("--families", default="fabric_1,velostat,ntype,cnt_pdms")
     ap.add_argument("--episodes", type=int, default=8)
     ap.add_argument("--set", action="append", default=[], help="scene override for every family")
+    ap.add_argument("--steps-ms", default="", help="only the candidates nearest these steps (comma-separated ms)")
+    ap.add_argument("--tag", default="", help="suffix of the results file (physics-step-<family><tag>.json)")
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     a = ap.parse_args()
+    sub = [float(x) for x in a.steps_ms.split(",") if x]
     for fam in a.families.split(","):
-        res = {"host": platform.node(), **study(fam, a.episodes, a.set)}
-        path = a.out / f"physics-step-{fam}.json"
+        res = {"host": platform.node(), **study(fam, a.episodes, a.set, sub or None)}
+        path = a.out / f"physics-step-{fam}{a.tag}.json"
         path.write_text(json.dumps(res, indent=1) + "\n")
         print(f"{fam}: largest step within {TOLERANCE:.1%} of full scale: {res['largest_step_within_tolerance_s']} s -> {path}")
 

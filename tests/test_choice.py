@@ -68,8 +68,16 @@ def test_force_controlled_presets_take_the_gpu_with_their_physics_step(preset, m
     assert load_scene(preset, c.overrides).sampling.substeps == 10  # 10 Hz samples, every preset here
     assert choose(cfg, cuda=H100, mjw=True, step_asked=True).overrides[-1] != "sampling.physics_timestep_s=0.01"
     assert not any("physics_timestep" in o for o in choose(cfg, physics="mujoco_warp", cuda=H100, mjw=True).overrides)
-    monkeypatch.setitem(choice.GPU_PHYSICS_STEP_S, cfg.protocol.kind, 0.003)  # does not divide 0.1 s: kept
-    assert choice.gpu_physics_step(cfg) is None
+    # a limit that does not divide the sample period: the largest step below it that does (0.1 s / 34)
+    # (where that is still larger than the scene's own step: fabric's presets step at 5 ms)
+    monkeypatch.setitem(choice.GPU_PHYSICS_STEP_S, cfg.protocol.kind, 0.003)
+    below = choice.gpu_physics_step(cfg)
+    assert below == (pytest.approx(0.1 / 34, rel=1e-12) if cfg.sampling.physics_timestep_s < 0.1 / 34 else None)
+    assert load_scene(preset, [f"sampling.physics_timestep_s={0.1 / 34!r}"]).sampling.substeps == 34
+    monkeypatch.setitem(choice.GPU_PHYSICS_STEP_S, cfg.protocol.kind, 0.1 / 13)  # at 20 Hz: 50 / 7 ms, at 10 Hz 100 / 13
+    assert choice.gpu_physics_step(load_scene(preset, ["sampling.sample_rate_hz=20"])) == pytest.approx(0.05 / 7, rel=1e-12)
+    assert choice.gpu_physics_step(cfg) == pytest.approx(0.1 / 13, rel=1e-12)
+    assert "physics step 7.69 ms" in choose(cfg, cuda=H100, mjw=True).line()
     monkeypatch.setitem(choice.GPU_PHYSICS_STEP_S, cfg.protocol.kind, 0.001)  # smaller than the scene's: kept
     assert choice.gpu_physics_step(cfg) is None
 

@@ -84,7 +84,10 @@ USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w
             "user-cli-h200-s23-velostat-noramp.json", "user-cli-h200-s23-cnt_pdms-sidebyside.json",
             "user-cli-h200-s23-cnt_pdms-turns.json", "user-cli-h200-s23-cnt_pdms-through1.json",
             "user-cli-h200-s23-cnt_pdms-stop1.json", "user-cli-h200-s23-cnt_pdms-through2.json",
-            "user-cli-h200-s23-cnt_pdms-stop2.json", "user-cli-h200-s23-velostat.json"]
+            "user-cli-h200-s23-cnt_pdms-stop2.json", "user-cli-h200-s23-velostat.json", "user-cli-h200-s24-velostat.json",
+            "user-cli-h200-s24-velostat-5ms.json", "user-cli-h200-s24-fabric_1.json", "user-cli-h200-s24-velostat-49152.json",
+            "user-cli-h200-s24-velostat-49152-5ms.json", "user-cli-h200-s24-fabric_1-step1.json",
+            "user-cli-h200-s24-fabric_1-5ms1.json", "user-cli-h200-s24-fabric_1-step2.json", "user-cli-h200-s24-fabric_1-5ms2.json"]
 # session 22: the physics processes' GPU stepping in turns against side by side (PIEZOTWIN_GPU_TURNS=0), velostat
 # 16384 episodes, (file, turns); the first pair in one call in the order run, the third an earlier call on the same day
 # session 23: the same for cnt_pdms 8192 (bench/h200_s23.sh; A: in turns with stepping alone, another call; B: side by side
@@ -105,6 +108,18 @@ POPULATE_THROUGH_AB = [("user-cli-h200-s23-cnt_pdms-through1.json", True), ("use
 RAMP_AB = [("default plan (8192 + 8192)", "user-cli-h200-s22-velostat-turns.json", None),
            ("no ramp (one batch of 16384)", "user-cli-h200-s23-velostat-noramp.json",
             "mjw-alone-h200-s23-velostat-one-batch-velostat.json")]
+# session 24: the GPU path's physics step, the largest that divides the sample period within the measured limit
+# (velostat kinds 100/13 = 7.69 ms) against the 5 ms of before (`--set sampling.physics_timestep_s=0.005`), each pair
+# in one call on one H200 (bench/h200_s24.sh A and B), and fabric_1 4096 at 100/19 = 5.26 ms against 5 ms,
+# alternated twice in one call (C): (family, label, file)
+STEP_AB = [("velostat", "16384, 7.69 ms (default now)", "user-cli-h200-s24-velostat.json"),
+           ("velostat", "16384, 5 ms (before)", "user-cli-h200-s24-velostat-5ms.json"),
+           ("velostat", "49152, 7.69 ms (default now)", "user-cli-h200-s24-velostat-49152.json"),
+           ("velostat", "49152, 5 ms (before)", "user-cli-h200-s24-velostat-49152-5ms.json"),
+           ("fabric_1", "4096, 5.26 ms (default now)", "user-cli-h200-s24-fabric_1-step1.json"),
+           ("fabric_1", "4096, 5 ms (before)", "user-cli-h200-s24-fabric_1-5ms1.json"),
+           ("fabric_1", "4096, 5.26 ms (default now)", "user-cli-h200-s24-fabric_1-step2.json"),
+           ("fabric_1", "4096, 5 ms (before)", "user-cli-h200-s24-fabric_1-5ms2.json")]
 # session 20's A/B of the staging buffers page-locked while the first batch steps (bench/h200_s20.sh R; in the
 # order run on one machine): (file, family, reserved)
 STAGING_AB = [("user-cli-h200-s20-velostat-reserve1.json", "velostat", True),
@@ -156,8 +171,10 @@ MULTI_GPU = "gpu-pipeline-h200x2.json"
 # bench/h200_s23.sh C (its stepping alone: 16.5 s in A, user-cli-h200-s23-cnt_pdms.json); velostat on the code now
 # (bench/h200_s23.sh D, with stepping alone); ntype and fabric_1 as in session 22 (one batch or driver-stepped: the
 # session's changes do not reach their runs)
-USER_CLI_LATEST = [("user-cli-h200-s23-cnt_pdms-through1.json", "cnt_pdms"), ("user-cli-h200-s23-velostat.json", "velostat"),
-                   ("user-cli-h200-s22-ntype.json", "ntype"), ("user-cli-h200-s22-fabric_1.json", "fabric_1")]
+# session 24: velostat and fabric_1 at the GPU step now (velostat 7.69 ms, fabric staircases 5.26 ms; bench/h200_s24.sh A,
+# each with stepping alone at the same step)
+USER_CLI_LATEST = [("user-cli-h200-s23-cnt_pdms-through1.json", "cnt_pdms"), ("user-cli-h200-s24-velostat.json", "velostat"),
+                   ("user-cli-h200-s22-ntype.json", "ntype"), ("user-cli-h200-s24-fabric_1.json", "fabric_1")]
 
 
 # ----------------------------------------------------------------------------------------------- formatting
@@ -489,6 +506,25 @@ def bench_user_cli() -> str:
                 "writes, and the plain CLI is slower; the ramp stays:\n",
                 table(["plan", "file", "wait for the first batch s", "sensor stage s", "pack s", "wall s",
                        "stepping alone: worlds s", "stepping alone s", "of stepping alone"], ramp)]
+    step = []
+    for fam, label, name in STEP_AB:
+        if got := _feed_run(name, fam):
+            r, t = got
+            a = r.get("mjw_alone")
+            worlds = t.get("physics (first batch): worlds", 0.0) + t.get("physics: worlds", 0.0)
+            step.append([fam, label, f"`{name}`", num(worlds), num(t.get("simulate")), num(t.get("pack")),
+                         num(t.get("writers: episodes")), num(r["seconds"]), num(r.get("samples_per_s")),
+                         f"{num(a['seconds'])} ({pct(a['seconds'] / r['seconds'])})" if a else "–"])
+    if step:
+        out += ["The physics step (session 24, each pair in one call on one H200): the GPU path now takes the largest "
+                "step that divides the sample period within the measured limit (100/13 = 7.69 ms for the velostat kinds, "
+                "4.85e-3 of full scale on 32 episodes; 100/19 = 5.26 ms for fabric's staircases, 4.6e-3; both 5 ms "
+                "before). velostat's worlds take 21-29 % less time. At 16384 episodes its wall does not move: it is bound "
+                "by the last batch's sensor stage, pack and writes, so its share of stepping alone falls. At 49152 the "
+                "stepping bound the run at 5 ms, and the wall falls by about a sixth. fabric_1's single batch of worlds "
+                "is bound by its sequential steps, 5 % fewer: 1.4-2.0 s off the wall:\n",
+                table(["family", "run", "file", "worlds s (physics processes)", "sensor stage s", "pack s", "writer-seconds",
+                       "wall s", "samples/s", "stepping alone s (of the wall)"], step)]
     staging = []
     for name, fam, reserved in STAGING_AB:
         if got := _feed_run(name, fam):

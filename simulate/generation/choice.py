@@ -12,6 +12,7 @@ The resolved choice goes into the config as concrete values (`generation.physics
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field
 
@@ -29,14 +30,18 @@ GPU_PROTOCOLS = {("sinusoid", "displacement"), ("hold", "displacement"), ("stair
 GPU_PROTOCOL_KINDS = tuple(sorted({k for k, _ in GPU_PROTOCOLS}))
 GPU_CONTROLS = ("displacement", "force")
 # the physics step the GPU path takes where `auto` chose it and the user set none (--set sampling.physics_timestep_s),
-# if larger than the scene's: the largest candidate step whose contact force stays within 0.5 % of full scale of a
-# 1 ms reference on the family's default protocol (bench/bench_physics_step.py, results/physics-step-<family>.json;
-# the step is the model's, so C MuJoCo measured it). Keyed by protocol kind: contact_design scales the indenter's
-# armature so that sqrt(k / m) dt is fixed (where the armature sets the mass: every preset), so the contact mode's period is a fixed number of steps whatever the
-# pad's stiffness, and the error depends on the step against the protocol's ramps, not on the pad.
-# Measured (8 episodes of the default protocol each): velostat_mix 5 ms = 2.6e-3 of full scale, 10 ms 6.7e-3 (the
-# preset's 2 ms: 5.9e-4); fabric_1 staircase 5 ms (the preset's) 3.6e-3, 10 ms 3.0e-2
-GPU_PHYSICS_STEP_S: dict[str, float] = {"staircase": 0.005, **{k: 0.005 for k in _VELOSTAT_KINDS}}
+# if larger than the scene's: the largest step that divides the sample period and stays within the protocol's limit
+# here, the largest candidate whose contact force (and every smaller candidate's) stays within 0.5 % of full scale of
+# a 1 ms reference on the family's default protocol (bench/bench_physics_step.py, results/physics-step-<family>.json;
+# the step is the model's, so C MuJoCo measured it; the candidates are the round steps and the 10 Hz period / 10-20).
+# Keyed by protocol kind: contact_design scales the indenter's armature so that sqrt(k / m) dt is fixed (where the
+# armature sets the mass: every preset), so the contact mode's period is a fixed number of steps whatever the pad's
+# stiffness, and the error depends on the step against the protocol's ramps, not on the pad. Measured (8 episodes of
+# the default protocol; velostat also on 32): velostat_mix 5 ms 2.6e-3 of full scale (32 episodes: 3.5e-3), 100/13 =
+# 7.69 ms 4.85e-3 (32: 4.85e-3), 100/12 = 8.33 ms 5.4e-3 (the preset's 2 ms: 5.9e-4); fabric_1 staircase 5 ms (the
+# preset's) 3.6e-3, 100/19 = 5.26 ms 4.6e-3, 100/18 = 5.56 ms 5.8e-3. Until session 24 the round candidates only:
+# 5 ms for both.
+GPU_PHYSICS_STEP_S: dict[str, float] = {"staircase": 0.1 / 19, **{k: 0.1 / 13 for k in _VELOSTAT_KINDS}}
 # where the GPU feed runs and the scene names no compression: Blosc2 lz4 (level 1 + shuffle, one thread per writer
 # process), for every family: the writers' CPU per episode of each preset's default episodes (this 2-core host,
 # bench/results/writer-episode-cpu.json) is lowest with lz4 in every family: cnt_pdms 16.5 ms (lzf 48.4, zstd 18.5),
@@ -69,7 +74,7 @@ class Choice:
         comp = next((o.split("=", 1)[1] for o in self.overrides if o.startswith("generation.compression=")), None)
         comp = f", {comp} compression" if comp else ""
         step = next((o.split("=", 1)[1] for o in self.overrides if o.startswith("sampling.physics_timestep_s=")), None)
-        comp += f", physics step {float(step) * 1e3:g} ms (GPU default of the protocol)" if step else ""
+        comp += f", physics step {float(step) * 1e3:.3g} ms (GPU default of the protocol)" if step else ""
         return (f"engine: {engine} on {self.physics_device}, sensor kernels on {self.device}{feed}{comp} "
                 f"({self.reason})")
 
@@ -98,13 +103,15 @@ def gpu_blocker(cfg: SceneConfig) -> str | None:
 
 
 def gpu_physics_step(cfg: SceneConfig) -> float | None:
-    """The GPU path's physics step for this scene (GPU_PHYSICS_STEP_S), where it is larger than the scene's and
-    divides the sample period; else None (the scene's step stays)."""
-    step = GPU_PHYSICS_STEP_S.get(cfg.protocol.kind)
-    if step is None or step <= cfg.sampling.physics_timestep_s:
+    """The GPU path's physics step for this scene: the largest step that divides the sample period and is at most
+    the protocol's limit (GPU_PHYSICS_STEP_S), period / ceil(period / limit), where that is larger than the scene's;
+    else None (the scene's step stays). At 10 Hz a limit of 100/13 ms gives 100/13 ms, at 20 Hz 50/7 ms."""
+    limit = GPU_PHYSICS_STEP_S.get(cfg.protocol.kind)
+    if limit is None:
         return None
-    ratio = 1.0 / (cfg.sampling.sample_rate_hz * step)
-    return step if abs(ratio - round(ratio)) <= 1e-6 and round(ratio) >= 1 else None
+    period = 1.0 / cfg.sampling.sample_rate_hz
+    step = period / math.ceil(period / limit - 1e-9)
+    return step if step > cfg.sampling.physics_timestep_s * (1 + 1e-9) else None
 
 
 def choose(cfg: SceneConfig, physics: str = "auto", device: str = "auto", workers: int | None = None,
