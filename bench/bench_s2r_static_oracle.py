@@ -8,7 +8,8 @@ For each recorded split (bench/results/experiments/sim2real-*.json) the test run
 (learn.sim2real.StaticCurve: force as a monotone function of ln reading) are scored on them:
 - the recorded baseline, fitted on the split's training runs (must give the recorded static_curve RMSE: a check
   that the runs were read the same way);
-- an oracle, fitted on the test runs themselves (in-sample): no memoryless map of the reading does better on them,
+- an oracle, fitted on the test runs themselves (in-sample; learn.sim2real.static_oracle, which `sim2real` now reports
+  as `static_oracle` in metrics.json for runs made from now on): no memoryless map of the reading does better on them,
   so its RMSE is what the press-to-press level spread at equal reading leaves to any static reading. A net with
   history can go below it; a target near it asks for that.
 Writes bench/results/s2r-static-oracle.json.
@@ -31,7 +32,7 @@ def main() -> None:
     sys.path.insert(0, str(ROOT))
     from learn import finetune as FT
     from learn import metrics as M
-    from learn.sim2real import StaticCurve
+    from learn.sim2real import StaticCurve, static_oracle
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--lupasic", type=Path, default=Path("/tmp/s2r/lupasic.h5"))
@@ -50,7 +51,7 @@ def main() -> None:
         def rmse(curve) -> float:
             y = np.concatenate([s.y[:, 0] for s in test])
             return M.rmse(y, np.concatenate([curve.predict(s.x)[:, 0] for s in test]))
-        base, oracle = rmse(StaticCurve(train)), rmse(StaticCurve(test))
+        base, oracle = rmse(StaticCurve(train)), static_oracle(test)["rmse"]
         r = m["results"]
         row = {"full_scale_n": full, "static_train_rmse_n": base, "static_train_recorded_n": r["static_curve"]["rmse"],
                "oracle_in_sample_rmse_n": oracle, "oracle_pct_full_scale": 100 * oracle / full,

@@ -291,3 +291,28 @@ def test_a_run_through_another_resistor_is_reread_through_the_chains():
     assert out.meta["reread_from_reference_resistor_ohm"] == 2.2e3
     same = Sequence(y_10k[:, None], f[:, None], ["sensor"], ["force"], {}, {"key": "a", "reference_resistor_ohm": 1e4}, {})
     assert reread_through(same, p) is same
+
+
+def test_static_oracle_is_the_floor_of_any_static_reading():
+    """learn.sim2real.static_oracle: the isotonic curve fitted on the test runs themselves; on a noiseless monotone
+    sensor it is exact but for its quantile bins (< 1 % of full scale), and with press-to-press levels the static
+    curve fitted on other runs reads those runs worse."""
+    from learn.sim2real import StaticCurve, static_oracle
+
+    rng = np.random.default_rng(3)
+
+    def run(key, level):
+        f = np.repeat(rng.uniform(0.5, 10.0, 12), 25)  # 12 presses held 25 samples
+        lvl = np.repeat(rng.normal(0.0, level, 12), 25)
+        return Sequence(x=(-np.log(f) + lvl)[:, None], y=f[:, None], inputs=["sensor"], targets=["force"],
+                        units={}, meta={"key": key})
+
+    exact = [run("a", 0.0), run("b", 0.0)]
+    assert static_oracle(exact)["rmse"] < 0.01 * 10.0
+    train, test = [run("t1", 0.3), run("t2", 0.3)], [run("x1", 0.3), run("x2", 0.3)]
+    o = static_oracle(test)
+    other = StaticCurve(train)
+    ref = np.concatenate([s.y[:, 0] for s in test])
+    est = np.concatenate([other.predict(s.x)[:, 0] for s in test])
+    assert 0.1 < o["rmse"] < float(np.sqrt(np.mean((est - ref) ** 2)))
+    assert set(o["per_run_rmse"]) == {"x1", "x2"}
