@@ -1028,8 +1028,9 @@ def sim2real_results() -> str:
     if orc:
         out += ("\n\nHow far a static reading can go on each split's test runs (`bench/bench_s2r_static_oracle.py`, "
                 "`bench/results/s2r-static-oracle.json`): the static curve fitted on the test runs themselves (in-sample, "
-                "an oracle no monotone memoryless map of the reading beats by much on them (isotonic, to its quantile bins); what the press-to-press level spread at equal "
-                "reading leaves) beside the recorded models (% of full scale). The check column refits the recorded "
+                "isotonic to its quantile bins: an oracle that no monotone memoryless map of the reading beats by much on "
+                "them, so what the press-to-press level spread at equal reading leaves) beside the recorded models (% of "
+                "full scale). The check column refits the recorded "
                 "static curve on the training runs from the same files: it must equal the recorded figure.\n\n"
                 + table(["split", "oracle: static curve fitted on the test runs", "pooled target / oracle",
                          "fine-tuned", "scratch", "static curve (training runs)", "check: refitted / recorded (N)"],
