@@ -7,6 +7,8 @@
 #    same call.
 # B: velostat 49152 (a run of several full batches) at the new step and at 5 ms, one call.
 # C: fabric_1 4096 at 5.26 ms and at 5 ms, alternated twice in one call.
+# D: velostat 16384 as typed, its driver under cProfile (bench/profile_cli.py).
+# E: velostat 16384, the shards checked by their writers (now) against by the driver too (before), one call.
 source "$(dirname "$0")/h100_lib.sh"  # environment, cli (plain CLI + MuJoCo Warp alone), pack, warm
 case "$1" in
 A)  warm velostat; cli velostat 16384 h200-s24-velostat
@@ -33,4 +35,14 @@ C)  # fabric_1 4096 at the new step (100/19 = 5.26 ms) and at 5 ms, alternated i
         --extra "--set sampling.physics_timestep_s=0.005" 2>&1 | tee $OUT/r/logs/user-cli-h200-s24-fabric_1-5ms2.log | tail -4
     cp bench/results/user-cli-h200-s24-fabric_1-5ms2.json $OUT/r/
     pack C ;;
+D)  # where the driver's time goes at the new step: velostat 16384 as typed under cProfile (the driver's main thread)
+    warm velostat
+    prof velostat-h200-s24 -- generate velostat -o /tmp/prof-out --episodes 16384
+    pack D ;;
+E)  # velostat 16384 as typed: the writers open their shards back (the default now) against the driver doing it too
+    # (PIEZOTWIN_DRIVER_OPENS_SHARDS=1, as before), in that order, one call
+    warm velostat
+    cli velostat 16384 h200-s24-velostat-writercheck noalone
+    PIEZOTWIN_DRIVER_OPENS_SHARDS=1 cli velostat 16384 h200-s24-velostat-drivercheck noalone
+    pack E ;;
 esac
