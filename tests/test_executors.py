@@ -644,19 +644,3 @@ def test_a_driver_failure_leaves_no_physics_block_behind(cfg, tmp_path, monkeypa
              for h in fut.result()[1].values() if isinstance(h[0], str)]
     assert len(names) >= 2  # the batch in hand and one stepped ahead handed blocks over
     assert not [n for n in names if (Path("/dev/shm") / n.lstrip("/")).exists()]
-
-
-def test_the_feed_driver_checks_a_reported_shard_by_its_size(tmp_path):
-    """check_entry: the GPU feed's driver takes a shard its writer reported done when the file holds the bytes the
-    writer's entry names (the writer opened the recording back itself); a missing or resized file names the shard."""
-    from sensors.data.manifest import shard_path
-    from simulate.generation.shards import check_entry
-
-    p = shard_path(tmp_path, 3)
-    with pytest.raises(RuntimeError, match="shard 3 .* missing"):
-        check_entry(tmp_path, 3, {"bytes": 10})
-    p.write_bytes(b"x" * 10)
-    check_entry(tmp_path, 3, {"bytes": 10})
-    with pytest.raises(RuntimeError, match="11 bytes, not the 10"):
-        p.write_bytes(b"x" * 11)
-        check_entry(tmp_path, 3, {"bytes": 10})

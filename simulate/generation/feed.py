@@ -54,17 +54,12 @@ RAMP_BATCHES = int(os.environ.get("PIEZOTWIN_RAMP_BATCHES", "2"))  # batches of 
 PHYSICS_PROCESSES = 2  # each steps its own batch: one's host work (its protocols) overlaps the other's GPU stepping
 GPU_TURNS = os.environ.get("PIEZOTWIN_GPU_TURNS", "1") == "1"  # their GPU stepping in turns, in batch order (see
 # `_gpu_turn`); the variable: the bench's A/B (0: side by side, as before session 22)
-# the driver's check of a shard its writer reported done: its size against the writer's entry (`check_entry`; the
-# writer opens the recording back itself); the variable: the bench's A/B (1: the driver opens every shard back too,
-# `check_written`, as before session 24: ~5 ms a shard in its own thread)
-DRIVER_OPENS_SHARDS = os.environ.get("PIEZOTWIN_DRIVER_OPENS_SHARDS", "0") == "1"
 # where the driver's time went in the last generate_feed of this process (for bench/): "protocols (first batch, in
 # the driver)" (made while the physics processes import), "start-up" (Warp, the
 # sensor), "simulate" (load field, sensor chain, channel arrays; protocols and physics too for kinds with their
 # own contact stage), "pack", "wait for physics", "wait for writers", "release staging" (the page-locked buffers,
 # and the worlds a driver stepped itself, freed while the writers finish), "shut down" (the process pools); and,
-# summed over the writer processes, "writers: episodes" (HDF5), "writers: close, fsync", "writers: sha256",
-# "writers: check" (each opens its shard back: `check_written`); and
+# summed over the writer processes, "writers: episodes" (HDF5), "writers: close, fsync", "writers: sha256"; and
 # summed over the physics tasks, "physics: ..." (see step_worlds; the first batch's apart)
 LAST_RUN_SECONDS: dict[str, float] = {}
 # the batches of that run in the order stepped: shards (first, last), episodes, their select ("all", "short <= n
@@ -590,15 +585,14 @@ class PackedShard:
 def write_packed_shard(cfg: SceneConfig, out_dir: str, packed: PackedShard, sensor_attrs: dict, mjcf: str) -> tuple[dict, dict]:
     """Writer task: write one packed shard atomically (what write_shard would write); returns its manifest
     entry (sha256 of the file just written, from the page cache; content hash and summary as the writer made
-    them), so the driver need not read it back (it checks the file's size: `check_entry`; the writer opens the whole
-    recording back itself, `check_written`), and the seconds this writer spent on "episodes" (HDF5), "close,
-    fsync", "sha256" and "check"."""
+    them), so the driver need not read it back, and
+    the seconds this writer spent on "episodes" (HDF5), "close, fsync" and "sha256"."""
     import time
 
     from sensors.data.manifest import shard_entry
     from sensors.data.recording import Channel
     from simulate.generation.run import config_sha256, shard_writer
-    from simulate.generation.shards import check_written, maybe_inject_fault
+    from simulate.generation.shards import maybe_inject_fault
 
     maybe_inject_fault(packed.shard)
     attached = {name: _attach(name) for name in dict.fromkeys(packed.block_names)}  # the driver owns them
@@ -622,9 +616,7 @@ def write_packed_shard(cfg: SceneConfig, out_dir: str, packed: PackedShard, sens
                 pass
     entry = shard_entry(w.path, [e[0] for e in packed.episodes], [e[1]["seed"] for e in packed.episodes], config_sha256(cfg),
                         content_sha256=w.content_sha256, summary=w.summary)
-    t3 = time.perf_counter()
-    check_written(Path(out_dir), packed.shard, config_sha256(cfg))  # here, beside the other writers, not in the driver
-    return entry, {"episodes": t1 - t0, "close, fsync": t2 - t1, "sha256": t3 - t2, "check": time.perf_counter() - t3}
+    return entry, {"episodes": t1 - t0, "close, fsync": t2 - t1, "sha256": time.perf_counter() - t2}
 
 
 SIZING_VALUES_PER_SAMPLE = 20  # float64 values per sample that batch sizing counts (the whole sensordata, as when
@@ -953,7 +945,7 @@ def generate_feed(
         episode_protocols,
         shard_sensor_attrs,
     )
-    from simulate.generation.shards import ShardFailedError, check_entry, check_written
+    from simulate.generation.shards import ShardFailedError, check_written
 
     LAST_RUN_SECONDS.clear()
     LAST_RUN_BATCHES.clear()
@@ -1058,10 +1050,7 @@ def generate_feed(
                     entries[p.shard], spent = f.result()
                     for k, v in spent.items():
                         seconds[f"writers: {k}"] = seconds.get(f"writers: {k}", 0.0) + v
-                    if DRIVER_OPENS_SHARDS:
-                        check_written(out, p.shard, sha)
-                    else:
-                        check_entry(out, p.shard, entries[p.shard])  # the writer checked the whole file itself
+                    check_written(out, p.shard, sha)
                 except BrokenProcessPool:
                     broken.append(p)
                     continue

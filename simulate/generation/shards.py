@@ -30,22 +30,5 @@ def maybe_inject_fault(shard: int) -> None:
 
 
 def check_written(out: Path, shard: int, sha: str) -> None:
-    """The shard's file is a whole recording of this config (opened and read: ~5 ms a shard). The GPU feed's writers
-    run it on their own file before they report it done; the CPU executors run it in the parent."""
     if not is_shard_complete(shard_path(out, shard), sha):
         raise RuntimeError(f"worker reported shard {shard} done but {shard_path(out, shard).name} is not a complete recording")
-
-
-def check_entry(out: Path, shard: int, entry: dict) -> None:
-    """The GPU feed's driver's check of a shard its writer reported done: the file is there with the bytes the
-    writer's manifest entry names. The writer has opened and checked the whole recording itself (`check_written`,
-    in its own process: 1366 shards of velostat 16384 cost the driver's thread 6.8 s of opening files,
-    bench/results/logs/profile-velostat-h200-s24.txt)."""
-    p = shard_path(out, shard)
-    try:
-        size = p.stat().st_size
-    except OSError:
-        size = None
-    if size is None or size != entry.get("bytes"):
-        got = "missing" if size is None else f"{size} bytes, not the {entry.get('bytes')} its writer wrote"
-        raise RuntimeError(f"worker reported shard {shard} done but {p.name} is {got}")
