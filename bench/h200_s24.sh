@@ -8,7 +8,8 @@
 # B: velostat 49152 (a run of several full batches) at the new step and at 5 ms, one call.
 # C: fabric_1 4096 at 5.26 ms and at 5 ms, alternated twice in one call.
 # D: velostat 16384 as typed, its driver under cProfile (bench/profile_cli.py).
-# E: velostat 16384, the shards checked by their writers (now) against by the driver too (before), one call.
+# E: velostat 16384, the shards checked by their writers against by the driver too, one call: run on commit 366508b,
+#    a probe reverted in the next commit (PIEZOTWIN_DRIVER_OPENS_SHARDS exists only there).
 source "$(dirname "$0")/h100_lib.sh"  # environment, cli (plain CLI + MuJoCo Warp alone), pack, warm
 case "$1" in
 A)  warm velostat; cli velostat 16384 h200-s24-velostat
