@@ -705,3 +705,20 @@ def test_design_rule_adopts_on_paired_differences(tmp_path):
     # a drift change within its SE (-0.05, +0.04, 0.0): kept
     r = hd.rule("residual", files([(0.2, 0.15), (0.2, 0.24), (0.2, 0.2)], [(1.0, 1.0)] * 3), str(tmp_path / "rule.json"))
     assert not r["conditions"]["drift_falls_by_more_than_se"] and not r["adopted"]
+
+
+def test_silhouette_of_the_staircases_falls_with_creep_and_slow_ramps():
+    """bench/bench_velostat_silhouette.py's physics (the generated table): on Fig. 6 staircases the creep tracker's
+    K-means separates the stages less well when the film creeps (contact aging gives every hold a fast start) and
+    when the ramps are slow (more loading samples between the clusters)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("bvs", Path(__file__).parents[1] / "bench" / "bench_velostat_silhouette.py")
+    bvs = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bvs)
+    sil = {k: bvs.variant([], speeds, amp)["period_0_5_s"]["silhouette"]
+           for k, speeds, amp in (("creep, 1-6", bvs.SPEEDS_MM_PER_MIN, "preset"), ("no creep, 1-6", bvs.SPEEDS_MM_PER_MIN, 0.0),
+                                  ("creep, 6", (6,), "preset"))}
+    assert sil["no creep, 1-6"] > sil["creep, 1-6"] + 0.03
+    assert sil["creep, 6"] > sil["creep, 1-6"] + 0.05
+    assert max(sil.values()) < 0.931  # none reaches the paper's (sect. 3.2)
