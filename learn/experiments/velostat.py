@@ -1008,6 +1008,8 @@ def findings(R: dict, creep: dict, cl: dict, bp: dict | None = None) -> dict[str
 
 
 TARGET_KEYS = ("band", "sil", "ward", "drift", "literal", "ours")  # issue 14's velostat targets an experiment run scores
+SILHOUETTE_TARGET = 0.8  # issue 14: silhouette >= this
+WARD_TARGET = (4, 6)  # issue 14: Ward elbow within these groups
 
 
 def target_flags(m: dict[str, Any]) -> dict[str, bool | None]:
@@ -1016,8 +1018,8 @@ def target_flags(m: dict[str, Any]) -> dict[str, bool | None]:
     compensation >= 50 % of the hold drift (R), both literal chains inside their bound, ours beating every chain."""
     F, C, K = m.get("findings", {}), m.get("creep", {}), m.get("clustering", {})
     get = {"band": lambda: bool(F["kmeans_paper_reading"]["band_within_2x"]),
-           "sil": lambda: C["silhouette"] >= 0.8,
-           "ward": lambda: 4 <= K["k_elbow"] <= 6,
+           "sil": lambda: C["silhouette"] >= SILHOUETTE_TARGET,
+           "ward": lambda: WARD_TARGET[0] <= K["k_elbow"] <= WARD_TARGET[1],
            "drift": lambda: bool(F["creep_target"]["met"]),
            "literal": lambda: all(v["met"] for v in F["literal_bound"].values()),
            "ours": lambda: bool(F["ours_beats_every_paper_model_on_every_metric"]) if "tcn" in m.get("models", {}) else None}
@@ -1044,10 +1046,12 @@ def targets_table(runs: dict[str, dict[str, Any]]) -> str:
                 return f"{kp['band_ratio'][0]:.2f}x / {kp['band_ratio'][1]:.2f}x ({yes(kp['band_within_2x'])})"
             if key == "sil":
                 lit = C["paper_reading"]["silhouette"]
-                return f"{C['silhouette']:.3f} ({yes(C['silhouette'] >= 0.8)}); eq. 3 as printed {lit:.3f} ({yes(lit >= 0.8)})"
+                return (f"{C['silhouette']:.3f} ({yes(C['silhouette'] >= SILHOUETTE_TARGET)}); eq. 3 as printed {lit:.3f} "
+                        f"({yes(lit >= SILHOUETTE_TARGET)})")
             if key == "ward":
                 fr = K.get("first_round", {}).get("k_elbow")
-                return f"{K['k_elbow']} ({yes(4 <= K['k_elbow'] <= 6)})" + (f"; one calibration per unit {fr}" if fr else "")
+                ok = WARD_TARGET[0] <= K["k_elbow"] <= WARD_TARGET[1]
+                return f"{K['k_elbow']} ({yes(ok)})" + (f"; one calibration per unit {fr}" if fr else "")
             if key == "drift":
                 ct = F["creep_target"]
                 return f"{100 * ct['removed_frac']:.1f} % ({yes(ct['met'])})"
