@@ -56,7 +56,7 @@ class LoadBatch:
 
     @property
     def fields_on_device(self) -> bool:
-        return not isinstance(self.deformation_m, np.ndarray)
+        return not isinstance(self.deformation_m, np.ndarray) and not getattr(self.deformation_m, "on_host", False)
 
     def on_host(self) -> LoadBatch:
         """This batch with the taxel fields as numpy arrays (E, T, N) / (E, T, N, 2) (a no-op on the host)."""

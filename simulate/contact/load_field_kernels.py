@@ -172,6 +172,78 @@ def fields_f32_to_host(fields: dict[str, wp.array], shapes: dict[str, tuple[int,
     return out
 
 
+@wp.kernel
+def _flag_blocks(bits: wp.array(dtype=wp.uint32), per_row: int, per_taxel: int, n_taxels: int, block: int,
+                 n_blocks: int, flags: wp.array(dtype=wp.int32)):
+    """flags[r * n_blocks + b] = 1 where a float32 of row r's block b has a non-zero bit (-0.0 and NaN count, as
+    in the writers' zero-chunk test); racing stores all write 1."""
+    i = wp.tid()
+    if bits[i] != wp.uint32(0):
+        r = i // per_row
+        n = (i // per_taxel) % n_taxels
+        flags[r * n_blocks + n // block] = 1
+
+
+@wp.kernel
+def _gather_blocks(src: wp.array(dtype=wp.float32), index: wp.array2d(dtype=wp.int32), n_time: int, n_taxels: int,
+                   per_taxel: int, block: int, dst: wp.array(dtype=wp.float32)):
+    """dst[m, t, j, k] = src[r, t, b * block + j, k] for (r, b) = index[m] (0 past the last taxel)."""
+    m, t, jk = wp.tid()
+    j = jk // per_taxel
+    k = jk % per_taxel
+    n = index[m, 1] * block + j
+    v = wp.float32(0.0)
+    if n < n_taxels:
+        v = src[((index[m, 0] * n_time + t) * n_taxels + n) * per_taxel + k]
+    dst[(m * n_time + t) * block * per_taxel + jk] = v
+
+
+def fields_f32_blocks_to_host(fields: dict[str, wp.array], shapes: dict[str, tuple[int, ...]],
+                              block: int | None = None) -> dict:
+    """Taxel fields left on the device (float64 Warp arrays, `shapes` (E, T, N, ...) each, one dimension may be -1) -> float32 on the host:
+    a `BlockSparse` of a field's non-zero blocks where at most SPARSE_MAX_SHARE of them are non-zero, else the dense
+    array (`fields_f32_to_host`'s). The rounding is the same kernel's; blocks, flags and index come back through the
+    page-locked buffers of `sensors.warp_setup.to_host` (inside `host_staging`: valid until that site's next copy)."""
+    from sensors.warp_setup import scratch, to_host
+    from simulate.contact.field_blocks import FIELD_BLOCK, SPARSE_MAX_SHARE, BlockSparse
+
+    block = FIELD_BLOCK if block is None else block
+    out: dict = {}
+    for name, arr in fields.items():
+        flat = arr.reshape(-1) if arr.ndim > 1 else arr
+        shape = tuple(int(s) for s in shapes[name])
+        if -1 in shape:  # one dimension left to the array's size, as in numpy's reshape
+            known = int(np.prod([s for s in shape if s != -1], dtype=np.int64))
+            shape = tuple(flat.shape[0] // max(1, known) if s == -1 else s for s in shape)
+        device = str(arr.device)
+        E, T, N = shape[0], shape[1], shape[2]
+        K = int(np.prod(shape[3:], dtype=np.int64)) if len(shape) > 3 else 1
+        size = max(1, min(block, N))  # a narrow field: one block of its own width
+        n_blocks = -(-N // size)
+        dst = scratch(f"field {name} f32", flat.shape[0], wp.float32, device)
+        wp.launch(_to_f32, dim=flat.shape[0], inputs=[flat, dst], device=device)
+        flags = scratch(f"field {name} flags", max(1, E * n_blocks), wp.int32, device)
+        flags.zero_()
+        if flat.shape[0]:
+            bits = wp.array(ptr=dst.ptr, dtype=wp.uint32, shape=dst.shape, device=device)
+            wp.launch(_flag_blocks, dim=flat.shape[0], inputs=[bits, T * N * K, K, N, size, n_blocks, flags], device=device)
+        hit = np.flatnonzero(to_host(flags, f"field {name} flags")[: E * n_blocks])
+        if len(hit) > SPARSE_MAX_SHARE * E * n_blocks:
+            out[name] = to_host(dst, f"field {name}").reshape(shape)
+            continue
+        index = np.stack([hit // n_blocks, hit % n_blocks], axis=1).astype(np.int32)
+        M = len(index)
+        if M:
+            idx = wp.array(index, dtype=wp.int32, device=device)
+            comp = scratch(f"field {name} blocks", M * T * size * K, wp.float32, device)
+            wp.launch(_gather_blocks, dim=(M, T, size * K), inputs=[dst, idx, T, N, K, size, comp], device=device)
+            blocks = to_host(comp, f"field {name} blocks").reshape((M, T, size, *shape[3:]))
+        else:
+            blocks = np.zeros((0, T, size, *shape[3:]), np.float32)
+        out[name] = BlockSparse(blocks, index, shape, size)
+    return out
+
+
 # ---------------------------------------------------------------------------------------------------------------
 # press_stroke (ntype): several flat indenters, each force spread uniformly over its footprint (simulate/contact/
 # press_stroke.py `_load_batch`, the numpy reference; Johnson, Contact Mechanics, 1985, flat punch on a Winkler

@@ -44,6 +44,7 @@ from pathlib import Path
 import numpy as np
 
 from scenes import SceneConfig
+from simulate.contact.field_blocks import BlockSparse
 
 FEED_WORLDS = 32768  # episodes per batch of worlds: 2.4e7 world-steps/s on an H100 (bench/results/physics-profile-h100-s4.json)
 PENDING_PER_WRITER = 2  # shards handed to the writers and not yet written, per writer: one being written, one
@@ -338,6 +339,7 @@ def release_prestarted() -> None:
             time.sleep(0.01)
 
 
+SPARSE_INDEX = "\x00index"  # a BlockSparse channel's index array in a packed piece: its name + this (no channel name has it)
 PACK_THREADS = 4  # threads copying a piece into its shared block (numpy copies release the GIL) ...
 PACK_SPLIT_BYTES = 8 * 2**20  # ... where it has at least this many bytes; a smaller piece is copied in the driver's
 # thread (a task per array and thread cost more than the copy: fabric_1's 8 KB-per-episode pieces, 53248 tasks and
@@ -527,6 +529,8 @@ class PackedShard:
     pieces: list[dict[str, np.ndarray]] = field(default_factory=list)  # arrays not in a block (time; all without room)
     episodes: list[tuple[str, dict, int, int]] = field(default_factory=list)  # (id, attrs, piece, row), in global order
     blocks: list[tuple[str, dict[str, tuple[int, str, tuple[int, ...]]]] | None] = field(default_factory=list)
+    sparse: list[dict[str, tuple[tuple[int, ...], int]]] = field(default_factory=list)  # per piece: its BlockSparse
+    # channels, name -> (dense shape, block), their blocks and index held as `name` and `name + SPARSE_INDEX`
 
     @property
     def n_episodes(self) -> int:
@@ -542,10 +546,20 @@ class PackedShard:
         shared = sum(int(np.prod(shape)) * np.dtype(dt).itemsize for b in self.blocks if b for _, dt, shape in b[1].values())
         return shared + sum(a.nbytes for piece in self.pieces for a in piece.values())
 
-    def add_piece(self, arrays: dict[str, np.ndarray], pool: BlockPool | None) -> None:
+    def add_piece(self, arrays: dict[str, np.ndarray | BlockSparse], pool: BlockPool | None) -> None:
         """Append a piece, copying its per-episode arrays into a block of `pool` (or into process memory: the
-        arrays given may be views of buffers the next slice overwrites)."""
-        per_ep = [n for n, spec in self.specs.items() if spec[3]]
+        arrays given may be views of buffers the next slice overwrites). A `BlockSparse` channel goes as its
+        blocks and index (`sparse`)."""
+        sparse, flat = {}, {}
+        for n, a in arrays.items():
+            if isinstance(a, BlockSparse):
+                sparse[n] = (a.shape, a.block)
+                flat[n], flat[n + SPARSE_INDEX] = a.blocks, a.index
+            else:
+                flat[n] = a
+        arrays = flat
+        self.sparse.append(sparse)
+        per_ep = [n for n in arrays if n.removesuffix(SPARSE_INDEX) in self.specs and self.specs[n.removesuffix(SPARSE_INDEX)][3]]
         padded = lambda nbytes: -(-nbytes // ARENA_ALIGN) * ARENA_ALIGN  # every array on an aligned offset
         shm, offset = pool.get(sum(padded(arrays[n].nbytes) for n in per_ep)) if pool is not None else (None, 0)
         if shm is None:
@@ -573,12 +587,16 @@ class PackedShard:
         self.pieces.append({n: np.array(a) for n, a in arrays.items() if n not in layout})
         self.blocks.append((shm.name, layout))
 
-    def arrays(self, bufs: dict) -> list[dict[str, np.ndarray]]:
-        """The pieces with their shared arrays as views of the attached blocks (`bufs`: block name -> buffer)."""
+    def arrays(self, bufs: dict) -> list[dict[str, np.ndarray | BlockSparse]]:
+        """The pieces with their shared arrays as views of the attached blocks (`bufs`: block name -> buffer), their
+        sparse channels as `BlockSparse` over those views."""
         out = []
-        for piece, block in zip(self.pieces, self.blocks):
+        for piece, block, sparse in zip(self.pieces, self.blocks, self.sparse):
             shared = {} if block is None else dict(zip(block[1], _views(bufs[block[0]], list(block[1].values()))))
-            out.append({**piece, **shared})
+            got = {**piece, **shared}
+            for n, (shape, size) in sparse.items():
+                got[n] = BlockSparse(got[n], got.pop(n + SPARSE_INDEX), shape, size)
+            out.append(got)
         return out
 
 
@@ -756,6 +774,11 @@ SLICES_PER_LENGTH = int(os.environ.get("PIEZOTWIN_FEED_SLICES", "4"))  # slices 
 PROBE_EPISODES = 64  # protocols drawn to estimate a batch's mean episode length (`batch_pack_bytes`; ~30 us each)
 
 
+def _held_nbytes(a: np.ndarray | BlockSparse) -> int:
+    """Bytes a channel's array puts in a pack (a BlockSparse: its blocks and index)."""
+    return a.stored_nbytes if isinstance(a, BlockSparse) else a.nbytes
+
+
 def batch_pack_bytes(cfg: SceneConfig, sensor, gids: list[int], threads: int = 1, protos: list | None = None) -> int:
     """The bytes the pack of episodes `gids` (a batch of the worlds path) will need, estimated before their physics
     is back (`probe_batch`)."""
@@ -786,8 +809,8 @@ def probe_batch(cfg: SceneConfig, sensor, gids: list[int], threads: int = 1,
     n = protos[0].n_samples
     zero = {n: (np.zeros((1, n, len(read_columns(build_model(cfg))))), np.zeros((1, n)))}
     with host_staging(), staging_log() as log:
-        per_episode = sum(c.data[0].nbytes for _, _, arrays in simulate_slices(cfg, seeds[:1], sensor, threads, probe[:1],
-                                                                               protos[:1], zero)
+        per_episode = sum(_held_nbytes(c.data[:1]) for _, _, arrays in simulate_slices(cfg, seeds[:1], sensor, threads, probe[:1],
+                                                                                       protos[:1], zero)
                           for c in arrays.values() if c.per_episode)
     lengths = np.array([p.n_samples for p in protos])
     slice_samples = 0  # samples of the largest slice: per length group, its episodes in SLICES_PER_LENGTH pieces

@@ -177,22 +177,23 @@ def physics_runs(cfg: SceneConfig, protos: list[EpisodeProtocol]) -> list[list[t
 
 
 def recorded_fields_on_host(cfg: SceneConfig, batch: LoadBatch) -> LoadBatch:
-    """The batch with the taxel fields that generation.record keeps as float32 numpy arrays (the others empty):
+    """The batch with the taxel fields that generation.record keeps as float32 on the host (the others empty):
     a batch whose fields are on the device gets them rounded there and copied back through page-locked buffers
-    (`fields_f32_to_host`: the same float32 values as the host's astype, half the bytes and no host pass); a
+    as their non-zero taxel blocks (`simulate.contact.field_blocks`: a `BlockSparse` whose episode rows are the
+    host's astype(float32), byte for byte; a field with most blocks non-zero comes whole, as a numpy array); a
     host batch is returned as it is."""
     if not batch.fields_on_device:
         return batch
     from dataclasses import replace
 
-    from simulate.contact.load_field_kernels import fields_f32_to_host
+    from simulate.contact.load_field_kernels import fields_f32_blocks_to_host
 
     keep = cfg.generation.record
     E, T = batch.target.shape
     names = {"deformation": "deformation_m", "pressure": "pressure_pa", "shear": "shear_pa"}
-    shapes = {"deformation": (E, T, -1), "pressure": (E, T, -1), "shear": (E, T, -1, 2)}
     want = [k for k in names if keep is None or k in keep]
-    got = fields_f32_to_host({k: getattr(batch, names[k]) for k in want}, {k: shapes[k] for k in want})
+    shapes = {"deformation": (E, T, -1), "pressure": (E, T, -1), "shear": (E, T, -1, 2)}
+    got = fields_f32_blocks_to_host({k: getattr(batch, names[k]) for k in want}, {k: shapes[k] for k in want})
     empty = {"deformation": np.empty((E, T, 0), np.float32), "pressure": np.empty((E, T, 0), np.float32),
              "shear": np.empty((E, T, 0, 2), np.float32)}
     return replace(batch, **{names[k]: got.get(k, empty[k]) for k in names})
