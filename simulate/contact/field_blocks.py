@@ -12,10 +12,15 @@ byte (a block left out holds only +0.0), so the files and their content hashes d
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 FIELD_BLOCK = 16  # taxels per block (the writers' TAXEL_BLOCK, so a block sent maps onto one chunk column there)
-SPARSE_MAX_SHARE = 0.5  # a field with more of its blocks non-zero than this goes whole (a gather then saves little)
+SPARSE_MAX_SHARE = 0.5  # a field with more of its blocks non-zero than this goes whole (a gather then saves little);
+# PIEZOTWIN_FIELD_BLOCKS=0 sends every field whole, as before (the bench's A/B)
+if os.environ.get("PIEZOTWIN_FIELD_BLOCKS", "1") == "0":
+    SPARSE_MAX_SHARE = -1.0
 
 
 class BlockSparse:
