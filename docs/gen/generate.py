@@ -87,7 +87,10 @@ USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w
             "user-cli-h200-s23-cnt_pdms-stop2.json", "user-cli-h200-s23-velostat.json", "user-cli-h200-s24-velostat.json",
             "user-cli-h200-s24-velostat-5ms.json", "user-cli-h200-s24-fabric_1.json", "user-cli-h200-s24-velostat-49152.json",
             "user-cli-h200-s24-velostat-49152-5ms.json", "user-cli-h200-s24-fabric_1-step1.json",
-            "user-cli-h200-s24-fabric_1-5ms1.json", "user-cli-h200-s24-fabric_1-step2.json", "user-cli-h200-s24-fabric_1-5ms2.json"]
+            "user-cli-h200-s24-fabric_1-5ms1.json", "user-cli-h200-s24-fabric_1-step2.json", "user-cli-h200-s24-fabric_1-5ms2.json",
+            "user-cli-h200-s25-velostat-blocks1.json", "user-cli-h200-s25-velostat-whole.json",
+            "user-cli-h200-s25-velostat-blocks2.json", "user-cli-h200-s25-cnt_pdms-blocks1.json",
+            "user-cli-h200-s25-cnt_pdms-whole.json", "user-cli-h200-s25-cnt_pdms-blocks2.json"]
 # session 22: the physics processes' GPU stepping in turns against side by side (PIEZOTWIN_GPU_TURNS=0), velostat
 # 16384 episodes, (file, turns); the first pair in one call in the order run, the third an earlier call on the same day
 # session 23: the same for cnt_pdms 8192 (bench/h200_s23.sh; A: in turns with stepping alone, another call; B: side by side
@@ -120,6 +123,14 @@ STEP_AB = [("velostat", "16384, 7.69 ms (default now)", "user-cli-h200-s24-velos
            ("fabric_1", "4096, 5 ms (before)", "user-cli-h200-s24-fabric_1-5ms1.json"),
            ("fabric_1", "4096, 5.26 ms (default now)", "user-cli-h200-s24-fabric_1-step2.json"),
            ("fabric_1", "4096, 5 ms (before)", "user-cli-h200-s24-fabric_1-5ms2.json")]
+# session 25's A/B of the taxel fields sent as their non-zero blocks (bench/h200_s25.sh A, B; in the order run, each
+# family in one call on one H200): (family, file, as blocks)
+FIELD_BLOCKS_AB = [("velostat", "user-cli-h200-s25-velostat-blocks1.json", True),
+                   ("velostat", "user-cli-h200-s25-velostat-whole.json", False),
+                   ("velostat", "user-cli-h200-s25-velostat-blocks2.json", True),
+                   ("cnt_pdms", "user-cli-h200-s25-cnt_pdms-blocks1.json", True),
+                   ("cnt_pdms", "user-cli-h200-s25-cnt_pdms-whole.json", False),
+                   ("cnt_pdms", "user-cli-h200-s25-cnt_pdms-blocks2.json", True)]
 # session 20's A/B of the staging buffers page-locked while the first batch steps (bench/h200_s20.sh R; in the
 # order run on one machine): (file, family, reserved)
 STAGING_AB = [("user-cli-h200-s20-velostat-reserve1.json", "velostat", True),
@@ -173,7 +184,9 @@ MULTI_GPU = "gpu-pipeline-h200x2.json"
 # session's changes do not reach their runs)
 # session 24: velostat and fabric_1 at the GPU step now (velostat 7.69 ms, fabric staircases 5.26 ms; bench/h200_s24.sh A,
 # each with stepping alone at the same step)
-USER_CLI_LATEST = [("user-cli-h200-s23-cnt_pdms-through1.json", "cnt_pdms"), ("user-cli-h200-s24-velostat.json", "velostat"),
+# session 25: cnt_pdms and velostat with the taxel fields sent as blocks (bench/h200_s25.sh A, B: each family's first
+# run of the call; velostat's with stepping alone)
+USER_CLI_LATEST = [("user-cli-h200-s25-cnt_pdms-blocks1.json", "cnt_pdms"), ("user-cli-h200-s25-velostat-blocks1.json", "velostat"),
                    ("user-cli-h200-s22-ntype.json", "ntype"), ("user-cli-h200-s24-fabric_1.json", "fabric_1")]
 
 
@@ -525,6 +538,24 @@ def bench_user_cli() -> str:
                 "is bound by its sequential steps, 5 % fewer: 1.4-2.0 s off the wall:\n",
                 table(["family", "run", "file", "worlds s (physics processes)", "sensor stage s", "pack s", "writer-seconds",
                        "wall s", "samples/s", "stepping alone s (of the wall)"], step)]
+    blocks = []
+    for fam, name, as_blocks in FIELD_BLOCKS_AB:
+        if got := _feed_run(name, fam):
+            r, t = got
+            blocks.append([fam, r["episodes"], f"`{name}`", "blocks" if as_blocks else "whole",
+                           num(t.get("reserve staging: GB page-locked (a size, not seconds)")),
+                           num(t.get("populate ahead: GB populated (a size, not seconds)")), num(t.get("simulate")),
+                           num(t.get("pack")), num(t.get("writers: episodes")), num(t.get("wait for writers")),
+                           num(r["seconds"])])
+    if blocks:
+        out += ["The taxel fields sent off the GPU as their non-zero taxel blocks (session 25, each family's three runs "
+                "in one call on one H200, in the order run; `PIEZOTWIN_FIELD_BLOCKS=0`: whole, as before). velostat's "
+                "page-locked staging falls from 7.3 to 0.2 GB and the shared memory populated for its pack from 19 to "
+                "1.2 GB; cnt_pdms' staging from 10 to 3.4 GB (its shear field only: its other fields are loaded on most "
+                "blocks and go whole). The wall does not follow: both runs are bound by their writers' CPU "
+                "(writer-seconds on 12 writer processes), which the blocks do not change:\n",
+                table(["family", "episodes", "file", "fields sent", "staging GB page-locked", "populated GB",
+                       "sensor stage s", "pack s", "writer-seconds", "wait for writers s", "wall s"], blocks)]
     staging = []
     for name, fam, reserved in STAGING_AB:
         if got := _feed_run(name, fam):

@@ -75,6 +75,12 @@ class BlockSparse:
             if not 0 <= r < self.shape[0]:
                 raise IndexError(f"row {key} of {self.shape[0]}")
             return self.episode(r)
+        if isinstance(key, slice) and key.step in (None, 1):  # a run of rows: views of its blocks, no copy
+            lo, hi, _ = key.indices(self.shape[0])
+            hi = max(lo, hi)
+            a, b = int(np.searchsorted(self.index[:, 0], lo, "left")), int(np.searchsorted(self.index[:, 0], hi, "left"))
+            index = self.index[a:b] - np.array([lo, 0], np.int32) if lo else self.index[a:b]
+            return BlockSparse(self.blocks[a:b], index, (hi - lo, *self.shape[1:]), self.block)
         rows = np.arange(self.shape[0])[key]
         if rows.ndim != 1:
             raise TypeError(f"BlockSparse rows: an int, a slice or a list of rows, not {key!r}")
@@ -83,7 +89,7 @@ class BlockSparse:
         keep = new[self.index[:, 0]] >= 0
         index = np.stack([new[self.index[keep, 0]], self.index[keep, 1]], axis=1).astype(np.int32)
         order = np.lexsort((index[:, 1], index[:, 0]))
-        return BlockSparse(self.blocks[keep][order], index[order], (len(rows), *self.shape[1:]), self.block)
+        return BlockSparse(self.blocks[np.flatnonzero(keep)[order]], index[order], (len(rows), *self.shape[1:]), self.block)
 
     def __array__(self, dtype=None, copy=None) -> np.ndarray:
         out = np.stack([self.episode(r) for r in range(self.shape[0])]) if self.shape[0] else np.zeros(self.shape, np.float32)
