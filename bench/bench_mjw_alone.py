@@ -49,8 +49,13 @@ def main() -> None:
     chosen = choose(cfg)
     cfg = load_scene(a.family, base + chosen.overrides)
     print(chosen.line())
-    groups = (_groups(cfg, list(range(n_shards(cfg))), feed_worlds(cfg)) if a.worlds is None
+    from simulate.contact.load_field import CONTACT_STAGES
+
+    stage = cfg.protocol.kind in CONTACT_STAGES  # ntype's press_stroke: its worlds step in the feed's driver, full batches
+    groups = (_groups(cfg, list(range(n_shards(cfg))), feed_worlds(cfg), ramp=0 if stage else None) if a.worlds is None
               else _groups(cfg, list(range(n_shards(cfg))), a.worlds, ramp=0))
+    if stage:
+        return _contact_stage_alone(a, cfg, chosen, groups)
     # load the kernels (Warp's cache is warm from the CLI run): 64 worlds of the same model, two samples
     import numpy as np
 
@@ -92,7 +97,43 @@ def main() -> None:
         "samples_per_s": samples / total,
         "world_steps_per_s": sum(b["episodes"] * b["sequential_steps"] for b in batches) / total,
     }
-    print(f"{a.family}: {samples} samples in {total:.1f} s = {samples / total:.3g} samples/s stepping alone")
+    _report(a, res)
+
+
+def _contact_stage_alone(a, cfg, chosen, groups) -> None:
+    """A kind with its own contact stage (ntype's press_stroke): per feed batch, its protocols, then its MuJoCo Warp
+    worlds with the stick-slip kernel (`iter_press_stroke` up to its first one-episode load batch), nothing else."""
+    from sensors.data.manifest import episode_seed
+    from simulate.contact.press_stroke import iter_press_stroke
+    from simulate.generation.run import episode_ids_of_shard, episode_protocols
+
+    warm = episode_protocols(cfg, [episode_seed(cfg.generation.root_seed, k) for k in range(64)], list(range(64)))
+    next(iter_press_stroke(cfg, warm, 1, 1))  # the kernels loaded (Warp's cache warm from the CLI run), not timed
+    batches, samples = [], 0
+    t0 = time.perf_counter()
+    for g in groups:
+        gids = [k for s in g for k in episode_ids_of_shard(cfg, s)]
+        t1 = time.perf_counter()
+        protos = episode_protocols(cfg, [episode_seed(cfg.generation.root_seed, k) for k in gids], gids)
+        t2 = time.perf_counter()
+        next(iter_press_stroke(cfg, protos, 1, 1))
+        t3 = time.perf_counter()
+        n = sum(p.n_samples for p in protos)
+        samples += n
+        steps = (protos[0].n_samples - 1) * cfg.sampling.substeps
+        batches.append({"episodes": len(gids), "samples": n, "wall_s": t3 - t1, "protocols_s": t2 - t1, "worlds_s": t3 - t2,
+                        "sequential_steps": steps})
+        print(f"batch of {len(gids)} episodes: {t3 - t1:.1f} s ({t3 - t2:.1f} s worlds)")
+    total = time.perf_counter() - t0
+    _report(a, {"engine_line": chosen.line(), "physics_timestep_s": cfg.sampling.physics_timestep_s, "episodes": a.episodes,
+                "worlds_per_batch": a.worlds, "batches": batches, "seconds": total,
+                "worlds_seconds": sum(b["worlds_s"] for b in batches), "samples": samples, "samples_per_s": samples / total,
+                "world_steps_per_s": sum(b["episodes"] * b["sequential_steps"] for b in batches) / total,
+                "what": "protocols + MuJoCo Warp worlds with the stick-slip kernel, per feed batch (the driver's contact stage)"})
+
+
+def _report(a, res: dict) -> None:
+    print(f"{a.family}: {res['samples']} samples in {res['seconds']:.1f} s = {res['samples_per_s']:.3g} samples/s stepping alone")
     cli = a.out / f"user-cli-{a.tag}.json"
     if cli.exists() and a.family in (d := json.loads(cli.read_text()))["runs"]:
         d["runs"][a.family]["mjw_alone"] = res

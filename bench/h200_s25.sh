@@ -6,6 +6,8 @@
 # B: cnt_pdms 8192 as typed (its shear field is all zero on a normal press, its other fields loaded on most blocks):
 #    with blocks, whole, with blocks again, one call.
 # D: velostat 16384 as typed with blocks, its driver under cProfile (bench/profile_cli.py).
+# N: ntype 24576 as typed, with its contact stage stepped alone (bench_mjw_alone.py now steps press_stroke's worlds:
+#    protocols + MuJoCo Warp worlds with the stick-slip kernel, per feed batch).
 source "$(dirname "$0")/h100_lib.sh"  # environment, cli (plain CLI + MuJoCo Warp alone), pack, warm
 case "$1" in
 A)  warm velostat
@@ -18,6 +20,9 @@ B)  warm cnt_pdms
     PIEZOTWIN_FIELD_BLOCKS=0 cli cnt_pdms 8192 h200-s25-cnt_pdms-whole noalone
     cli cnt_pdms 8192 h200-s25-cnt_pdms-blocks2 noalone
     pack B ;;
+N)  warm ntype
+    cli ntype 24576 h200-s25-ntype
+    pack N ;;
 D)  warm velostat
     prof velostat-h200-s25 -- generate velostat -o /tmp/prof-out --episodes 16384
     pack D ;;
