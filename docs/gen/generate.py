@@ -90,7 +90,9 @@ USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w
             "user-cli-h200-s24-fabric_1-5ms1.json", "user-cli-h200-s24-fabric_1-step2.json", "user-cli-h200-s24-fabric_1-5ms2.json",
             "user-cli-h200-s25-velostat-blocks1.json", "user-cli-h200-s25-velostat-whole.json",
             "user-cli-h200-s25-velostat-blocks2.json", "user-cli-h200-s25-cnt_pdms-blocks1.json",
-            "user-cli-h200-s25-cnt_pdms-whole.json", "user-cli-h200-s25-cnt_pdms-blocks2.json"]
+            "user-cli-h200-s25-cnt_pdms-whole.json", "user-cli-h200-s25-cnt_pdms-blocks2.json",
+            "user-cli-h200-s25-ntype.json", "user-cli-h200-s25-ntype-whole.json", "user-cli-h200-s25-ntype-blocks2.json",
+            "user-cli-h200-s25-ntype-blocks3.json", "user-cli-h200-s25-ntype-s22code.json"]
 # session 22: the physics processes' GPU stepping in turns against side by side (PIEZOTWIN_GPU_TURNS=0), velostat
 # 16384 episodes, (file, turns); the first pair in one call in the order run, the third an earlier call on the same day
 # session 23: the same for cnt_pdms 8192 (bench/h200_s23.sh; A: in turns with stepping alone, another call; B: side by side
@@ -130,7 +132,11 @@ FIELD_BLOCKS_AB = [("velostat", "user-cli-h200-s25-velostat-blocks1.json", True)
                    ("velostat", "user-cli-h200-s25-velostat-blocks2.json", True),
                    ("cnt_pdms", "user-cli-h200-s25-cnt_pdms-blocks1.json", True),
                    ("cnt_pdms", "user-cli-h200-s25-cnt_pdms-whole.json", False),
-                   ("cnt_pdms", "user-cli-h200-s25-cnt_pdms-blocks2.json", True)]
+                   ("cnt_pdms", "user-cli-h200-s25-cnt_pdms-blocks2.json", True),
+                   ("ntype", "user-cli-h200-s25-ntype.json", True),
+                   ("ntype", "user-cli-h200-s25-ntype-whole.json", False),
+                   ("ntype", "user-cli-h200-s25-ntype-blocks2.json", True),
+                   ("ntype", "user-cli-h200-s25-ntype-blocks3.json", True)]
 # session 20's A/B of the staging buffers page-locked while the first batch steps (bench/h200_s20.sh R; in the
 # order run on one machine): (file, family, reserved)
 STAGING_AB = [("user-cli-h200-s20-velostat-reserve1.json", "velostat", True),
@@ -184,10 +190,11 @@ MULTI_GPU = "gpu-pipeline-h200x2.json"
 # session's changes do not reach their runs)
 # session 24: velostat and fabric_1 at the GPU step now (velostat 7.69 ms, fabric staircases 5.26 ms; bench/h200_s24.sh A,
 # each with stepping alone at the same step)
-# session 25: cnt_pdms and velostat with the taxel fields sent as blocks (bench/h200_s25.sh A, B: each family's first
-# run of the call; velostat's with stepping alone)
+# session 25: cnt_pdms, velostat and ntype with the taxel fields sent as blocks (bench/h200_s25.sh A, B, N: each
+# family's first run of the call; velostat's and ntype's with stepping alone; ntype on a slower host than session 22's:
+# session 22's code took 55.3 s there, user-cli-h200-s25-ntype-s22code.json)
 USER_CLI_LATEST = [("user-cli-h200-s25-cnt_pdms-blocks1.json", "cnt_pdms"), ("user-cli-h200-s25-velostat-blocks1.json", "velostat"),
-                   ("user-cli-h200-s22-ntype.json", "ntype"), ("user-cli-h200-s24-fabric_1.json", "fabric_1")]
+                   ("user-cli-h200-s25-ntype.json", "ntype"), ("user-cli-h200-s24-fabric_1.json", "fabric_1")]
 
 
 # ----------------------------------------------------------------------------------------------- formatting
@@ -552,8 +559,9 @@ def bench_user_cli() -> str:
                 "in one call on one H200, in the order run; `PIEZOTWIN_FIELD_BLOCKS=0`: whole, as before). velostat's "
                 "page-locked staging falls from 7.3 to 0.2 GB and the shared memory populated for its pack from 19 to "
                 "1.2 GB; cnt_pdms' staging from 10 to 3.4 GB (its shear field only: its other fields are loaded on most "
-                "blocks and go whole). The wall does not follow: both runs are bound by their writers' CPU "
-                "(writer-seconds on 12 writer processes), which the blocks do not change:\n",
+                "blocks and go whole). The wall does not follow: velostat and cnt_pdms are bound by their writers' CPU "
+                "(writer-seconds on 12 writer processes), which the blocks do not change; ntype by its contact stage, "
+                "whose worlds step in the driver:\n",
                 table(["family", "episodes", "file", "fields sent", "staging GB page-locked", "populated GB",
                        "sensor stage s", "pack s", "writer-seconds", "wait for writers s", "wall s"], blocks)]
     staging = []
