@@ -51,7 +51,7 @@ def main() -> None:
     print(chosen.line())
     from simulate.contact.load_field import CONTACT_STAGES
 
-    stage = cfg.protocol.kind in CONTACT_STAGES  # ntype's press_stroke: its worlds step in the feed's driver, full batches
+    stage = cfg.protocol.kind in CONTACT_STAGES  # ntype's press_stroke: full batches (no ramp), its own physics
     groups = (_groups(cfg, list(range(n_shards(cfg))), feed_worlds(cfg), ramp=0 if stage else None) if a.worlds is None
               else _groups(cfg, list(range(n_shards(cfg))), a.worlds, ramp=0))
     if stage:
@@ -102,13 +102,13 @@ def main() -> None:
 
 def _contact_stage_alone(a, cfg, chosen, groups) -> None:
     """A kind with its own contact stage (ntype's press_stroke): per feed batch, its protocols, then its MuJoCo Warp
-    worlds with the stick-slip kernel (`iter_press_stroke` up to its first one-episode load batch), nothing else."""
+    worlds with the stick-slip kernel (`press_stroke_physics`, what the feed's physics processes run), nothing else."""
     from sensors.data.manifest import episode_seed
-    from simulate.contact.press_stroke import iter_press_stroke
+    from simulate.contact.press_stroke import press_stroke_physics
     from simulate.generation.run import episode_ids_of_shard, episode_protocols
 
     warm = episode_protocols(cfg, [episode_seed(cfg.generation.root_seed, k) for k in range(64)], list(range(64)))
-    next(iter_press_stroke(cfg, warm, 1, 1))  # the kernels loaded (Warp's cache warm from the CLI run), not timed
+    press_stroke_physics(cfg, warm)  # the kernels loaded (Warp's cache warm from the CLI run), not timed
     batches, samples = [], 0
     t0 = time.perf_counter()
     for g in groups:
@@ -116,7 +116,7 @@ def _contact_stage_alone(a, cfg, chosen, groups) -> None:
         t1 = time.perf_counter()
         protos = episode_protocols(cfg, [episode_seed(cfg.generation.root_seed, k) for k in gids], gids)
         t2 = time.perf_counter()
-        next(iter_press_stroke(cfg, protos, 1, 1))
+        press_stroke_physics(cfg, protos)
         t3 = time.perf_counter()
         n = sum(p.n_samples for p in protos)
         samples += n

@@ -8,6 +8,8 @@
 # D: velostat 16384 as typed with blocks, its driver under cProfile (bench/profile_cli.py).
 # N: ntype 24576 as typed, with its contact stage stepped alone (bench_mjw_alone.py now steps press_stroke's worlds:
 #    protocols + MuJoCo Warp worlds with the stick-slip kernel, per feed batch).
+# P: ntype 24576 with its worlds in the physics processes (the default now; with stepping alone), then in the driver
+#    (PIEZOTWIN_STAGES_IN_DRIVER=1, as before), one call.
 source "$(dirname "$0")/h100_lib.sh"  # environment, cli (plain CLI + MuJoCo Warp alone), pack, warm
 case "$1" in
 A)  warm velostat
@@ -23,6 +25,10 @@ B)  warm cnt_pdms
 N)  warm ntype
     cli ntype 24576 h200-s25-ntype
     pack N ;;
+P)  warm ntype
+    cli ntype 24576 h200-s25-ntype-processes
+    PIEZOTWIN_STAGES_IN_DRIVER=1 cli ntype 24576 h200-s25-ntype-driver noalone
+    pack P ;;
 D)  warm velostat
     prof velostat-h200-s25 -- generate velostat -o /tmp/prof-out --episodes 16384
     pack D ;;

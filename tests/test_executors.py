@@ -218,10 +218,11 @@ def test_gpu_feed_equals_serial_and_retries_a_killed_writer(tmp_path, monkeypatc
     assert mb["summary"] == ma["summary"] and mb["summary"]["n_samples"] == sum(d["summary"]["n_samples"] for d in described)
 
 
-def test_feed_steps_a_driver_contact_stage_in_full_batches_and_writes_what_the_serial_loop_writes(tmp_path, monkeypatch):
-    """ntype's press_stroke runs its contact stage in the feed's driver: its latency-bound batches cost about the same
-    whatever their size, so the feed makes them full from the first (no ramp of worlds / 4, worlds / 2), and the files
-    are those of the serial loop."""
+def test_feed_steps_a_contact_stage_in_full_batches_and_writes_what_the_serial_loop_writes(tmp_path, monkeypatch):
+    """ntype's press_stroke has its own contact stage: its worlds step in the feed's physics processes (their
+    `press_stroke_physics` handed to the driver, which makes the load field and runs the sensor chain), its
+    latency-bound batches cost about the same whatever their size, so the feed makes them full from the first (no ramp
+    of worlds / 4, worlds / 2), and the files are those of the serial loop."""
     from simulate.generation import feed
 
     ntype = load_scene("ntype", ["generation.episodes=6", "generation.episodes_per_shard=1", "generation.root_seed=3"])
@@ -239,6 +240,7 @@ def test_feed_steps_a_driver_contact_stage_in_full_batches_and_writes_what_the_s
     out = tmp_path / "feed"
     executors.generate(ntype, out, workers=2, feed=True)
     assert made == [[[0, 1, 2], [3, 4, 5]]]
+    assert feed.LAST_RUN_SECONDS.get("physics: worlds", 0) > 0  # the second batch stepped in a physics process
     assert real(ntype, list(range(6)), 3) == [[0], [1, 2, 3], [4, 5]]  # what the ramp would have made
     _assert_same_dataset(ref, out, 6, 6)
 
@@ -571,8 +573,10 @@ def test_physics_processes_started_ahead_are_taken_by_the_feed_or_stopped(cfg, s
     for args in (("mujoco", "auto", "warp", "local"), ("auto", "cpu", "warp", "local"), ("auto", "auto", "numpy", "local"),
                  ("auto", "auto", "warp", "ray")):
         assert not feed.feed_likely(cfg, *args), args
-    ntype = load_scene("ntype")  # press_stroke: its contact stage runs in the driver, no physics processes
-    assert not feed.feed_likely(ntype, "auto", "auto", "warp", "local")
+    ntype = load_scene("ntype")  # press_stroke: its worlds step in the physics processes too
+    assert feed.feed_likely(ntype, "auto", "auto", "warp", "local") and not feed.stage_in_driver(ntype)
+    paper = load_scene("ntype", ["protocol.kind=element_loads"])  # no worlds: its contact stage runs in the driver
+    assert feed.stage_in_driver(paper) and not feed.feed_likely(paper, "auto", "auto", "warp", "local")
     # taken by the feed: the same files as the serial loop
     feed.prestart_physics()
     pool = feed._PRESTARTED

@@ -313,7 +313,7 @@ CONTACT_STAGES: dict[str, str] = {
     "press_stroke": "simulate.contact.press_stroke:run_press_stroke",
     "element_loads": "simulate.contact.element_loads:run_element_loads",
 }
-# those with a sliced form: "module:function(cfg, protocols, threads, slice_episodes, device_fields)" yielding
+# those with a sliced form: "module:function(cfg, protocols, threads, slice_episodes, device_fields, physics)" yielding
 # (slice of protocols, LoadBatch) as `iter_load_batches` does
 SLICED_CONTACT_STAGES: dict[str, str] = {"press_stroke": "simulate.contact.press_stroke:iter_press_stroke"}
 
@@ -340,7 +340,9 @@ def iter_load_batches(
 
         if cfg.protocol.kind in SLICED_CONTACT_STAGES:  # one batch of physics, its fields slice by slice (on the device)
             module, fn = SLICED_CONTACT_STAGES[cfg.protocol.kind].split(":")
-            yield from getattr(importlib.import_module(module), fn)(cfg, protocols, threads, slice_episodes, device_fields)
+            stage_physics = None if physics is None else physics[0]  # its own physics array (`_step_groups`)
+            yield from getattr(importlib.import_module(module), fn)(cfg, protocols, threads, slice_episodes, device_fields,
+                                                                    stage_physics)
             return
         module, fn = CONTACT_STAGES[cfg.protocol.kind].split(":")
         yield slice(0, len(protocols)), getattr(importlib.import_module(module), fn)(cfg, protocols, threads)

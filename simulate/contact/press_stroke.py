@@ -104,12 +104,36 @@ def run_press_stroke(cfg: SceneConfig, protocols: list[EpisodeProtocol], threads
     return next(iter_press_stroke(cfg, protocols, threads))[1]
 
 
+PHYSICS_COLUMNS = 7  # per sample and indenter: position x, y, z (m), normal force (N), shear x, y (N), contacts
+
+
 def iter_press_stroke(cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1,
-                      slice_episodes: int | None = None, device_fields: str | None = None):
-    """`run_press_stroke` as (slice of protocols, LoadBatch) pieces of at most slice_episodes episodes (default
-    all) after one batch of physics. device_fields: on the MuJoCo Warp path with box indenters, the taxel fields
-    are made by Warp kernels on that device and stay there (flat Warp arrays, see LoadBatch), for a sensor chain
-    that runs there (`press_fields_warp`; the numpy `_load_batch` is its reference)."""
+                      slice_episodes: int | None = None, device_fields: str | None = None,
+                      physics: np.ndarray | None = None):
+    """`run_press_stroke` as (slice of protocols, LoadBatch) pieces after one batch of physics: on MuJoCo Warp of at
+    most slice_episodes episodes (default all), on C MuJoCo one piece. device_fields: on the MuJoCo Warp path with box
+    indenters, the taxel fields are made by Warp kernels on that device and stay there (flat Warp arrays, see
+    LoadBatch), for a sensor chain that runs there (`press_fields_warp`; the numpy `_load_batch` is its reference).
+    physics: `press_stroke_physics` of these protocols, run elsewhere (the GPU feed's physics process)."""
+    from simulate.contact.load_field import physics_engine
+
+    P = press_stroke_physics(cfg, protocols, threads) if physics is None else physics
+    engine, device = physics_engine(cfg)
+    gpu = engine == "mujoco_warp"
+    dev = device_fields if gpu and device_fields == device else None
+    E = len(protocols)
+    step = max(1, slice_episodes) if gpu and slice_episodes is not None else max(1, E)
+    for a in range(0, E, step):
+        sl = slice(a, min(E, a + step))
+        p = P[sl]
+        yield sl, _load_batch(cfg, protocols[sl], p[..., 0:3], p[..., 3], p[..., 4:6], p[..., 6], dev)
+
+
+def press_stroke_physics(cfg: SceneConfig, protocols: list[EpisodeProtocol], threads: int = 1) -> np.ndarray:
+    """The physics of E "press_stroke" episodes (same n_samples n): per sample and indenter its position, MuJoCo
+    normal force, stick-slip shear and contact count, (E, n, C, PHYSICS_COLUMNS) float64 (columns as named there).
+    C MuJoCo: one batched rollout, the stick-slip over every physics step on the host; MuJoCo Warp: the same model,
+    controls and stick-slip as batched worlds (float32 physics, the stick-slip a step kernel)."""
     n = protocols[0].n_samples
     if any(p.n_samples != n for p in protocols) or n < 2:
         raise ValueError("run_press_stroke: all protocols need the same n_samples >= 2")
@@ -137,6 +161,7 @@ def iter_press_stroke(cfg: SceneConfig, protocols: list[EpisodeProtocol], thread
     per = SENSORS_PER_INDENTER
     from simulate.contact.load_field import physics_engine
 
+    out = np.zeros((E, n, C, PHYSICS_COLUMNS))
     engine, device = physics_engine(cfg)
     if engine == "mujoco_warp":  # the same model, controls and stick-slip, as batched worlds (float32 physics)
         from simulate.contact.mujoco_warp import worlds_for
@@ -145,19 +170,11 @@ def iter_press_stroke(cfg: SceneConfig, protocols: list[EpisodeProtocol], thread
             states[:, 1 : 1 + m.nq], lambda sl, eps: controls_batch(cfg, protocols[eps], (np.arange(sl.start, sl.stop) + 1.0) * dt),
             np.concatenate([sens0, np.zeros((E, 2 * C))], axis=1), sub, n)
         sd = rec[..., : m.nsensordata].reshape(E, n, C, per)
-        shear = rec[..., m.nsensordata :].reshape(E, n, C, 2)
-        step = E if slice_episodes is None else max(1, slice_episodes)
-        for a in range(0, E, step):
-            sl = slice(a, min(E, a + step))
-            yield sl, _load_batch(cfg, protocols[sl], sd[sl, ..., 0:3], np.clip(-sd[sl, ..., 6], 0.0, None), shear[sl],
-                                  sd[sl, ..., 3], device_fields if device_fields == device else None)
-        return
+        out[..., 0:3], out[..., 3] = sd[..., 0:3], np.clip(-sd[..., 6], 0.0, None)
+        out[..., 4:6], out[..., 6] = rec[..., m.nsensordata :].reshape(E, n, C, 2), sd[..., 3]
+        return out
     ctrl = _controls(cfg, protocols, (np.arange(nstep) + 1.0) * dt)
     rows = np.arange(1, n) * sub - 1
-    pos = np.zeros((E, n, C, 3))
-    fn = np.zeros((E, n, C))
-    ft = np.zeros((E, n, C, 2))
-    found = np.zeros((E, n, C))
     datas = [mujoco.MjData(m) for _ in range(max(1, threads))]
     chunk = max(1, MAX_STEPS_PER_CHUNK // nstep)
     for a in range(0, E, chunk):
@@ -168,8 +185,8 @@ def iter_press_stroke(cfg: SceneConfig, protocols: list[EpisodeProtocol], thread
         shear = stick_slip_path(sd[..., 0:2], normal, k_t, mu)  # the Warp kernel of `stick_slip`
         r = np.concatenate([[0], rows + 1])
         sdr = sd[:, r]
-        pos[a:b], fn[a:b], ft[a:b], found[a:b] = sdr[..., 0:3], normal[:, r], shear[:, r], sdr[..., 3]
-    yield slice(0, E), _load_batch(cfg, protocols, pos, fn, ft, found)
+        out[a:b, ..., 0:3], out[a:b, ..., 3], out[a:b, ..., 4:6], out[a:b, ..., 6] = sdr[..., 0:3], normal[:, r], shear[:, r], sdr[..., 3]
+    return out
 
 
 def _mjcf(cfg: SceneConfig) -> str:

@@ -19,8 +19,9 @@ batches. Here a three-stage pipeline runs over batches of several shards' episod
    (RAMP_BATCHES), so the writers start early (a modest run is one batch); while the driver waits for the first
    batch, the blocks its pack will fill are populated ahead (`BlockPool.populate_ahead`, sized by
    `batch_pack_bytes`), and go on being populated beside that batch's pack (POPULATE_THROUGH). Kinds with their
-   own contact stage (ntype's press_stroke) step their worlds here in the driver instead, in full batches from the
-   first (no processes to overlap, no ramp);
+   own contact stage go in full batches from the first (no ramp: their batches are latency-bound); press_stroke's
+   worlds step in the physics processes like the others' (`press_stroke_physics`, handed over as its own array), a
+   stage without worlds (element_loads) runs here in the driver (`stage_in_driver`);
 3. writer processes (spawned; one shard per task, at most PENDING_PER_WRITER queued each) write the shards and
    make their manifest entries.
 
@@ -216,8 +217,16 @@ def _step_groups(cfg: SceneConfig, protos: list, threads: int) -> dict:
     """`step_worlds`' physics: per length group of `protos`, (sensordata, target) into shared memory (see there)."""
     from multiprocessing import shared_memory
 
-    from simulate.contact.load_field import simulate_sensors, simulate_sensors_padded
+    from simulate.contact.load_field import SLICED_CONTACT_STAGES, simulate_sensors, simulate_sensors_padded
     from simulate.generation.run import physics_runs
+
+    if cfg.protocol.kind in SLICED_CONTACT_STAGES:  # press_stroke: its own physics array per length (small: 7 values
+        # per indenter and sample), handed over like the rest
+        from simulate.contact.press_stroke import press_stroke_physics
+
+        groups = [(n, idx, (press_stroke_physics(cfg, [protos[i] for i in idx], threads), np.zeros((len(idx), n))))
+                  for run in physics_runs(cfg, protos) for n, idx in run]
+        return {n: _to_shm(*done) for n, idx, done in groups}
 
     out = {}
     groups = []
@@ -237,21 +246,42 @@ def _step_groups(cfg: SceneConfig, protos: list, threads: int) -> dict:
             made.append(shared_memory.SharedMemory(create=True, size=nbytes))
             return np.ndarray(shape, np.float64, buffer=made[0].buf)
 
-        if done is None:
-            sens, target = simulate_sensors(cfg, [protos[i] for i in idx], threads, alloc)
-        else:
-            into, target = alloc(done[0].shape), done[1]  # into shared memory like the rest
-            into[...] = done[0]
-            sens = into
+        if done is not None:
+            out[n] = _to_shm(*done)
+            continue
+        sens, target = simulate_sensors(cfg, [protos[i] for i in idx], threads, alloc)
         if not made:
             out[n] = (sens, target)
             continue
-        shm = made[0]  # the receiver unlinks it (the shared resource tracker has it registered until then)
-        np.ndarray(target.shape, np.float64, buffer=shm.buf, offset=sens.nbytes)[...] = target
-        out[n] = (shm.name, [(0, sens.dtype.str, sens.shape), (sens.nbytes, "<f8", target.shape)])
-        sens = None
-        shm.close()
+        layout = _put_target(made[0], sens, target)
+        sens = None  # the view released before the block is closed
+        made[0].close()
+        out[n] = (made[0].name, layout)
     return out
+
+
+def _put_target(shm, sens: np.ndarray, target: np.ndarray) -> list:
+    """Write target (E, n) into `shm` after sens (E, n, ...) float64, which fills its start; returns the layout the
+    receiver reads them by (it unlinks the block: the shared resource tracker has it registered until then)."""
+    np.ndarray(target.shape, np.float64, buffer=shm.buf, offset=sens.nbytes)[...] = target
+    return [(0, sens.dtype.str, sens.shape), (sens.nbytes, "<f8", target.shape)]
+
+
+def _to_shm(sens: np.ndarray, target: np.ndarray) -> tuple:
+    """sens and target (float64) copied into a new shared-memory block: (block name, layout), or themselves where
+    /dev/shm has no room."""
+    from multiprocessing import shared_memory
+
+    nbytes = sens.nbytes + target.nbytes
+    if not _shm_room(nbytes):
+        return sens, target
+    shm = shared_memory.SharedMemory(create=True, size=max(1, nbytes))
+    into = np.ndarray(sens.shape, np.float64, buffer=shm.buf)
+    into[...] = sens
+    layout = _put_target(shm, into, target)
+    into = None
+    shm.close()
+    return shm.name, layout
 
 
 # ---------------------------------------------------------------- physics processes started ahead of the feed
@@ -278,20 +308,34 @@ def _warm_physics() -> float:
     return time.perf_counter() - t0
 
 
+def stage_in_driver(cfg: SceneConfig) -> bool:
+    """Whether the feed's driver runs this scene's contact stage itself, physics included: a kind with its own
+    contact stage and no sliced form taking physics made elsewhere (`SLICED_CONTACT_STAGES`: press_stroke's worlds step
+    in the physics processes like the others')."""
+    from simulate.contact.load_field import CONTACT_STAGES, SLICED_CONTACT_STAGES
+
+    if cfg.protocol.kind in CONTACT_STAGES and STAGES_IN_DRIVER:
+        return True
+    return cfg.protocol.kind in CONTACT_STAGES and cfg.protocol.kind not in SLICED_CONTACT_STAGES
+
+
+STAGES_IN_DRIVER = os.environ.get("PIEZOTWIN_STAGES_IN_DRIVER", "0") == "1"  # every contact stage in the driver, its
+# worlds too, as before session 25 (the bench's A/B)
+
+
 def feed_likely(cfg: SceneConfig, physics: str, device: str, backend: str, executor: str,
                 workers: int | None = None) -> bool:
     """Whether a `piezotwin generate` with these flags will likely run the GPU feed with its physics processes, judged
     without starting CUDA or importing mujoco_warp (the caller then starts them early): the local executor with more
     than one worker (None: chosen), Warp kernels, no CPU device or C MuJoCo asked for, a scene whose contact stage
     steps as worlds in those processes, mujoco_warp installed, and exactly one NVIDIA GPU in /proc/driver/nvidia/gpus."""
-    from simulate.contact.load_field import CONTACT_STAGES
     from simulate.contact.mujoco_warp import available
 
     g = cfg.generation
     asked = g.physics if physics == "auto" and "physics" in g.model_fields_set else physics
     if executor != "local" or workers == 1 or backend != "warp" or device == "cpu" or asked == "mujoco":
         return False
-    if cfg.protocol.kind in CONTACT_STAGES or not available():
+    if stage_in_driver(cfg) or not available():
         return False
     try:
         return len(os.listdir("/proc/driver/nvidia/gpus")) == 1
@@ -650,9 +694,9 @@ def feed_worlds(cfg: SceneConfig) -> int:
 
     p, s = cfg.protocol, cfg.sampling
     if p.kind in CONTACT_STAGES:
-        # the stage runs in the driver (press_stroke: its taxel fields by Warp kernels on the device, ~3 GB of
-        # float64 fields per 8192 ntype episodes; on the host, numpy's (episodes, samples, indenters, taxels)
-        # temporaries)
+        # the stage's load field runs in the driver (press_stroke: its taxel fields by Warp kernels on the device,
+        # ~3 GB of float64 fields per 8192 ntype episodes; on the host, numpy's (episodes, samples, indenters,
+        # taxels) temporaries)
         return FEED_WORLDS // 4
     if p.kind != "sinusoid":
         return FEED_WORLDS
@@ -799,7 +843,7 @@ def probe_batch(cfg: SceneConfig, sensor, gids: list[int], threads: int = 1,
     protos: those of `gids`, where made already (else the probed ones are drawn here)."""
     from sensors.data.manifest import episode_seed
     from sensors.warp_setup import host_staging, staging_log
-    from simulate.contact.load_field import build_model, read_columns
+    from simulate.contact.load_field import SLICED_CONTACT_STAGES, build_model, read_columns
     from simulate.generation.run import SENSOR_SLICE, episode_protocols, simulate_slices
 
     every = max(1, len(gids) // PROBE_EPISODES)
@@ -807,7 +851,12 @@ def probe_batch(cfg: SceneConfig, sensor, gids: list[int], threads: int = 1,
     seeds = [episode_seed(cfg.generation.root_seed, k) for k in probe]
     protos = episode_protocols(cfg, seeds, probe) if protos is None else protos[::every][:PROBE_EPISODES]
     n = protos[0].n_samples
-    zero = {n: (np.zeros((1, n, len(read_columns(build_model(cfg))))), np.zeros((1, n)))}
+    if cfg.protocol.kind in SLICED_CONTACT_STAGES:  # press_stroke's own physics array
+        from simulate.contact.press_stroke import PHYSICS_COLUMNS
+
+        zero = {n: (np.zeros((1, n, cfg.indenter.count, PHYSICS_COLUMNS)), np.zeros((1, n)))}
+    else:
+        zero = {n: (np.zeros((1, n, len(read_columns(build_model(cfg))))), np.zeros((1, n)))}
     with host_staging(), staging_log() as log:
         per_episode = sum(_held_nbytes(c.data[:1]) for _, _, arrays in simulate_slices(cfg, seeds[:1], sensor, threads, probe[:1],
                                                                                        protos[:1], zero)
@@ -982,7 +1031,7 @@ def generate_feed(
     # the worlds step in their own processes, batches ahead of the load field + sensor chain here (kinds with
     # their own contact stage run it here); they start first, so their start-up overlaps the driver's
     # (or were started ahead by the caller: prestart_physics)
-    if cfg.protocol.kind in CONTACT_STAGES:
+    if stage_in_driver(cfg):
         release_prestarted()
         physics = None
     else:
@@ -991,12 +1040,12 @@ def generate_feed(
             physics = ProcessPoolExecutor(PHYSICS_PROCESSES, mp_context=ctx)
             for _ in range(PHYSICS_PROCESSES):
                 physics.submit(_warm_physics)
-    # a kind with its own contact stage steps its worlds here, in the driver: no ramp, since its latency-bound
-    # batches cost about the same whatever their size (STEP_S_FLOOR), so a ramp's small batches each cost a full
-    # one's time and overlap nothing (ntype 8192 episodes on an H200: ramp of 2048, 4096 then 2048 against one
-    # batch, bench/results/logs/profile-ntype-ramp*-h200-s16.txt)
-    batches = (_schedule(cfg, todo, worlds or feed_worlds(cfg)) if physics
-               else [(g, None) for g in _groups(cfg, todo, worlds or feed_worlds(cfg), ramp=0)])
+    # a kind with its own contact stage: no ramp, since its latency-bound batches cost about the same whatever their
+    # size (STEP_S_FLOOR), so a ramp's small batches each cost a full one's time and overlap nothing (ntype 8192
+    # episodes on an H200, stepped in the driver then: ramp of 2048, 4096 then 2048 against one batch,
+    # bench/results/logs/profile-ntype-ramp*-h200-s16.txt)
+    batches = ([(g, None) for g in _groups(cfg, todo, worlds or feed_worlds(cfg), ramp=0)] if cfg.protocol.kind in CONTACT_STAGES
+               else _schedule(cfg, todo, worlds or feed_worlds(cfg)))
     groups = [g for g, _ in batches]
 
     turns = new_turns() if physics and GPU_TURNS else None

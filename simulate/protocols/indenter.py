@@ -238,7 +238,7 @@ def _draw_press_stroke(proto: EpisodeProtocol, cfg: SceneConfig, rng: np.random.
     }
     return EpisodeProtocol(
         frequency_hz=proto.frequency_hz, amplitude=first["force_n"], offset_xy_m=np.asarray(first["xy_m"], float),
-        n_samples=proto.n_samples, control=proto.control, kind=proto.kind, params=params,
+        n_samples=proto.n_samples, control=proto.control, kind=proto.kind, params=params, index=proto.index,
     )
 
 
