@@ -92,7 +92,8 @@ USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w
             "user-cli-h200-s25-velostat-blocks2.json", "user-cli-h200-s25-cnt_pdms-blocks1.json",
             "user-cli-h200-s25-cnt_pdms-whole.json", "user-cli-h200-s25-cnt_pdms-blocks2.json",
             "user-cli-h200-s25-ntype.json", "user-cli-h200-s25-ntype-whole.json", "user-cli-h200-s25-ntype-blocks2.json",
-            "user-cli-h200-s25-ntype-blocks3.json", "user-cli-h200-s25-ntype-s22code.json"]
+            "user-cli-h200-s25-ntype-blocks3.json", "user-cli-h200-s25-ntype-s22code.json",
+            "user-cli-h200-s25-ntype-processes.json", "user-cli-h200-s25-ntype-driver.json"]
 # session 22: the physics processes' GPU stepping in turns against side by side (PIEZOTWIN_GPU_TURNS=0), velostat
 # 16384 episodes, (file, turns); the first pair in one call in the order run, the third an earlier call on the same day
 # session 23: the same for cnt_pdms 8192 (bench/h200_s23.sh; A: in turns with stepping alone, another call; B: side by side
@@ -137,6 +138,10 @@ FIELD_BLOCKS_AB = [("velostat", "user-cli-h200-s25-velostat-blocks1.json", True)
                    ("ntype", "user-cli-h200-s25-ntype-whole.json", False),
                    ("ntype", "user-cli-h200-s25-ntype-blocks2.json", True),
                    ("ntype", "user-cli-h200-s25-ntype-blocks3.json", True)]
+# session 25's A/B of ntype's worlds stepped in the physics processes against in the driver (bench/h200_s25.sh P, one
+# call, in that order): (label, file)
+NTYPE_PROCESSES_AB = [("in the physics processes (default now)", "user-cli-h200-s25-ntype-processes.json"),
+                      ("in the driver (PIEZOTWIN_STAGES_IN_DRIVER=1, as before)", "user-cli-h200-s25-ntype-driver.json")]
 # session 20's A/B of the staging buffers page-locked while the first batch steps (bench/h200_s20.sh R; in the
 # order run on one machine): (file, family, reserved)
 STAGING_AB = [("user-cli-h200-s20-velostat-reserve1.json", "velostat", True),
@@ -190,11 +195,11 @@ MULTI_GPU = "gpu-pipeline-h200x2.json"
 # session's changes do not reach their runs)
 # session 24: velostat and fabric_1 at the GPU step now (velostat 7.69 ms, fabric staircases 5.26 ms; bench/h200_s24.sh A,
 # each with stepping alone at the same step)
-# session 25: cnt_pdms, velostat and ntype with the taxel fields sent as blocks (bench/h200_s25.sh A, B, N: each
-# family's first run of the call; velostat's and ntype's with stepping alone; ntype on a slower host than session 22's:
-# session 22's code took 55.3 s there, user-cli-h200-s25-ntype-s22code.json)
+# session 25: cnt_pdms and velostat with the taxel fields sent as blocks (bench/h200_s25.sh A, B: each family's first
+# run of the call; velostat's with stepping alone); ntype with its worlds in the physics processes (P, with stepping
+# alone)
 USER_CLI_LATEST = [("user-cli-h200-s25-cnt_pdms-blocks1.json", "cnt_pdms"), ("user-cli-h200-s25-velostat-blocks1.json", "velostat"),
-                   ("user-cli-h200-s25-ntype.json", "ntype"), ("user-cli-h200-s24-fabric_1.json", "fabric_1")]
+                   ("user-cli-h200-s25-ntype-processes.json", "ntype"), ("user-cli-h200-s24-fabric_1.json", "fabric_1")]
 
 
 # ----------------------------------------------------------------------------------------------- formatting
@@ -564,6 +569,19 @@ def bench_user_cli() -> str:
                 "whose worlds step in the driver:\n",
                 table(["family", "episodes", "file", "fields sent", "staging GB page-locked", "populated GB",
                        "sensor stage s", "pack s", "writer-seconds", "wait for writers s", "wall s"], blocks)]
+    stage = []
+    for label, name in NTYPE_PROCESSES_AB:
+        if got := _feed_run(name, "ntype"):
+            r, t = got
+            a = load("user-cli-h200-s25-ntype-processes.json")["runs"]["ntype"].get("mjw_alone")
+            stage.append([label, f"`{name}`", num(t.get("simulate")), num(t.get("wait for physics (first batch)")),
+                          num(r["seconds"]), num(r.get("samples_per_s")), pct(a["seconds"] / r["seconds"]) if a else "–"])
+    if stage:
+        out += ["ntype's worlds (press_stroke, 24576 episodes) stepped in the physics processes against in the feed's "
+                "driver (session 25, one call on one H200, in that order; stepping alone from the first run's file): "
+                "the driver now makes the load field and runs the sensor chain of one batch while the next steps:\n",
+                table(["worlds stepped", "file", "driver's stage s", "wait for the first batch s", "wall s", "samples/s",
+                       "of stepping alone"], stage)]
     staging = []
     for name, fam, reserved in STAGING_AB:
         if got := _feed_run(name, fam):
