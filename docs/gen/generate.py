@@ -560,7 +560,7 @@ def bench_user_cli() -> str:
                            num(t.get("pack")), num(t.get("writers: episodes")), num(t.get("wait for writers")),
                            num(r["seconds"])])
     if blocks:
-        out += ["The taxel fields sent off the GPU as their non-zero taxel blocks (session 25, each family's three runs "
+        out += ["The taxel fields sent off the GPU as their non-zero taxel blocks (session 25, each family's runs "
                 "in one call on one H200, in the order run; `PIEZOTWIN_FIELD_BLOCKS=0`: whole, as before). velostat's "
                 "page-locked staging falls from 7.3 to 0.2 GB and the shared memory populated for its pack from 19 to "
                 "1.2 GB; cnt_pdms' staging from 10 to 3.4 GB (its shear field only: its other fields are loaded on most "
