@@ -565,8 +565,8 @@ def bench_user_cli() -> str:
                 "page-locked staging falls from 7.3 to 0.2 GB and the shared memory populated for its pack from 19 to "
                 "1.2 GB; cnt_pdms' staging from 10 to 3.4 GB (its shear field only: its other fields are loaded on most "
                 "blocks and go whole). The wall does not follow: velostat and cnt_pdms are bound by their writers' CPU "
-                "(writer-seconds on 12 writer processes), which the blocks do not change; ntype by its contact stage, "
-                "whose worlds step in the driver:\n",
+                "(writer-seconds on 12 writer processes), which the blocks do not change; ntype (a slower host) by its "
+                "contact stage, whose worlds these runs still stepped in the driver (next table):\n",
                 table(["family", "episodes", "file", "fields sent", "staging GB page-locked", "populated GB",
                        "sensor stage s", "pack s", "writer-seconds", "wait for writers s", "wall s"], blocks)]
     stage = []
