@@ -11,6 +11,8 @@ batch of two samples first loads the kernels (compiled by the CLI run before, so
 seconds per batch ("worlds": the MuJoCo Warp part, as the feed's timings name it; "wall": the whole task),
 samples/s and world-steps/s. Merged into bench/results/user-cli-<tag>.json under runs.<family>.mjw_alone when
 that file has the family's run (bench_user_cli.py writes it), else written to mjw-alone-<tag>-<family>.json.
+ntype's press_stroke (its own contact stage): per feed batch (full, no ramp), its protocols, then
+`press_stroke_physics` (MuJoCo Warp worlds with the stick-slip kernel), as the feed's physics processes run them.
 """
 
 from __future__ import annotations
