@@ -237,10 +237,20 @@ def test_feed_steps_a_contact_stage_in_full_batches_and_writes_what_the_serial_l
         return made[-1]
 
     monkeypatch.setattr(feed, "_groups", spy)
+    from multiprocessing import shared_memory
+
+    touched, real_init = [], shared_memory.SharedMemory.__init__  # the blocks the driver made or attached
+
+    def tracking_init(self, *a, **k):
+        real_init(self, *a, **k)
+        touched.append(self._name.lstrip("/"))
+
+    monkeypatch.setattr(shared_memory.SharedMemory, "__init__", tracking_init)
     out = tmp_path / "feed"
     executors.generate(ntype, out, workers=2, feed=True)
     assert made == [[[0, 1, 2], [3, 4, 5]]]
     assert feed.LAST_RUN_SECONDS.get("physics: worlds", 0) > 0  # the second batch stepped in a physics process
+    assert touched and not [n for n in touched if (Path("/dev/shm") / n).exists()]  # its physics blocks unlinked
     assert real(ntype, list(range(6)), 3) == [[0], [1, 2, 3], [4, 5]]  # what the ramp would have made
     _assert_same_dataset(ref, out, 6, 6)
 
