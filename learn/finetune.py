@@ -29,6 +29,9 @@ new input affine) to the training loss (Li, Grandvalet & Davoine 2018, ICML, "Ex
 learning with convolutional networks", eq. of L2-SP); ``lpft`` first fits the head (policy ``head``, early stopped),
 then every layer of the policy from there (Kumar et al. 2022, ICLR, "Fine-tuning can distort pretrained features
 and underperform out-of-distribution": linear probing, then fine-tuning). Eighth round of issue 15 (CHANGELOG).
+``shrink_perturb`` scales every pre-trained weight by SP_SHRINK and adds SP_NOISE times a fresh initialisation of its
+layer before training as ``plain`` (Ash & Adams 2020, NeurIPS, "On warm-starting neural network training": a warm
+start that fits its new data no better than a cold one, as pike1 -> pike2's fine-tuning with 4 and 14 runs did).
 
 Early stopping uses held-out real data: whole runs (`split_runs`), or, in `piezotwin sim2real`, the last
 loaded presses of each training run (`split_tail`: the same sensor, cut between presses). The pre-trained weights
@@ -76,7 +79,11 @@ __all__ = [
 ]
 
 FREEZE_POLICIES = ("head", "none")
-FINETUNE_METHODS = ("plain", "l2sp", "lpft")
+FINETUNE_METHODS = ("plain", "l2sp", "lpft", "shrink_perturb")
+# estimates (not from the paper, which sweeps both): shrink-and-perturb's factor on the pre-trained weights and the
+# scale of the fresh initialisation added to them (`_shrink_perturb`)
+SP_SHRINK = 0.5
+SP_NOISE = 0.1
 # estimate: alpha 0.1 and beta 0.01 are the values Li et al. (2018) settled on for L2-SP (chosen there by cross-validation
 # over 1e-3 ... 1 on image tasks, loss = mean per sample, as our MSE); taken as given, never tuned on these data
 L2SP_ALPHA = 0.1
@@ -410,6 +417,8 @@ def finetune(comp: Compensator, train: Seq[Sequence], valid: Seq[Sequence], *, p
         raise ValueError(f"freeze policy must be one of {', '.join(FREEZE_POLICIES)}; got {policy!r}")
     _torch_only(comp)
     c = restandardise(comp, train) if norm == "real" else copy.deepcopy(comp)
+    if method == "shrink_perturb":
+        _shrink_perturb(c.net, SP_SHRINK, SP_NOISE, seed)
     head = set(head_parameter_names(c))
     frozen = []
     for n, p in c.net.named_parameters():
@@ -449,10 +458,24 @@ def finetune(comp: Compensator, train: Seq[Sequence], valid: Seq[Sequence], *, p
     info = {"policy": policy, "frozen": frozen, "trained": sorted(set(n for n, _ in c.net.named_parameters()) - set(frozen)) + ["input affine a, b"],
             "n_trainable": int(n_trainable), "n_parameters": int(sum(p.numel() for p in c.net.parameters())),
             "lr": lr, "norm": norm, "method": method,
-            **({"l2sp_alpha": float(l2sp_alpha), "l2sp_beta": float(l2sp_beta)} if method == "l2sp" else {}), "n_rehearsal_episodes": len(rehearsal), "valid_mse_z_before": before, "input_affine": {"a": a.tolist(), "b": b.tolist()},
+            **({"l2sp_alpha": float(l2sp_alpha), "l2sp_beta": float(l2sp_beta)} if method == "l2sp" else {}),
+            **({"sp_shrink": SP_SHRINK, "sp_noise": SP_NOISE} if method == "shrink_perturb" else {}), "n_rehearsal_episodes": len(rehearsal), "valid_mse_z_before": before, "input_affine": {"a": a.tolist(), "b": b.tolist()},
             "n_train_runs": len(train), "n_valid_runs": len(valid), **hist.to_json()}
     c.history = {k: v for k, v in info.items() if k not in ("train_loss", "valid_loss")}
     return c, info
+
+
+def _shrink_perturb(net: nn.Module, shrink: float, noise: float, seed: int) -> None:
+    """In place: every parameter w <- shrink w + noise w0, w0 a fresh initialisation of its layer (each module's own
+    `reset_parameters`, drawn from torch's generator seeded with `seed`). Ash & Adams 2020 (NeurIPS), shrink-perturb."""
+    fresh = copy.deepcopy(net)
+    torch.manual_seed(seed)
+    for m in fresh.modules():
+        if hasattr(m, "reset_parameters"):
+            m.reset_parameters()
+    with torch.no_grad():
+        for w, w0 in zip(net.parameters(), fresh.parameters()):
+            w.mul_(shrink).add_(noise * w0)
 
 
 def _fold_affine(c: Compensator, wrapped: _InputAffine) -> None:

@@ -279,7 +279,7 @@ S2R_BUDGET = {  # the default budget of `piezotwin sim2real` (2 CPU cores, <= 15
 # sensors.chain_fit.contact_fraction) with F_a fitted; ninth round, scored by the rule written before scoring
 # (CHANGELOG): validation-tail paired difference over pipeline seeds 0-2 -0.003 +- 0.041 N (pike1 -> pike2) and
 # +0.011 +- 0.030 N (pike2 -> pike1), not adopted (bench/results/s2r-contact-*.json). Off: F_a = 0, rounds 1-8 bit for bit
-# finetune_method: plain | l2sp | lpft (learn.finetune; L2-SP's alpha / beta: learn.finetune.L2SP_ALPHA, an estimate);
+# finetune_method: plain | l2sp | lpft | shrink_perturb (learn.finetune; L2-SP's alpha / beta: learn.finetune.L2SP_ALPHA, an estimate);
 # eighth round, adopted only by the rule written before scoring (CHANGELOG)
 # pipeline_seed: varies the generation draw and the pre-training (its simulated split, init and batch order) with the
 # fit, the learning curve's run order and the fine-tuning / scratch seeds held: root seed + 100 x pipeline_seed for

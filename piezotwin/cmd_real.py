@@ -240,7 +240,7 @@ def sim2real(
                        "force label) from the training runs, line the labels up for the fit and delay the generated "
                        "labels by it.")] = False,
     finetune_method: Annotated[str | None, typer.Option("--finetune-method", help="plain, l2sp (L2-SP, Li et al. 2018) "
-                               "or lpft (LP-FT, Kumar et al. 2022); default: the budget's.")] = None,
+                               "lpft (LP-FT, Kumar et al. 2022) or shrink_perturb (Ash & Adams 2020); default: the budget's.")] = None,
     pipeline_seed: Annotated[int, typer.Option("--pipeline-seed", help="Redraw the generation and the pre-training "
                              "(root seed + 100 x this) with the fit, the run order and the fine-tuning seeds held.")] = 0,
 ) -> None:
