@@ -308,6 +308,30 @@ def test_lpft_probes_the_head_before_every_layer(ckpt):
     assert info["best_loss"] <= lp["best_loss"] + 1e-9
 
 
+def test_shrink_perturb_starts_from_shrunk_weights_plus_a_fresh_initialisation(ckpt):
+    """Shrink-and-perturb (Ash & Adams 2020): w <- SP_SHRINK w + SP_NOISE w0, w0 the layer's own fresh initialisation
+    drawn from the seed (the same seed, the same start); the fine-tuning then runs as plain and reports the factors."""
+    lin = torch.nn.Linear(4, 3)
+    w = [p.detach().clone() for p in lin.parameters()]
+    fresh = torch.nn.Linear(4, 3)
+    torch.manual_seed(7)
+    fresh.reset_parameters()
+    FT._shrink_perturb(lin, 0.5, 0.1, 7)
+    for p, p0, q in zip(lin.parameters(), w, fresh.parameters()):
+        torch.testing.assert_close(p.detach(), 0.5 * p0 + 0.1 * q.detach())
+    base = load_checkpoint(ckpt)
+    real = FT.apply_map(sim_seqs(3, REALP, rest=800.0), "log")
+    runs = [FT.finetune(base, real[:2], real[2:], policy="none", lr=1e-2, max_epochs=2, patience=5, norm="checkpoint",
+                        method="shrink_perturb", seed=3) for _ in range(2)]
+    (a, info), (b, _) = runs
+    assert info["method"] == "shrink_perturb" and info["sp_shrink"] == FT.SP_SHRINK and info["sp_noise"] == FT.SP_NOISE
+    for p, q in zip(a.net.parameters(), b.net.parameters()):
+        torch.testing.assert_close(p, q)  # deterministic
+    _, plain = FT.finetune(base, real[:2], real[2:], policy="none", lr=1e-2, max_epochs=1, patience=1, norm="checkpoint")
+    assert info["valid_mse_z_before"] != pytest.approx(plain["valid_mse_z_before"])  # it starts elsewhere
+    assert "shrink_perturb" in FT.FINETUNE_METHODS
+
+
 def test_finetune_with_the_checkpoint_scales_reaches_scratch_on_mismatched_ranges(ckpt):
     """Tenth round of issue 15: the real runs span other ranges than the simulated data (pike1 -> pike2: the real
     force sd 1.4-1.8 x the checkpoint's z-score, mean +0.4-1.0 sd; ln reading sd 1.4-1.6 x, mean -0.4 to -0.7 sd).
