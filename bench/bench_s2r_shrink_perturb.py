@@ -9,7 +9,8 @@ its baselines ran again; pike2 -> pike1: a full loop at pipeline seed 0, as reco
 plain fine-tuning, `results/experiments/sim2real-velostat-<split>.json`. The rule
 (`results/s2r-shrink-perturb-rule.md`): adopt only if, per split, (1) the all-runs fine-tuned test RMSE falls by >= 5 %,
 (2) the mean relative change over the budgets is <= -5 %, (3) no budget rises by more than 10 %; pike1 -> pike2 first,
-then the same on pike2 -> pike1.
+then the same on pike2 -> pike1. TAMS covers left out (`--run tams-<cover>-held-out=DIR`, each a full loop with the
+recorded run's command plus the method) are reported beside them, outside the rule.
 """
 
 from __future__ import annotations
@@ -26,8 +27,12 @@ def _curve(m: dict) -> dict[str, dict[str, float]]:
             for e in m["learning_curve"]}
 
 
+def _reference(split: str) -> str:
+    return f"sim2real-{split}.json" if split.startswith("tams-") else f"sim2real-velostat-{split}.json"
+
+
 def score(split: str, run_dir: Path) -> dict:
-    ref = json.loads((RESULTS / "experiments" / f"sim2real-velostat-{split}.json").read_text())
+    ref = json.loads((RESULTS / "experiments" / _reference(split)).read_text())
     got = json.loads((run_dir / "metrics.json").read_text())
     rc, gc = _curve(ref), _curve(got)
     budgets = [b for b in rc if b in gc]
@@ -38,7 +43,7 @@ def score(split: str, run_dir: Path) -> dict:
               "no_budget_rises_10pct": max(rel.values()) <= 0.10}
     r, g = ref["results"], got["results"]
     return {
-        "split": split, "run": str(run_dir), "reference": f"experiments/sim2real-velostat-{split}.json",
+        "split": split, "run": str(run_dir), "reference": f"experiments/{_reference(split)}",
         "full_scale_n": got["full_scale_n"],
         "finetuned_rmse": {"plain": r["finetuned"]["rmse"], "shrink_perturb": g["finetuned"]["rmse"]},
         "finetuned_pct_full_scale": {"plain": r["finetuned"]["rmse_pct_full_scale"],
@@ -55,7 +60,8 @@ def score(split: str, run_dir: Path) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--run", action="append", required=True, help="SPLIT=DIR (pike1-to-pike2 or pike2-to-pike1)")
+    ap.add_argument("--run", action="append", required=True,
+                    help="SPLIT=DIR (pike1-to-pike2, pike2-to-pike1, or tams-<cover>-held-out: reported, outside the rule)")
     ap.add_argument("-o", "--out", type=Path, default=RESULTS / "s2r-shrink-perturb.json")
     a = ap.parse_args()
     splits = {}
@@ -63,11 +69,11 @@ def main() -> None:
         split, d = item.split("=", 1)
         splits[split] = score(split, Path(d))
     order = [s for s in ("pike1-to-pike2", "pike2-to-pike1") if s in splits]
-    adopted = bool(order) and order[0] == "pike1-to-pike2" and all(splits[s]["passes"] for s in order) and len(order) == 2
+    adopted = len(order) == 2 and all(splits[s]["passes"] for s in order)
     out = {"rule": "results/s2r-shrink-perturb-rule.md", "candidate": "finetune_method=shrink_perturb (SP_SHRINK 0.5, "
            "SP_NOISE 0.1, estimates)", "splits": splits, "adopted": adopted}
     a.out.write_text(json.dumps(out, indent=1) + "\n")
-    for s in order:
+    for s in splits:
         v = splits[s]
         print(f"{s}: fine-tuned {v['finetuned_rmse']['plain']:.2f} -> {v['finetuned_rmse']['shrink_perturb']:.2f} N; "
               + ", ".join(f"{b} runs {c['finetuned_rel_change']:+.0%}" for b, c in v["curve"].items())

@@ -998,6 +998,26 @@ def s2r_candidates() -> str:
                 "with all runs in % of full scale; reference -> candidate, same pipeline seed):\n",
                 table(["candidate", "direction", "pipeline seed", "fine-tuned by budget (N)", "all runs", "decision",
                        "file"], loop)]
+    sp = load("s2r-shrink-perturb.json")
+    if sp:
+        rows = []
+        for split, v in sp["splits"].items():
+            c = v["curve"]
+            rows.append([split, " / ".join(f"{num(c[n]['plain']['finetuned_rmse'])} -> {num(c[n]['shrink_perturb']['finetuned_rmse'])}"
+                                           for n in c),
+                         " / ".join(num(c[n]["shrink_perturb"]["scratch_rmse"]) for n in c),
+                         " / ".join(num(c[n]["shrink_perturb"]["static_curve_rmse"]) for n in c),
+                         f"{num(v['finetuned_pct_full_scale']['plain'])} -> {num(v['finetuned_pct_full_scale']['shrink_perturb'])} %",
+                         "in the rule" if not split.startswith("tams-") else "seen beside it",
+                         "yes" if v["passes"] else "no"])
+        out += ["\nThe fine-tuning method: plain (the default) -> shrink-and-perturb (`--finetune-method shrink_perturb`, "
+                "Ash & Adams 2020: the pre-trained weights x 0.5 plus 0.1 x a fresh initialisation, both estimates), "
+                "the fit and pre-training the recorded runs' (`s2r-shrink-perturb.json`, rule "
+                "`s2r-shrink-perturb-rule.md`: each Lupasic direction must fall by >= 5 % with all runs and on the "
+                f"budgets' mean, no budget rising > 10 %). Decision: **{'adopted' if sp['adopted'] else 'not adopted'}**; "
+                "test RMSE in N at 1 / 2 / 4 / all training runs (TAMS: 1 / 2):\n",
+                table(["split", "fine-tuned: plain -> shrink-perturb", "scratch", "static curve", "all runs",
+                       "role", "passes the rule's checks"], rows)]
     return "\n".join(out) if out else "No candidate scored yet."
 
 
