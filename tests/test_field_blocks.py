@@ -141,6 +141,12 @@ def test_feed_packs_block_fields_and_writes_the_dense_files(monkeypatch, tmp_pat
                     for got in (sa[piece_s][n], ka[piece_s][n]):
                         assert (got[row_s] if spec[3] else got).tobytes() == want.tobytes(), n
             sa = None
+        # the pack's estimate (populated ahead) plans a block field at SPARSE_MAX_SHARE of its dense bytes: with every
+        # field as blocks (share 1) it covers what the pieces hold, and no more than the whole fields
+        need = feed.batch_pack_bytes(cfg, sensor, list(range(7)))
+        held = sum(int(np.prod(shape)) * np.dtype(dt).itemsize for p in sparse for b in p.blocks for _, dt, shape in b[1].values())
+        whole = sum(a.nbytes for p in dense for piece in p.pieces for n, a in piece.items() if n != "time")
+        assert held <= need <= whole
         attrs, mjcf = sensor.attrs(), "<mujoco/>"
         for name, packs, bufs in (("dense", dense, {}), ("sparse", sparse, None)):
             out = tmp_path / name

@@ -818,9 +818,13 @@ SLICES_PER_LENGTH = int(os.environ.get("PIEZOTWIN_FEED_SLICES", "4"))  # slices 
 PROBE_EPISODES = 64  # protocols drawn to estimate a batch's mean episode length (`batch_pack_bytes`; ~30 us each)
 
 
-def _held_nbytes(a: np.ndarray | BlockSparse) -> int:
-    """Bytes a channel's array puts in a pack (a BlockSparse: its blocks and index)."""
-    return a.stored_nbytes if isinstance(a, BlockSparse) else a.nbytes
+def _planned_nbytes(a: np.ndarray | BlockSparse) -> int:
+    """Bytes a channel's array of the probe plans for a pack: a taxel field the probe's zero load sends as blocks
+    counts SPARSE_MAX_SHARE of its dense bytes, the most a field sent as blocks can hold (one loaded on more goes
+    whole: cnt_pdms' deformation and pressure, planned at half with its all-zero shear at half, come out right)."""
+    from simulate.contact import field_blocks
+
+    return int(a.nbytes * max(0.0, field_blocks.SPARSE_MAX_SHARE)) if isinstance(a, BlockSparse) else a.nbytes
 
 
 def batch_pack_bytes(cfg: SceneConfig, sensor, gids: list[int], threads: int = 1, protos: list | None = None) -> int:
@@ -835,7 +839,7 @@ def probe_batch(cfg: SceneConfig, sensor, gids: list[int], threads: int = 1,
     them through the load field and the sensor chain on zero sensordata (its channels' shapes and dtypes do not
     depend on the load; on a GPU it also loads the sensor's kernels, ahead of the first slice). Returns
     - the bytes its pack will need: per sample, times the mean length of up to PROBE_EPISODES of their protocols,
-      times their count;
+      times their count (a taxel field sent as its non-zero blocks: `_planned_nbytes`);
     - its staging plan ((site, slot) -> bytes, for `sensors.warp_setup.reserve_staging`): the page-locked buffers
       its largest slice copies back into, from the probe's copies per sample times that slice's samples (the slices
       of `simulate_slices` with SLICES_PER_LENGTH pieces, from the lengths of up to PROBE_EPISODES protocols; the
@@ -858,8 +862,8 @@ def probe_batch(cfg: SceneConfig, sensor, gids: list[int], threads: int = 1,
     else:
         zero = {n: (np.zeros((1, n, len(read_columns(build_model(cfg))))), np.zeros((1, n)))}
     with host_staging(), staging_log() as log:
-        per_episode = sum(_held_nbytes(c.data[:1]) for _, _, arrays in simulate_slices(cfg, seeds[:1], sensor, threads, probe[:1],
-                                                                                       protos[:1], zero)
+        per_episode = sum(_planned_nbytes(c.data[:1]) for _, _, arrays in simulate_slices(cfg, seeds[:1], sensor, threads,
+                                                                                          probe[:1], protos[:1], zero)
                           for c in arrays.values() if c.per_episode)
     lengths = np.array([p.n_samples for p in protos])
     slice_samples = 0  # samples of the largest slice: per length group, its episodes in SLICES_PER_LENGTH pieces
