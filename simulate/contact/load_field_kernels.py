@@ -156,22 +156,6 @@ def _to_f32(src: wp.array(dtype=wp.float64), dst: wp.array(dtype=wp.float32)):
     dst[i] = wp.float32(src[i])
 
 
-def fields_f32_to_host(fields: dict[str, wp.array], shapes: dict[str, tuple[int, ...]]) -> dict[str, np.ndarray]:
-    """Taxel fields left on the device (float64 Warp arrays) -> float32 numpy arrays of `shapes` (name -> shape):
-    rounded on the device (numpy's astype(float32), bit for bit), then copied back through the page-locked
-    buffers of `sensors.warp_setup.to_host` (inside `host_staging`: valid until that field's next copy). Half the
-    bytes of the float64 fields, and no host pass over them (bench/README.md, session 9)."""
-    from sensors.warp_setup import scratch, to_host
-
-    out = {}
-    for name, arr in fields.items():
-        flat = arr.reshape(-1) if arr.ndim > 1 else arr
-        dst = scratch(f"field {name} f32", flat.shape[0], wp.float32, str(arr.device))
-        wp.launch(_to_f32, dim=flat.shape[0], inputs=[flat, dst], device=arr.device)
-        out[name] = to_host(dst, f"field {name}").reshape(shapes[name])
-    return out
-
-
 @wp.kernel
 def _flag_blocks(bits: wp.array(dtype=wp.uint32), per_row: int, per_taxel: int, n_taxels: int, block: int,
                  n_blocks: int, flags: wp.array(dtype=wp.int32)):
@@ -200,10 +184,12 @@ def _gather_blocks(src: wp.array(dtype=wp.float32), index: wp.array2d(dtype=wp.i
 
 def fields_f32_blocks_to_host(fields: dict[str, wp.array], shapes: dict[str, tuple[int, ...]],
                               block: int | None = None) -> dict:
-    """Taxel fields left on the device (float64 Warp arrays, `shapes` (E, T, N, ...) each, one dimension may be -1) -> float32 on the host:
-    a `BlockSparse` of a field's non-zero blocks where at most SPARSE_MAX_SHARE of them are non-zero, else the dense
-    array (`fields_f32_to_host`'s). The rounding is the same kernel's; blocks, flags and index come back through the
-    page-locked buffers of `sensors.warp_setup.to_host` (inside `host_staging`: valid until that site's next copy)."""
+    """Taxel fields left on the device (float64 Warp arrays, `shapes` (E, T, N, ...) each, one dimension may be -1) ->
+    float32 on the host, rounded on the device (numpy's astype(float32), bit for bit; half the bytes of the float64
+    fields and no host pass, bench/README.md session 9): a `BlockSparse` of a field's non-zero blocks where at most
+    SPARSE_MAX_SHARE of them are non-zero, else the dense array. Blocks, flags, index and dense arrays come back
+    through the page-locked buffers of `sensors.warp_setup.to_host` (inside `host_staging`: valid until that site's
+    next copy)."""
     from sensors.warp_setup import scratch, to_host
     from simulate.contact.field_blocks import FIELD_BLOCK, SPARSE_MAX_SHARE, BlockSparse
 

@@ -224,9 +224,8 @@ def _step_groups(cfg: SceneConfig, protos: list, threads: int) -> dict:
         # per indenter and sample), handed over like the rest
         from simulate.contact.press_stroke import press_stroke_physics
 
-        groups = [(n, idx, (press_stroke_physics(cfg, [protos[i] for i in idx], threads), np.zeros((len(idx), n))))
-                  for run in physics_runs(cfg, protos) for n, idx in run]
-        return {n: _to_shm(*done) for n, idx, done in groups}
+        return {n: _to_shm(press_stroke_physics(cfg, [protos[i] for i in idx], threads), np.zeros((len(idx), n)))
+                for run in physics_runs(cfg, protos) for n, idx in run}
 
     out = {}
     groups = []
