@@ -241,6 +241,9 @@ def sim2real(
                        "labels by it.")] = False,
     finetune_method: Annotated[str | None, typer.Option("--finetune-method", help="plain, l2sp (L2-SP, Li et al. 2018) "
                                "lpft (LP-FT, Kumar et al. 2022) or shrink_perturb (Ash & Adams 2020); default: the budget's.")] = None,
+    two_point_level: Annotated[str | None, typer.Option("--two-point-level", help="How the two-point calibration's "
+                               "known load sets the film level of the presses to come: measured (that press's level) or "
+                               "shrunk (its run level under the fitted levels model); default: the budget's.")] = None,
     pipeline_seed: Annotated[int, typer.Option("--pipeline-seed", help="Redraw the generation and the pre-training "
                              "(root seed + 100 x this) with the fit, the run order and the fine-tuning seeds held.")] = 0,
 ) -> None:
@@ -279,6 +282,12 @@ def sim2real(
         if finetune_method not in FINETUNE_METHODS:
             fail(f"--finetune-method must be one of {', '.join(FINETUNE_METHODS)} (got {finetune_method!r})")
         b["finetune_method"] = finetune_method
+    if two_point_level is not None:
+        from learn.sim2real import TWO_POINT_LEVELS
+
+        if two_point_level not in TWO_POINT_LEVELS:
+            fail(f"--two-point-level must be one of {', '.join(TWO_POINT_LEVELS)} (got {two_point_level!r})")
+        b["two_point_level"] = two_point_level
     if pipeline_seed:
         if not 0 <= pipeline_seed < 10**6:
             fail(f"--pipeline-seed must be in [0, 1e6) (got {pipeline_seed})")

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from learn.data import Sequence
-from learn.sim2real import _mean_metrics, two_point_calibration
+from learn.sim2real import _mean_metrics, run_level_shrinkage, two_point_calibration
 from sensors import chain_fit as CF
 
 RATE = 20.0
@@ -53,6 +53,33 @@ def test_two_point_keeps_a_known_adc_full_scale():
     cal, info = two_point_calibration(p, Sequence(np.log(y)[:, None], f[:, None], ["sensor"], ["force"], {}, {"key": "t"}, {}), RATE)
     assert info["full_scale_used"] == 5115.0 and info["unloaded_reading"] < 5115.0 * 0.99
     assert abs(info["level_ln"] - 0.3) < 0.05
+
+
+def test_shrunk_two_point_level_predicts_the_run_level_better():
+    """Presses at l = u_run + e (s_run 0.1, s_w 0.5, sensors.chain_fit's levels model): one calibration press's level
+    in full is off the run level by s_w; shrunk by k = s_run^2 / (s_run^2 + s_w^2) (run_level_shrinkage, from the
+    fit's own sds) it is off by about s_run s_w / sqrt(s_run^2 + s_w^2), the posterior sd."""
+    p = CF.ChainParams(exponent=1.1, r0_ohm=7e4, creep_amplitude=0.0, n_creep=1, r_ref_ohm=1e4, full_scale=900.0,
+                       level_run_log_sd=0.1)
+    fit_json = {"error": {"level_run_sd": {"within_run_sd": 0.5}}}
+    k = run_level_shrinkage(p, fit_json)
+    assert k == pytest.approx(0.01 / 0.26)
+    assert run_level_shrinkage(p, None) == 1.0  # no within-run sd recorded: the press says all
+    rng = np.random.default_rng(3)
+    f = np.concatenate([np.zeros(20), np.linspace(0, 10.0, 10), np.full(30, 10.0), np.linspace(10.0, 0, 4), np.zeros(10)])
+    err = {1.0: [], k: []}
+    for _ in range(60):
+        u = rng.normal(0, 0.1)
+        y = CF.simulate_reading(f, 1 / RATE, p, level=np.where(f > 0, u + rng.normal(0, 0.5), 0.0))
+        seq = Sequence(np.log(y)[:, None], f[:, None], ["sensor"], ["force"], {}, {"key": "s"}, {})
+        for kk in err:
+            cal, info = two_point_calibration(p, seq, RATE, level_shrink=kk)
+            assert info["level_ln"] == pytest.approx(kk * info["level_ln_measured"])
+            err[kk].append(info["level_ln"] - u)
+    rms = {kk: float(np.sqrt(np.mean(np.square(v)))) for kk, v in err.items()}
+    assert 0.4 < rms[1.0] < 0.6 and rms[k] < 0.14 and rms[k] < 0.3 * rms[1.0]
+    with pytest.raises(ValueError, match="level_shrink"):
+        two_point_calibration(p, seq, RATE, level_shrink=1.5)
 
 
 def test_seed_mean_and_spread():
