@@ -53,6 +53,8 @@ PENDING_PER_WRITER = 2  # shards handed to the writers and not yet written, per 
 PENDING_RAM_FRACTION = 0.25  # ... and no more bytes pending than this fraction of the host's memory
 RAMP_BATCHES = int(os.environ.get("PIEZOTWIN_RAMP_BATCHES", "2"))  # batches of worlds / 4 and worlds / 2 episodes before
 # the full ones (see _groups); the variable: the bench's A/B (0: full batches from the first)
+CONTACT_RAMP_BATCHES = int(os.environ.get("PIEZOTWIN_CONTACT_RAMP_BATCHES", "0"))  # the same for a kind with its own
+# contact stage (ntype's press_stroke; see generate_feed); the variable: the bench's A/B
 PHYSICS_PROCESSES = 2  # each steps its own batch: one's host work (its protocols) overlaps the other's GPU stepping
 GPU_TURNS = os.environ.get("PIEZOTWIN_GPU_TURNS", "1") == "1"  # their GPU stepping in turns, in batch order (see
 # `_gpu_turn`); the variable: the bench's A/B (0: side by side, as before session 22)
@@ -1047,7 +1049,8 @@ def generate_feed(
     # size (STEP_S_FLOOR), so a ramp's small batches each cost a full one's time and overlap nothing (ntype 8192
     # episodes on an H200, stepped in the driver then: ramp of 2048, 4096 then 2048 against one batch,
     # bench/results/logs/profile-ntype-ramp*-h200-s16.txt)
-    batches = ([(g, None) for g in _groups(cfg, todo, worlds or feed_worlds(cfg), ramp=0)] if cfg.protocol.kind in CONTACT_STAGES
+    batches = ([(g, None) for g in _groups(cfg, todo, worlds or feed_worlds(cfg), ramp=CONTACT_RAMP_BATCHES)]
+               if cfg.protocol.kind in CONTACT_STAGES
                else _schedule(cfg, todo, worlds or feed_worlds(cfg)))
     groups = [g for g, _ in batches]
 

@@ -1,0 +1,24 @@
+#!/usr/bin/env bash
+# The device calls of session 26 (issue 16), one H200: `bash bench/h200_s26.sh R`. Logs and result files go to $OUT.
+# R: ntype 24576 as typed with a ramp of smaller first batches (PIEZOTWIN_CONTACT_RAMP_BATCHES=2: 2048, 4096, then
+#    full; its worlds now step in the physics processes, so a small first batch lets the driver and the writers start
+#    while the next steps) against none (the default), alternated twice in one call; stepping alone once (its feed
+#    batches, no ramp, as always).
+# V: velostat 16384 as typed (the pack's estimate for block fields, session 25, first measured on a GPU here).
+source "$(dirname "$0")/h100_lib.sh"  # environment, cli (plain CLI + MuJoCo Warp alone), pack, warm
+case "$1" in
+R)  warm ntype
+    cli ntype 24576 h200-s26-ntype-ramp0a
+    PIEZOTWIN_CONTACT_RAMP_BATCHES=2 cli ntype 24576 h200-s26-ntype-ramp2a noalone
+    cli ntype 24576 h200-s26-ntype-ramp0b noalone
+    PIEZOTWIN_CONTACT_RAMP_BATCHES=2 cli ntype 24576 h200-s26-ntype-ramp2b noalone
+    pack R ;;
+R1) warm ntype
+    PIEZOTWIN_CONTACT_RAMP_BATCHES=1 cli ntype 24576 h200-s26-ntype-ramp1a noalone
+    cli ntype 24576 h200-s26-ntype-ramp0c noalone
+    PIEZOTWIN_CONTACT_RAMP_BATCHES=1 cli ntype 24576 h200-s26-ntype-ramp1b noalone
+    pack R1 ;;
+V)  warm velostat
+    cli velostat 16384 h200-s26-velostat
+    pack V ;;
+esac
