@@ -1018,6 +1018,19 @@ def s2r_candidates() -> str:
                 "test RMSE in N at 1 / 2 / 4 / all training runs (TAMS: 1 / 2):\n",
                 table(["split", "fine-tuned: plain -> shrink-perturb", "scratch", "static curve", "all runs",
                        "role", "passes the rule's checks"], rows)]
+    tp = load("s2r-two-point-shrink.json")
+    if tp:
+        rows = [[r["split"], num(r["shrinkage_k"]), f"{num(r['measured']['level_ln'])} -> {num(r['shrunk']['level_ln'])}",
+                 f"{r['measured']['rmse_pct_full_scale']:.1f} -> {r['shrunk']['rmse_pct_full_scale']:.1f} %",
+                 f"{100 * r['rel_change']:+.1f} %", "yes" if r["zero_shot_as_recorded"] else "**no**"] for r in tp["splits"]]
+        mp = tp["mean_pct_full_scale"]
+        out += ["\nThe two-point calibration's film level: the calibration press's own level in full -> its run level under "
+                "the fitted levels model (k x that level, `--two-point-level shrunk`; `s2r-two-point-shrink.json`, rule "
+                "`s2r-two-point-shrink-rule.md`: the mean over the five splits must fall and no split rise > 10 %). "
+                f"Mean {mp['measured']:.1f} -> {mp['shrunk']:.1f} % of full scale. Decision: "
+                f"**{'adopted' if tp['adopted'] else 'not adopted'}**:\n",
+                table(["split", "k", "film level applied (ln)", "zero-shot after calibration", "change",
+                       "zero-shot as recorded"], rows)]
     return "\n".join(out) if out else "No candidate scored yet."
 
 
@@ -1061,7 +1074,8 @@ def sim2real_results() -> str:
             valid_note = m["validation"]
         if "calibration_run" in z:
             two.append([name, z["calibration_run"], num(z.get("unloaded_reading")), num(z.get("chain_full_scale")),
-                        num(z.get("known_load_n")), num(z.get("level_ln")), f"{z['rmse_pct_full_scale']:.1f} %"])
+                        num(z.get("known_load_n")), num(z.get("level_ln_measured", z.get("level_ln"))),
+                        num(z.get("level_shrink", 1.0)), num(z.get("level_ln")), f"{z['rmse_pct_full_scale']:.1f} %"])
         held = (m.get("steps", {}).get("fit", {}) or {}).get("held_out", {})
         if held:
             pdrop = held.get("plateau_drop", {})
@@ -1125,9 +1139,12 @@ def sim2real_results() -> str:
                          "coef. on level", "independent sd", "pre-trained on training runs"], slopes))
     if two:
         out += ("\n\nTwo-point calibration on the sensor under test (its first press: the unloaded reading sets the "
-                "readout's rest level, the known load the film level; scored on the test data after that press):\n\n"
+                "readout's rest level; the known load measures that press's film level, of which the share k = "
+                "s_run^2 / (s_run^2 + s_w^2) is applied to the presses to come, its run level under the fitted levels "
+                "model, `learn.sim2real.run_level_shrinkage`; scored on the test data after that press):\n\n"
                 + table(["split", "calibration run", "unloaded reading", "chain's rest level", "known load (N)",
-                         "film level shift (ln)", "zero-shot after calibration (% FS)"], two))
+                         "film level of that press (ln)", "k", "film level applied (ln)",
+                         "zero-shot after calibration (% FS)"], two))
     if cal:
         out += ("\n\nFit on the held-out runs (levels of each press removed for the within-press error; band: the "
                 "share of held-out press levels inside the fitted 90 % band, target 80-95 %; where recorded, the band is "
