@@ -4,7 +4,9 @@
 #    full; its worlds now step in the physics processes, so a small first batch lets the driver and the writers start
 #    while the next steps) against none (the default), alternated twice in one call; stepping alone once (its feed
 #    batches, no ramp, as always).
-# V: velostat 16384 as typed (the pack's estimate for block fields, session 25, first measured on a GPU here).
+# V: velostat 16384 as typed with stepping alone (the pack's estimate for block fields, session 25: first measured
+#    on a GPU in W's runs, `--workers 12`, the default there), then fabric_1 4096 as typed with stepping alone.
+# W: (run inline, see bench/README) ntype 24576 and velostat 16384 with --workers 14 against 12.
 source "$(dirname "$0")/h100_lib.sh"  # environment, cli (plain CLI + MuJoCo Warp alone), pack, warm
 case "$1" in
 R)  warm ntype
@@ -20,5 +22,7 @@ R1) warm ntype
     pack R1 ;;
 V)  warm velostat
     cli velostat 16384 h200-s26-velostat
+    warm fabric_1
+    cli fabric_1 4096 h200-s26-fabric_1
     pack V ;;
 esac
