@@ -343,3 +343,21 @@ def test_static_oracle_is_the_floor_of_any_static_reading():
     est = np.concatenate([other.predict(s.x)[:, 0] for s in test])
     assert 0.1 < o["rmse"] < float(np.sqrt(np.mean((est - ref) ** 2)))
     assert set(o["per_run_rmse"]) == {"x1", "x2"}
+
+
+def test_sim2real_cli_refuses_an_unknown_two_point_level(tmp_path):
+    """`--two-point-level` takes measured or shrunk: anything else is one line, exit 2, nothing written."""
+    import h5py
+    from typer.testing import CliRunner
+
+    from piezotwin.cli import app
+
+    rec = tmp_path / "real.h5"
+    with h5py.File(rec, "w"):
+        pass
+    out = tmp_path / "run"
+    res = CliRunner().invoke(app, ["sim2real", "velostat", str(rec), "--test-episodes", "*b*", "-o", str(out),
+                                   "--two-point-level", "median"])
+    assert res.exit_code == 2, res.output
+    assert "--two-point-level must be one of measured, shrunk" in res.output.replace("\n", " ")
+    assert not out.exists()
