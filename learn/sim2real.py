@@ -259,7 +259,7 @@ S2R_BUDGET = {  # the default budget of `piezotwin sim2real` (2 CPU cores, <= 15
     "pretrain_patience": 12, "finetune_epochs": 120, "finetune_patience": 20, "lr": 2e-3, "policy": "none",
     "finetune_norm": "checkpoint", "rehearsal": 0.0, "n_train_seeds": 3, "time_budget_s": 900.0, "valid_tail": 0.25,
     "press_slope": False, "rated_force_n": None, "run_level": False, "fit_threshold": False,
-    "creep_linear": False, "finetune_method": "plain", "l2sp_alpha": 0.1, "l2sp_beta": 0.01, "pipeline_seed": 0,
+    "creep_linear": False, "finetune_method": ["plain", "shrink_perturb"], "l2sp_alpha": 0.1, "l2sp_beta": 0.01, "pipeline_seed": 0,
     "fit_contact": False, "tail_by": "presses", "static_blend": False, "fit_tunnel": False, "latency": False,
     "two_point_level": "shrunk",
 }
@@ -288,7 +288,11 @@ TWO_POINT_LEVELS = ("measured", "shrunk")
 # (CHANGELOG): validation-tail paired difference over pipeline seeds 0-2 -0.003 +- 0.041 N (pike1 -> pike2) and
 # +0.011 +- 0.030 N (pike2 -> pike1), not adopted (bench/results/s2r-contact-*.json). Off: F_a = 0, rounds 1-8 bit for bit
 # finetune_method: plain | l2sp | lpft | shrink_perturb (learn.finetune; L2-SP's alpha / beta: learn.finetune.L2SP_ALPHA, an estimate);
-# eighth round, adopted only by the rule written before scoring (CHANGELOG)
+# eighth round, adopted only by the rule written before scoring (CHANGELOG). A list is a grid (finetune_methods): each
+# fine-tunes per budget and seed, the lowest validation loss on the tails kept. [plain, shrink_perturb] (the warm start
+# chosen by the data: shrink-and-perturb where the pre-trained net fits the real runs poorly) adopted in round 16
+# (session 26) by the rule written before scoring (bench/results/s2r-method-select-rule.md, s2r-method-select.json:
+# pike1 -> pike2 3.93 -> 2.36 N with all runs, no budget of the five splits worse; plain, round 1-15, alone before)
 # pipeline_seed: varies the generation draw and the pre-training (its simulated split, init and batch order) with the
 # fit, the learning curve's run order and the fine-tuning / scratch seeds held: root seed + 100 x pipeline_seed for
 # steps 2-3 (0: the recorded runs); measures the pipeline's spread (bench/bench_s2r_pipeline_noise.py)
@@ -745,6 +749,32 @@ def _chain_prior(family: str, runs) -> Any:
     return p
 
 
+def finetune_methods(B: dict) -> list[str]:
+    """The budget's fine-tuning methods: one (str) or a grid (list), each tried per budget and training seed, the one
+    of the lowest validation loss on the budget's tails kept (as the rehearsal share)."""
+    m = B.get("finetune_method", "plain")
+    ms = [str(x) for x in m] if isinstance(m, (list, tuple)) else [str(m)]
+    bad = [x for x in ms if x not in FT.FINETUNE_METHODS]
+    if not ms or bad:
+        raise ValueError(f"finetune_method must be one or more of {', '.join(FT.FINETUNE_METHODS)} (got {m!r})")
+    return ms
+
+
+def best_finetune(base, heads: Seq[Sequence], tails: Seq[Sequence], seed: int, B: dict, sim: Seq[Sequence] = (),
+                  kw: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any], float, str]:
+    """Fine-tune ``base`` on ``heads`` for every method (finetune_methods) and rehearsal share (the budget's grids)
+    and keep the one of the lowest validation loss on ``tails`` (never the test runs); ties keep the first tried.
+    Returns (net, its info, rehearsal share, method)."""
+    best = None
+    for mt in finetune_methods(B):
+        for r in _rehearsals(B):
+            reh = rehearsal_set(sim, int(r * sum(len(s) for s in heads)), seed) if sim and r > 0 else []
+            c, ci = FT.finetune(base, heads, tails, rehearsal=reh, seed=seed, method=mt, **(kw or {}))
+            if best is None or ci["best_loss"] < best[1]["best_loss"]:
+                best = (c, ci, r, mt)
+    return best
+
+
 def _rehearsals(B: dict) -> list[float]:
     r = B["rehearsal"]
     return [float(x) for x in r] if isinstance(r, (list, tuple)) else [float(r)]
@@ -828,7 +858,7 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
     # training seeds: fine-tuned and scratch each the mean over the same fixed seeds (fixed in the budget)
     seeds = [int(seed) + int(k) for k in range(int(B["n_train_seeds"]))]
     kw = dict(policy=B["policy"], lr=B["lr"], max_epochs=int(B["finetune_epochs"]), patience=int(B["finetune_patience"]),
-              norm=B["finetune_norm"], method=B.get("finetune_method", "plain"), l2sp_alpha=float(B.get("l2sp_alpha", FT.L2SP_ALPHA)),
+              norm=B["finetune_norm"], l2sp_alpha=float(B.get("l2sp_alpha", FT.L2SP_ALPHA)),
               l2sp_beta=float(B.get("l2sp_beta", FT.L2SP_BETA)))
     sizes = sorted({k for k in (1, 2, 4) if k < len(sp.train)} | {len(sp.train)})
     n_steps = len(sizes) + 1
@@ -853,13 +883,7 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
         t1, t2 = FT.split_tail(tails, 0.5, **tail_kw)
         fts, scs, infos = [], [], []
         for sd in seeds:
-            # the share of simulated episodes mixed in: chosen per budget on the real valid runs (never the test runs)
-            ft, fi, reh_ratio = None, None, None
-            for r in _rehearsals(B):
-                reh = rehearsal_set(sim, int(r * sum(len(s) for s in heads)), sd) if sim and r > 0 else []
-                c, ci = FT.finetune(base, heads, tails, rehearsal=reh, seed=sd, **kw)
-                if fi is None or ci["best_loss"] < fi["best_loss"]:
-                    ft, fi, reh_ratio = c, ci, r
+            ft, fi, reh_ratio, meth = best_finetune(base, heads, tails, sd, B, sim, kw)
             sc = FT.train_from_scratch(base.kind, base.hparams, heads, tails, seed=sd, max_epochs=int(B["finetune_epochs"]),
                                        patience=int(B["finetune_patience"])) if scratch else None
             w_tail = blend_weight(ft, st_h, tails)
@@ -876,7 +900,8 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
                           "finetune_valid_rmse_n": fv, "scratch_valid_rmse_n": sv,
                           "finetune_valid_error_split_n": error_split(ft, tails),
                           **({"linear_probe": fi["linear_probe"]} if "linear_probe" in fi else {}),
-                          "rehearsal": reh_ratio, "scratch_epochs": (getattr(sc, "history", {}) or {}).get("epochs"),
+                          "rehearsal": reh_ratio, "finetune_method": meth,
+                          "scratch_epochs": (getattr(sc, "history", {}) or {}).get("epochs"),
                           "static_blend": blend_rec})
         st = StaticCurve(tr)  # the curve sees every labelled real sample the others see (heads and tails)
         row = {"n_runs": k, "runs": [s.key for s in tr], "finetuned": _mean_metrics(fts),

@@ -240,7 +240,9 @@ def sim2real(
                        "force label) from the training runs, line the labels up for the fit and delay the generated "
                        "labels by it.")] = False,
     finetune_method: Annotated[str | None, typer.Option("--finetune-method", help="plain, l2sp (L2-SP, Li et al. 2018) "
-                               "lpft (LP-FT, Kumar et al. 2022) or shrink_perturb (Ash & Adams 2020); default: the budget's.")] = None,
+                               "lpft (LP-FT, Kumar et al. 2022) or shrink_perturb (Ash & Adams 2020), or several "
+                               "comma-separated, the one of the lowest validation loss kept per budget and seed; default: "
+                               "the budget's (plain,shrink_perturb).")] = None,
     two_point_level: Annotated[str | None, typer.Option("--two-point-level", help="How the two-point calibration's "
                                "known load sets the film level of the presses to come: measured (that press's level) or "
                                "shrunk (its run level under the fitted levels model); default: the budget's.")] = None,
@@ -279,9 +281,11 @@ def sim2real(
     if finetune_method is not None:
         from learn.finetune import FINETUNE_METHODS
 
-        if finetune_method not in FINETUNE_METHODS:
-            fail(f"--finetune-method must be one of {', '.join(FINETUNE_METHODS)} (got {finetune_method!r})")
-        b["finetune_method"] = finetune_method
+        ms = [m.strip() for m in finetune_method.split(",")]
+        if not all(ms) or any(m not in FINETUNE_METHODS for m in ms):
+            fail(f"--finetune-method must be one or more of {', '.join(FINETUNE_METHODS)}, comma-separated "
+                 f"(got {finetune_method!r})")
+        b["finetune_method"] = ms[0] if len(ms) == 1 else ms
     if two_point_level is not None:
         from learn.sim2real import TWO_POINT_LEVELS
 

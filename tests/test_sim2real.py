@@ -361,3 +361,55 @@ def test_sim2real_cli_refuses_an_unknown_two_point_level(tmp_path):
     assert res.exit_code == 2, res.output
     assert "--two-point-level must be one of measured, shrunk" in res.output.replace("\n", " ")
     assert not out.exists()
+
+
+def test_finetune_grid_keeps_the_lowest_validation_loss(monkeypatch):
+    """The budget's methods x rehearsal shares are each fine-tuned and the one of the lowest validation loss on the
+    tails is kept (best_finetune); a single method is a grid of one; an unknown method is refused."""
+    import learn.sim2real as S
+
+    loss = {("plain", 0.0): 0.30, ("shrink_perturb", 0.0): 0.20, ("plain", 1.0): 0.25, ("shrink_perturb", 1.0): 0.22}
+    calls = []
+
+    def fake(base, heads, tails, *, rehearsal, seed, method, **kw):
+        r = 1.0 if rehearsal else 0.0
+        calls.append((method, r, seed, kw.get("lr")))
+        return f"{method}@{r}", {"best_loss": loss[(method, r)]}
+
+    monkeypatch.setattr(S.FT, "finetune", fake)
+    sim = [Sequence(np.zeros((10, 1)), np.zeros((10, 1)), ["sensor"], ["force"], {}, {"key": "s"}, {})]
+    heads = [Sequence(np.zeros((10, 1)), np.zeros((10, 1)), ["sensor"], ["force"], {}, {"key": "h"}, {})]
+    B = {"finetune_method": ["plain", "shrink_perturb"], "rehearsal": [0.0, 1.0]}
+    net, info, r, m = S.best_finetune("base", heads, heads, 7, B, sim, {"lr": 1e-3})
+    assert (net, r, m, info["best_loss"]) == ("shrink_perturb@0.0", 0.0, "shrink_perturb", 0.20)
+    assert len(calls) == 4 and {c[2] for c in calls} == {7} and {c[3] for c in calls} == {1e-3}
+    assert S.best_finetune("base", heads, heads, 0, {"finetune_method": "plain", "rehearsal": 0.0})[3] == "plain"
+    with pytest.raises(ValueError, match="finetune_method must be one or more of"):
+        S.finetune_methods({"finetune_method": ["plain", "nope"]})
+
+
+def test_sim2real_cli_takes_a_method_grid(tmp_path, monkeypatch):
+    """`--finetune-method plain,shrink_perturb` is a grid (a list in the budget), one name stays a name, and a
+    name outside the methods is one line, exit 2."""
+    import h5py
+    from typer.testing import CliRunner
+
+    import learn.sim2real as S
+    from piezotwin.cli import app
+
+    rec = tmp_path / "r.h5"
+    h5py.File(rec, "w").close()
+    seen = []
+
+    def fake(family, recording, out, **kw):
+        seen.append(kw["budget"]["finetune_method"])
+        raise ValueError("stop here")
+
+    monkeypatch.setattr(S, "run_sim2real", fake)
+    base = ["sim2real", "velostat", str(rec), "--test-episodes", "*x*", "-o", str(tmp_path / "o"), "--finetune-method"]
+    CliRunner().invoke(app, base + ["plain, shrink_perturb"])
+    CliRunner().invoke(app, base + ["l2sp"])
+    assert seen == [["plain", "shrink_perturb"], "l2sp"]
+    res = CliRunner().invoke(app, base + ["plain,nope"])
+    assert res.exit_code == 2 and "--finetune-method must be one or more of" in res.output.replace("\n", " ")
+    assert S.S2R_BUDGET["finetune_method"] == ["plain", "shrink_perturb"]
