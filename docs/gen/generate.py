@@ -1010,7 +1010,7 @@ def s2r_candidates() -> str:
                          f"{num(v['finetuned_pct_full_scale']['plain'])} -> {num(v['finetuned_pct_full_scale']['shrink_perturb'])} %",
                          "in the rule" if not split.startswith("tams-") else "seen beside it",
                          "yes" if v["passes"] else "no"])
-        out += ["\nThe fine-tuning method: plain (the default) -> shrink-and-perturb (`--finetune-method shrink_perturb`, "
+        out += ["\nThe fine-tuning method (session 25): plain -> shrink-and-perturb alone (`--finetune-method shrink_perturb`, "
                 "Ash & Adams 2020: the pre-trained weights x 0.5 plus 0.1 x a fresh initialisation, both estimates), "
                 "the fit and pre-training the recorded runs' (`s2r-shrink-perturb.json`, rule "
                 "`s2r-shrink-perturb-rule.md`: each Lupasic direction must fall by >= 5 % with all runs and on the "
@@ -1018,6 +1018,19 @@ def s2r_candidates() -> str:
                 "test RMSE in N at 1 / 2 / 4 / all training runs (TAMS: 1 / 2):\n",
                 table(["split", "fine-tuned: plain -> shrink-perturb", "scratch", "static curve", "all runs",
                        "role", "passes the rule's checks"], rows)]
+    ms = load("s2r-method-select.json")
+    if ms:
+        rows = [[split, " / ".join(f"{num(c['plain'])} -> {num(c['selected'])}" for c in v["curve"]),
+                 " / ".join("".join(p[0] for p in c["picked"]) for c in v["curve"]),
+                 " / ".join(f"{100 * c['rel_change']:+.0f} %" for c in v["curve"])] for split, v in ms["splits"].items()]
+        out += ["\nThe warm start chosen on the validation tails: per budget and training seed, plain and shrink-and-perturb "
+                "both fine-tuned, the lower loss on the tails kept (`finetune_method` [plain, shrink_perturb]; scored "
+                "offline from the two recorded runs of each split, `s2r-method-select.json`, rule "
+                "`s2r-method-select-rule.md`: pike1 -> pike2 must fall >= 5 % with all runs, no budget of the five splits "
+                f"rise > 10 %, the mean change <= 0; mean {100 * ms['mean_rel_change']:+.1f} %). Decision: "
+                f"**{'adopted' if ms['adopted'] else 'not adopted'}**. Fine-tuned test RMSE in N at 1 / 2 / 4 / all "
+                "training runs (TAMS: 1 / 2), plain -> chosen, and the method kept per seed (p plain, s shrink-and-perturb):\n",
+                table(["split", "fine-tuned: plain -> chosen", "kept per seed", "change"], rows)]
     tp = load("s2r-two-point-shrink.json")
     if tp:
         rows = [[r["split"], num(r["shrinkage_k"]), f"{num(r['measured']['level_ln'])} -> {num(r['shrunk']['level_ln'])}",
