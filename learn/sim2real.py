@@ -605,11 +605,11 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
     rate = float(B["fit_rate_hz"])
     t_all = time.perf_counter()
 
-    clock = {"wall": time.perf_counter(), "cpu": time.process_time()}
+    clock = {"wall": time.perf_counter(), "cpu": cpu_seconds()}
 
     def mark(step, info):
-        # wall and CPU seconds of the step (CPU: this process, all threads), for the stated time budget
-        w, c = time.perf_counter(), time.process_time()
+        # wall and CPU seconds of the step (CPU: this process, all threads, and its finished child processes), for the stated time budget
+        w, c = time.perf_counter(), cpu_seconds()
         info = {**info, "wall_s": w - clock["wall"], "cpu_s": c - clock["cpu"]}
         clock.update(wall=w, cpu=c)
         state["done"][step] = info
@@ -684,7 +684,7 @@ def run_sim2real(family: str, recording: str | Path, out_dir: str | Path, *, tes
         sim = FT.apply_map(FT.load_recording(gen_f, ["sensor"], ["force"]), input_transform(p)) if max(_rehearsals(B)) > 0 else []
         m = _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target, rate,
                            lambda k, n: bar.update(task, completed=k, total=n), log, sim=sim, fit_json=fj)
-    w4, c4 = time.perf_counter() - clock["wall"], time.process_time() - clock["cpu"]
+    w4, c4 = time.perf_counter() - clock["wall"], cpu_seconds() - clock["cpu"]
     m["steps"] = state["done"]
     m["budget"] = B
     m["command"] = command
@@ -760,19 +760,84 @@ def finetune_methods(B: dict) -> list[str]:
     return ms
 
 
+def cpu_seconds() -> float:
+    """CPU seconds of this process (all threads) and of its finished child processes (step 4's `Trainings`)."""
+    import resource
+
+    ch = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + ch.ru_utime + ch.ru_stime
+
+
+TRAIN_WORKERS = 4  # at most this many processes for step 4's trainings (fewer where the machine has fewer cores)
+
+
+def _train_job(job: tuple[str, tuple, dict[str, Any]]) -> Any:
+    """One training of step 4 (a fine-tuning or a net from scratch), on one torch thread (`single_thread`: its numbers
+    are then a function of the data and its seed alone, in whichever process it runs)."""
+    what, args, kw = job
+    return single_thread(FT.finetune if what == "finetune" else FT.train_from_scratch)(*args, **kw)
+
+
+class Trainings:
+    """Runs step 4's trainings side by side in up to `workers` spawned processes (None: min(TRAIN_WORKERS, cores);
+    1: one after another here). Each training seeds itself and runs on one torch thread, so the nets are the same
+    either way; the machine's cores only set how long it takes (the grid of warm starts doubled the fine-tuning)."""
+
+    def __init__(self, workers: int | None = None):
+        import os
+
+        self.workers = max(1, min(TRAIN_WORKERS, os.cpu_count() or 1) if workers is None else int(workers))
+        self.pool = None
+
+    def run(self, jobs: list[tuple[str, tuple, dict[str, Any]]]) -> list[Any]:
+        if self.workers == 1 or len(jobs) < 2:
+            return [_train_job(j) for j in jobs]
+        if self.pool is None:
+            import multiprocessing as mp
+            from concurrent.futures import ProcessPoolExecutor
+
+            self.pool = ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"))
+        return list(self.pool.map(_train_job, jobs))
+
+    def close(self) -> None:
+        if self.pool is not None:
+            self.pool.shutdown(cancel_futures=True)
+            self.pool = None
+
+    def __enter__(self) -> Trainings:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def _finetune_jobs(base, heads: Seq[Sequence], tails: Seq[Sequence], seed: int, B: dict, sim: Seq[Sequence] = (),
+                   kw: dict[str, Any] | None = None) -> tuple[list[tuple[str, float]], list[tuple[str, tuple, dict]]]:
+    """The fine-tunings of one budget and seed: every method (finetune_methods) x rehearsal share (the budget's
+    grids), as (grid, jobs) for `Trainings.run`."""
+    grid = [(mt, r) for mt in finetune_methods(B) for r in _rehearsals(B)]
+    jobs = [("finetune", (base, heads, tails),
+             {"rehearsal": rehearsal_set(sim, int(r * sum(len(s) for s in heads)), seed) if sim and r > 0 else [],
+              "seed": seed, "method": mt, **(kw or {})}) for mt, r in grid]
+    return grid, jobs
+
+
+def _pick(grid: list[tuple[str, float]], results: list[tuple[Any, dict[str, Any]]]) -> tuple[Any, dict[str, Any], float, str]:
+    """The fine-tuning of the lowest validation loss on the tails (ties: the first tried): (net, info, share, method)."""
+    best = None
+    for (mt, r), (c, ci) in zip(grid, results):
+        if best is None or ci["best_loss"] < best[1]["best_loss"]:
+            best = (c, ci, r, mt)
+    return best
+
+
 def best_finetune(base, heads: Seq[Sequence], tails: Seq[Sequence], seed: int, B: dict, sim: Seq[Sequence] = (),
-                  kw: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any], float, str]:
+                  kw: dict[str, Any] | None = None, trainings: Trainings | None = None) -> tuple[Any, dict[str, Any], float, str]:
     """Fine-tune ``base`` on ``heads`` for every method (finetune_methods) and rehearsal share (the budget's grids)
     and keep the one of the lowest validation loss on ``tails`` (never the test runs); ties keep the first tried.
     Returns (net, its info, rehearsal share, method)."""
-    best = None
-    for mt in finetune_methods(B):
-        for r in _rehearsals(B):
-            reh = rehearsal_set(sim, int(r * sum(len(s) for s in heads)), seed) if sim and r > 0 else []
-            c, ci = FT.finetune(base, heads, tails, rehearsal=reh, seed=seed, method=mt, **(kw or {}))
-            if best is None or ci["best_loss"] < best[1]["best_loss"]:
-                best = (c, ci, r, mt)
-    return best
+    grid, jobs = _finetune_jobs(base, heads, tails, seed, B, sim, kw)
+    return _pick(grid, (trainings or Trainings(1)).run(jobs))
 
 
 def _rehearsals(B: dict) -> list[float]:
@@ -874,44 +939,57 @@ def _evaluate_loop(base, p, recording, test_glob, B, seed, input_channel, target
     tail_fs = float(B.get("rated_force_n") or max(float(s.y.max()) for s in sp.train))
     tail_kw = dict(full_scale_n=tail_fs, by=B.get("tail_by", "presses"))
     lc = []
-    for i, k in enumerate(sizes):
-        tr = [s for s in sp.train if s.key in sp.order[:k]]
-        heads, tails = FT.split_tail(tr, float(B["valid_tail"]), **tail_kw)
-        # round 11's candidate, recorded at every budget whether on or not: the static curve of the heads, the blend
-        # weight fitted on the tails' first halves and both scored on their second halves (held out from the weight)
-        st_h = StaticCurve(heads)
-        t1, t2 = FT.split_tail(tails, 0.5, **tail_kw)
-        fts, scs, infos = [], [], []
-        for sd in seeds:
-            ft, fi, reh_ratio, meth = best_finetune(base, heads, tails, sd, B, sim, kw)
-            sc = FT.train_from_scratch(base.kind, base.hparams, heads, tails, seed=sd, max_epochs=int(B["finetune_epochs"]),
-                                       patience=int(B["finetune_patience"])) if scratch else None
-            w_tail = blend_weight(ft, st_h, tails)
-            blend_rec = _blend_record(ft, st_h, t1, t2, w_tail, score, sc)
-            if B.get("static_blend"):
-                ft = StaticBlend(ft, st_h, w_tail)
-            fts.append(score(ft))
-            if sc is not None:
-                scs.append(score(sc))
-            fv = FT.rmse_on(ft, tails)  # N, on the training runs' validation tails
-            sv = FT.rmse_on(sc, tails) if sc is not None else None
-            infos.append({"seed": sd, "finetune_epochs": fi["epochs"], "finetune_best_epoch": fi["best_epoch"],
-                          "finetune_valid_mse_z_before": fi["valid_mse_z_before"], "finetune_valid_mse_z_best": fi["best_loss"],
-                          "finetune_valid_rmse_n": fv, "scratch_valid_rmse_n": sv,
-                          "finetune_valid_error_split_n": error_split(ft, tails),
-                          **({"linear_probe": fi["linear_probe"]} if "linear_probe" in fi else {}),
-                          "rehearsal": reh_ratio, "finetune_method": meth,
-                          "scratch_epochs": (getattr(sc, "history", {}) or {}).get("epochs"),
-                          "static_blend": blend_rec})
-        st = StaticCurve(tr)  # the curve sees every labelled real sample the others see (heads and tails)
-        row = {"n_runs": k, "runs": [s.key for s in tr], "finetuned": _mean_metrics(fts),
-               "scratch": _mean_metrics(scs) if scs else None, "static_curve": score(st), "seeds": infos,
-               "pretrained_valid_rmse_n": FT.rmse_on(base, tails), "pretrained_valid_error_split_n": error_split(base, tails)}
-        lc.append(row)
-        sc_txt = f"{row['scratch']['rmse']:.3f} +- {row['scratch']['rmse_sd']:.3f} N" if scs else "not run"
-        log(f"  {k} real run(s): fine-tuned {row['finetuned']['rmse']:.3f} +- {row['finetuned']['rmse_sd']:.3f} N, scratch "
-            f"{sc_txt}, static curve {row['static_curve']['rmse']:.3f} N (mean +- sd over {len(seeds)} seeds)")
-        tick(i + 2, n_steps)
+    trainings = Trainings()
+    try:
+        for i, k in enumerate(sizes):
+            tr = [s for s in sp.train if s.key in sp.order[:k]]
+            heads, tails = FT.split_tail(tr, float(B["valid_tail"]), **tail_kw)
+            # round 11's candidate, recorded at every budget whether on or not: the static curve of the heads, the blend
+            # weight fitted on the tails' first halves and both scored on their second halves (held out from the weight)
+            st_h = StaticCurve(heads)
+            t1, t2 = FT.split_tail(tails, 0.5, **tail_kw)
+            fts, scs, infos = [], [], []
+            # every training of this budget (each seed's grid of fine-tunings and its net from scratch) side by side
+            grids, jobs = [], []
+            for sd in seeds:
+                g, j = _finetune_jobs(base, heads, tails, sd, B, sim, kw)
+                grids.append(g)
+                jobs += j
+                if scratch:
+                    jobs.append(("scratch", (base.kind, base.hparams, heads, tails),
+                                 {"seed": sd, "max_epochs": int(B["finetune_epochs"]), "patience": int(B["finetune_patience"])}))
+            done = iter(trainings.run(jobs))
+            for sd, g in zip(seeds, grids):
+                ft, fi, reh_ratio, meth = _pick(g, [next(done) for _ in g])
+                sc = next(done) if scratch else None
+                w_tail = blend_weight(ft, st_h, tails)
+                blend_rec = _blend_record(ft, st_h, t1, t2, w_tail, score, sc)
+                if B.get("static_blend"):
+                    ft = StaticBlend(ft, st_h, w_tail)
+                fts.append(score(ft))
+                if sc is not None:
+                    scs.append(score(sc))
+                fv = FT.rmse_on(ft, tails)  # N, on the training runs' validation tails
+                sv = FT.rmse_on(sc, tails) if sc is not None else None
+                infos.append({"seed": sd, "finetune_epochs": fi["epochs"], "finetune_best_epoch": fi["best_epoch"],
+                              "finetune_valid_mse_z_before": fi["valid_mse_z_before"], "finetune_valid_mse_z_best": fi["best_loss"],
+                              "finetune_valid_rmse_n": fv, "scratch_valid_rmse_n": sv,
+                              "finetune_valid_error_split_n": error_split(ft, tails),
+                              **({"linear_probe": fi["linear_probe"]} if "linear_probe" in fi else {}),
+                              "rehearsal": reh_ratio, "finetune_method": meth,
+                              "scratch_epochs": (getattr(sc, "history", {}) or {}).get("epochs"),
+                              "static_blend": blend_rec})
+            st = StaticCurve(tr)  # the curve sees every labelled real sample the others see (heads and tails)
+            row = {"n_runs": k, "runs": [s.key for s in tr], "finetuned": _mean_metrics(fts),
+                   "scratch": _mean_metrics(scs) if scs else None, "static_curve": score(st), "seeds": infos,
+                   "pretrained_valid_rmse_n": FT.rmse_on(base, tails), "pretrained_valid_error_split_n": error_split(base, tails)}
+            lc.append(row)
+            sc_txt = f"{row['scratch']['rmse']:.3f} +- {row['scratch']['rmse_sd']:.3f} N" if scs else "not run"
+            log(f"  {k} real run(s): fine-tuned {row['finetuned']['rmse']:.3f} +- {row['finetuned']['rmse_sd']:.3f} N, scratch "
+                f"{sc_txt}, static curve {row['static_curve']['rmse']:.3f} N (mean +- sd over {len(seeds)} seeds)")
+            tick(i + 2, n_steps)
+    finally:
+        trainings.close()
     last = lc[-1]
     for k in ("finetuned", "scratch", "static_curve"):
         res[k] = last[k]

@@ -413,3 +413,34 @@ def test_sim2real_cli_takes_a_method_grid(tmp_path, monkeypatch):
     res = CliRunner().invoke(app, base + ["plain,nope"])
     assert res.exit_code == 2 and "--finetune-method must be one or more of" in res.output.replace("\n", " ")
     assert S.S2R_BUDGET["finetune_method"] == ["plain", "shrink_perturb"]
+
+
+def test_trainings_in_processes_give_the_same_nets():
+    """Step 4's trainings in worker processes (`Trainings`) give the nets one after another gives: each seeds itself
+    and runs on one torch thread (a fine-tuning and a net from scratch of the same tiny runs, compared weight by
+    weight)."""
+    import torch
+
+    from learn import finetune as FT
+    from learn.models.base import make_model
+    from learn.sim2real import Trainings
+
+    rng = np.random.default_rng(0)
+    runs = []
+    for k in range(3):
+        f = np.abs(np.cumsum(rng.normal(0, 0.3, 200)))
+        runs.append(Sequence(np.log1p(f)[:, None] + rng.normal(0, 0.01, (200, 1)), f[:, None], ["sensor"], ["force"],
+                             {}, {"key": f"r{k}"}, {}))
+    base = make_model("tcn", channels=4, dilations=[1, 2], chunk=32, max_epochs=2, patience=2)
+    base.fit([s.x for s in runs], [s.y for s in runs], seed=0, inputs=["sensor"], targets=["force"], units={})
+    jobs = [("finetune", (base, runs[:2], runs[2:]), {"seed": 3, "max_epochs": 3, "patience": 3, "method": "shrink_perturb",
+                                                       "norm": "checkpoint", "policy": "none", "lr": 1e-3}),
+            ("scratch", (base.kind, base.hparams, runs[:2], runs[2:]), {"seed": 3, "max_epochs": 3, "patience": 3})]
+    with Trainings(2) as par:
+        a = par.run(jobs)
+    b = Trainings(1).run(jobs)
+    nets = [(a[0][0], b[0][0]), (a[1], b[1])]
+    for x, y in nets:
+        for (n, p), (_, q) in zip(x.net.state_dict().items(), y.net.state_dict().items()):
+            assert torch.equal(p, q), n
+    assert a[0][1]["best_loss"] == b[0][1]["best_loss"]
