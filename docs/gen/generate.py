@@ -198,8 +198,8 @@ MULTI_GPU = "gpu-pipeline-h200x2.json"
 # session 25: cnt_pdms and velostat with the taxel fields sent as blocks (bench/h200_s25.sh A, B: each family's first
 # run of the call; velostat's with stepping alone); ntype with its worlds in the physics processes (P, with stepping
 # alone)
-USER_CLI_LATEST = [("user-cli-h200-s25-cnt_pdms-blocks1.json", "cnt_pdms"), ("user-cli-h200-s26-velostat.json", "velostat"),
-                   ("user-cli-h200-s26-ntype-ramp0a.json", "ntype"), ("user-cli-h200-s26-fabric_1.json", "fabric_1")]
+USER_CLI_LATEST = [("user-cli-h200-s26-all-cnt_pdms.json", "cnt_pdms"), ("user-cli-h200-s26-all-velostat.json", "velostat"),
+                   ("user-cli-h200-s26-all-ntype.json", "ntype"), ("user-cli-h200-s26-all-fabric_1.json", "fabric_1")]
 
 
 # ----------------------------------------------------------------------------------------------- formatting
