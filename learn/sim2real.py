@@ -1108,9 +1108,11 @@ def _s2r_report(out: Path, m: dict[str, Any]) -> None:
                 "does markedly better there (what the spread of force at equal reading leaves to a static reading).", ""]
                if m.get("static_oracle") else []),
              "## Learning curve (test RMSE, N)", "",
-             md_table(["real runs", "fine-tuned (mean +- sd over seeds)", "scratch (mean +- sd)", "static curve"],
+             md_table(["real runs", "fine-tuned (mean +- sd over seeds)", "scratch (mean +- sd)", "static curve",
+                       "warm start kept per seed"],
                       [[c["n_runs"], f"{fmt(c['finetuned_rmse'])} +- {fmt(c.get('finetuned_rmse_sd', 0.0))}",
-                        f"{fmt(c['scratch_rmse'])} +- {fmt(c.get('scratch_rmse_sd', 0.0))}", fmt(c["static_curve_rmse"])]
+                        f"{fmt(c['scratch_rmse'])} +- {fmt(c.get('scratch_rmse_sd', 0.0))}", fmt(c["static_curve_rmse"]),
+                        ", ".join(str(x.get("finetune_method", "plain")) for x in c.get("seeds", []))]
                        for c in m["learning_curve"]]),
              "", f"Training seeds {m.get('train_seeds')}: fine-tuned and scratch are each the mean over them. Two-point "
              f"calibration: unloaded reading {z.get('unloaded_reading', float('nan')):.1f} and a known load of "
