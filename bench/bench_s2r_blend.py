@@ -87,7 +87,8 @@ def main(argv=None):
                     "two_point_pct_fs": bm["results"]["zero_shot"]["two_point_gain"]["rmse_pct_full_scale"]}
         else:
             m = _evaluate_loop(load_checkpoint(ck), params, a.real, a.test_episodes, B, 0, "sensor", "force",
-                               float(B["fit_rate_hz"]), lambda k, n: None, print, sim=(), scratch=False)
+                               float(B["fit_rate_hz"]), lambda k, n: None, print, sim=(), scratch=False,
+                               fit_json=fj)
             lc = m["learning_curve"]
             test = {"pooled_pct_fs": m["results"]["finetuned"]["rmse_pct_full_scale"],
                     "two_point_pct_fs": m["results"]["zero_shot"]["two_point_gain"]["rmse_pct_full_scale"]}

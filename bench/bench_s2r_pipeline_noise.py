@@ -25,14 +25,14 @@ from pathlib import Path
 import numpy as np
 
 
-def one(base_ck: Path, params, real: str, glob: str, B: dict) -> dict:
+def one(base_ck: Path, params, real: str, glob: str, B: dict, fj: dict | None = None) -> dict:
     from learn.checkpoint import load_checkpoint
     from learn.sim2real import _evaluate_loop
 
     base = load_checkpoint(base_ck)
     t0 = time.perf_counter()
     m = _evaluate_loop(base, params, real, glob, B, 0, "sensor", "force", float(B["fit_rate_hz"]), lambda k, n: None,
-                       print, sim=(), scratch=False)
+                       print, sim=(), scratch=False, fit_json=fj)
     lc = m["learning_curve"]
     return {"finetuned_valid_rmse_mean": float(np.mean([c["finetuned_valid_rmse"] for c in lc])),
             "finetuned_valid_rmse_by_seed": [float(np.mean([c["seeds"][i]["finetune_valid_rmse_n"] for c in lc]))
@@ -142,7 +142,7 @@ def main(argv=None):
             key = f"p{p}/{meth}"
             if key in out["runs"]:
                 continue
-            r = one(ck, params, a.real, a.test_episodes, {**B, "finetune_method": meth})
+            r = one(ck, params, a.real, a.test_episodes, {**B, "finetune_method": meth}, fj)
             if p == 0 and meth == "plain":  # the recorded runs' fine-tuning, rerun: equal if the pipeline is deterministic
                 rec = [c["finetuned_valid_rmse"] for c in bm["learning_curve"]]
                 r["determinism_check"] = {"recorded_valid_by_budget": rec, "rerun_valid_by_budget": [c["finetuned_valid_rmse"] for c in r["curve"]],

@@ -31,7 +31,7 @@ sys.path.insert(0, str(ROOT))
 BANDS_N = ((0.0, 3.0), (3.0, 8.0), (8.0, 16.0))  # learn.experiments.velostat.FORCE_BANDS_N
 
 
-def _protocols(cfg, kind: str, n: int, seed: int):
+def _protocols(kind: str, n: int, seed: int):
     from scenes import load_scene
     from simulate.protocols.indenter import make_episode_protocol
 
@@ -95,7 +95,7 @@ def main() -> None:
            "kmeans_bounds": {k: list(map(float, t.kmeans_bounds_)) for k, t in trackers.items()},
            "bounds_used": {k: list(map(float, t.bounds)) for k, t in trackers.items()}}
     for kind, label in (("velostat_steps", "presses from zero"), ("velostat_staircase", "staircase steps (1-15 N, 5 s)")):
-        c, protos = _protocols(cfg, kind, a.episodes, 1000)
+        c, protos = _protocols(kind, a.episodes, 1000)
         _, out = run(c, make_sensor(c, "numpy", "cpu"), protos, "mujoco")
         r = out["resistance_measured"].astype(float)
         res["kinds"][label] = {k: score(t, c, protos, r) for k, t in trackers.items()}

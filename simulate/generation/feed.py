@@ -1048,7 +1048,8 @@ def generate_feed(
     # a kind with its own contact stage: no ramp, since its latency-bound batches cost about the same whatever their
     # size (STEP_S_FLOOR), so a ramp's small batches each cost a full one's time and overlap nothing (ntype 8192
     # episodes on an H200, stepped in the driver then: ramp of 2048, 4096 then 2048 against one batch,
-    # bench/results/logs/profile-ntype-ramp*-h200-s16.txt)
+    # bench/results/logs/profile-ntype-ramp*-h200-s16.txt; again with its worlds in the physics processes, ntype 24576:
+    # 43.5 / 39.9 s with CONTACT_RAMP_BATCHES = 2 against 40.3 / 38.6 s without, user-cli-h200-s26-ntype-ramp*.json)
     batches = ([(g, None) for g in _groups(cfg, todo, worlds or feed_worlds(cfg), ramp=CONTACT_RAMP_BATCHES)]
                if cfg.protocol.kind in CONTACT_STAGES
                else _schedule(cfg, todo, worlds or feed_worlds(cfg)))
