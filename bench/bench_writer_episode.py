@@ -65,7 +65,7 @@ def episodes_of(fam: str, cache: Path) -> tuple[list[tuple[str, dict, dict]], in
             order = rec.attrs["bench_channel_order"]
             eps = [(ep, {name: rec.channel(ep, name) for name in order[ep]}, rec.episode_attrs(ep))
                    for ep in rec.episode_ids]
-            return eps, int(rec.attrs["bench_episodes_per_shard"])
+            return with_feed_hints(eps), int(rec.attrs["bench_episodes_per_shard"])
     from scenes import load_scene
     from sensors.data.manifest import episode_seed
     from sensors.registry import make_sensor
@@ -86,7 +86,35 @@ def episodes_of(fam: str, cache: Path) -> tuple[list[tuple[str, dict, dict]], in
                          extra_attrs=extra, compression="none") as w:
         for ep, ch, attrs in eps:
             w.add_episode(ep, ch, attrs)
-    return eps, cfg.generation.episodes_per_shard
+    return with_feed_hints(eps), cfg.generation.episodes_per_shard
+
+
+def with_feed_hints(eps: list) -> list:
+    """The episodes as the GPU feed hands them to its writers: a taxel field it would send as its non-zero blocks
+    (`simulate.contact.field_blocks`: at most SPARSE_MAX_SHARE of its blocks loaded) carries their flags
+    (`Channel.nonzero_blocks`, since session 27), computed here by the numpy reference of the device's flag kernel
+    (not timed: the device makes them). A revision whose Channel has no such field gets the episodes unchanged."""
+    import dataclasses
+
+    import numpy as np
+
+    from sensors.data.recording import Channel
+
+    if "nonzero_blocks" not in {f.name for f in dataclasses.fields(Channel)}:
+        return eps
+    from simulate.contact.field_blocks import FIELD_BLOCK, SPARSE_MAX_SHARE, blocks_of
+
+    out = []
+    for ep, ch, attrs in eps:
+        ch = dict(ch)
+        for name, c in ch.items():
+            d = c.data
+            if d.ndim >= 2 and d.dtype == np.float32 and len(c.dim_names) > 1 and c.dim_names[1] == "taxel":
+                block, mask = blocks_of(d[None], FIELD_BLOCK).nonzero_blocks(0)
+                if mask.mean() <= SPARSE_MAX_SHARE:
+                    ch[name] = dataclasses.replace(c, nonzero_blocks=(block, mask))
+        out.append((ep, ch, attrs))
+    return out
 
 
 def write_shard_timed(path: Path, eps: list, n: int, codec: str) -> dict[str, float]:
@@ -109,7 +137,9 @@ def write_shard_timed(path: Path, eps: list, n: int, codec: str) -> dict[str, fl
             dsid = R.h5d.open(gid, name.encode())
             if hasattr(R, "_write_rows"):  # since session 18: all-zero chunks left unwritten (`rows`: its first
                 # commits, before the taxel blocks, the base of writer-episode-cpu-s18-blocks.json)
-                R._write_rows(dsid, ch.data, self.chunks[name] if hasattr(self, "chunks") else self.rows[name])
+                hint = getattr(ch, "nonzero_blocks", None)  # since session 27: the feed's flags of zero blocks
+                R._write_rows(dsid, ch.data, self.chunks[name] if hasattr(self, "chunks") else self.rows[name],
+                              *(() if hint is None else (hint,)))
             else:
                 dsid.write(R.h5s.ALL, R.h5s.ALL, R.np.asarray(ch.data, order="C"))
         t2 = _clock()

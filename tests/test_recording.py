@@ -557,3 +557,49 @@ def test_zero_chunk_writes_read_back_for_any_layout(tmp_path, case):
         assert ds[...].tobytes() == a.tobytes()
         nz = rc._nonzero_chunks(a, chunks)
         assert ds.id.get_num_chunks() == int(nz.sum())
+
+
+@pytest.mark.parametrize("n", [1200, 30000])  # one chunk along time per taxel block, and several (1 MiB cap)
+def test_nonzero_block_hint_gives_the_scanned_file(tmp_path, monkeypatch, n):
+    """A field whose producer flags its all-zero taxel blocks (`Channel.nonzero_blocks`, the GPU feed's BlockSparse)
+    is written without scanning them: the same chunks stored, the same bytes read back, the same content hash and
+    stored summary as the scanned write. A block flagged non-zero is still scanned along time where it holds several
+    chunks, so its zero stretches stay unwritten; a hint of the wrong length is a clear error."""
+    from simulate.contact.field_blocks import blocks_of
+
+    N = 40  # blocks of 16, 16, 8 taxels
+    rng = np.random.default_rng(3)
+    pressure = np.zeros((n, N), np.float32)
+    pressure[100:300, 18:22] = rng.uniform(1e3, 5e4, (200, 4)).astype(np.float32)  # the middle block only
+    pressure[150, 17] = -0.0  # a signed zero inside a loaded block stays as written
+    shear = np.zeros((n, N, 2), np.float32)
+    shear[100:300, 33:35] = rng.normal(0, 1e-3, (200, 2, 2)).astype(np.float32)  # the last, short block only
+    hints = {name: blocks_of(a[None], rc.TAXEL_BLOCK).nonzero_blocks(0) for name, a in (("pressure", pressure), ("shear", shear))}
+    assert hints["pressure"][1].tolist() == [False, True, False] and hints["shear"][1].tolist() == [False, False, True]
+
+    def episode(hinted):
+        return {"time": Channel(np.arange(n) / 100.0, "s", ("time",)),
+                **{name: Channel(a, "Pa", dims, nonzero_blocks=hints[name] if hinted else None)
+                   for name, a, dims in (("pressure", pressure, ("time", "taxel")), ("shear", shear, ("time", "taxel", "xy")))}}
+
+    kw = dict(source="sim", config_json=CONFIG, root_seed=1, shard_index=0, sensor_attrs={"family": "velostat"},
+              compression="lz4")
+    scans, scan = [], rc._nonzero_chunks
+    monkeypatch.setattr(rc, "_nonzero_chunks", lambda data, chunks: scans.append(data.shape) or scan(data, chunks))
+    hinted = write_recording(tmp_path / "hinted.h5", {"ep-0": episode(True)}, **kw)
+    # what was scanned: the flagged block's column where it holds several chunks along time, nothing else
+    assert scans == ([] if n == 1200 else [(n, 16), (n, 8, 2)])
+    scanned = write_recording(tmp_path / "scanned.h5", {"ep-0": episode(False)}, **kw)
+    assert [s[1:] for s in scans[2 if n > 1200 else 0:]] == [(N,), (N, 2)]
+    with Recording(hinted) as a, Recording(scanned) as b:
+        for name in ("pressure", "shear"):
+            da, db = a._f[f"episodes/ep-0/{name}"], b._f[f"episodes/ep-0/{name}"]
+            assert da.id.get_num_chunks() == db.id.get_num_chunks() == 1, name  # n = 30000: one of two along time
+            assert a.read("ep-0", name).tobytes() == b.read("ep-0", name).tobytes() == episode(False)[name].data.tobytes()
+        assert np.signbit(a.read("ep-0", "pressure")[150, 17])
+        assert a.content_sha256 == b.content_sha256 == a.compute_content_sha256()
+        sa, sb = a.summary(from_data=False), b.summary(from_data=False)
+        assert sa["channels"] == sb["channels"] == a.summary()["channels"] and sa["n_samples"] == sb["n_samples"]
+        assert sa["channels"]["pressure"]["min"] == 0.0 and sa["channels"]["shear"]["min"] < 0.0
+    with pytest.raises(ValueError, match="nonzero_blocks"):
+        Channel(pressure, "Pa", ("time", "taxel"), nonzero_blocks=(16, np.ones(2, bool)))

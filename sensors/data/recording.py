@@ -136,10 +136,17 @@ class Channel:
     units: str
     dim_names: tuple[str, ...]
     description: str = ""
+    # what the producer already knows of the data's zeros (the GPU feed: a field sent as its non-zero taxel blocks,
+    # simulate.contact.field_blocks.BlockSparse): (block, mask), mask[k] False where entries [k * block, (k + 1) *
+    # block) of axis 1 are all +0.0 over the whole episode. The writer then neither scans those blocks for zero
+    # chunks nor for the summary's min / max; the file and its content hash are the same (a hint, not stored)
+    nonzero_blocks: tuple[int, np.ndarray] | None = None
 
     def __post_init__(self) -> None:
         self.data = np.asarray(self.data)
         self.dim_names = tuple(self.dim_names)
+        if self.nonzero_blocks is not None:
+            self.nonzero_blocks = (int(self.nonzero_blocks[0]), np.asarray(self.nonzero_blocks[1], bool))
         self.validate()
 
     def validate(self, where: str = "channel") -> None:
@@ -154,6 +161,12 @@ class Channel:
             raise ValueError(f"{where}: dim_names must be non-empty strings, got {self.dim_names}")
         if self.data.dtype.kind not in "biufc":
             raise ValueError(f"{where}: data must be numeric or bool, got dtype {self.data.dtype}")
+        if self.nonzero_blocks is not None:
+            block, mask = self.nonzero_blocks
+            n = -(-self.data.shape[1] // max(block, 1)) if self.data.ndim >= 2 else -1
+            if block < 1 or mask.ndim != 1 or len(mask) != n:
+                raise ValueError(f"{where}: nonzero_blocks needs a block >= 1 and one flag per block of axis 1 "
+                                 f"({n} for shape {self.data.shape}), got block {block} and {mask.shape} flags")
 
     @property
     def is_time_series(self) -> bool:
@@ -411,6 +424,9 @@ def _chunk_len(n_time: int, frame_bytes: int) -> int:
 # Chunks of all-zero bytes are left unwritten (read back as the fill value 0: the same bytes). Off only to measure
 # what it saves (bench): PIEZOTWIN_SKIP_ZERO_CHUNKS=0, read when this module is imported (the writer processes too)
 SKIP_ZERO_CHUNKS = os.environ.get("PIEZOTWIN_SKIP_ZERO_CHUNKS", "1") == "1"
+# Whether the writer takes a channel's `nonzero_blocks` hint (the same file either way). Off only for the bench's A/B:
+# PIEZOTWIN_BLOCK_HINTS=0
+USE_BLOCK_HINTS = os.environ.get("PIEZOTWIN_BLOCK_HINTS", "1") == "1"
 # Taxels per chunk along a channel's "taxel" axis (its second): a press loads a few taxels of a large pad, so most
 # blocks of a taxel field stay zero through an episode and are not written (velostat: a 10 mm tip on 144 taxels).
 # 0: the whole frame in each chunk (the layout before session 18, and what the bench compares against:
@@ -460,10 +476,28 @@ def _nonzero_chunks(data: np.ndarray, chunks: tuple[int, ...]) -> np.ndarray:
     return out
 
 
-def _write_rows(dsid: h5d.DatasetID, data: np.ndarray, chunks: tuple[int, ...] | None) -> None:
+def _hinted_nonzero_chunks(data: np.ndarray, chunks: tuple[int, ...],
+                           nonzero_blocks: tuple[int, np.ndarray]) -> np.ndarray | None:
+    """`_nonzero_chunks` from a channel's `nonzero_blocks` where its blocks are the chunks' taxel columns: the
+    columns it flags zero are not read, the others scanned only where a column holds several chunks along time;
+    None where the blocks do not match the chunks (then everything is scanned)."""
+    block, mask = nonzero_blocks
+    if data.ndim < 2 or chunks[1] != block or len(mask) != -(-data.shape[1] // block):
+        return None
+    n_time = -(-data.shape[0] // chunks[0])
+    nz = np.zeros((n_time, len(mask)), bool)
+    for j in np.flatnonzero(mask):
+        col = data[:, j * block:(j + 1) * block]
+        nz[:, j] = True if n_time == 1 else _nonzero_chunks(np.ascontiguousarray(col), chunks)[:, 0]
+    return nz
+
+
+def _write_rows(dsid: h5d.DatasetID, data: np.ndarray, chunks: tuple[int, ...] | None,
+                nonzero_blocks: tuple[int, np.ndarray] | None = None) -> None:
     """Write `data` into the chunked dataset `dsid` laid out in `chunks` (`_chunk_shape`; None: written whole),
     leaving its all-zero chunks unwritten (SKIP_ZERO_CHUNKS): a dataset with no zero chunk in one call, else each
-    run of nonzero chunks along time (within one taxel block) as one hyperslab."""
+    run of nonzero chunks along time (within one taxel block) as one hyperslab. `nonzero_blocks`: the channel's
+    hint (`Channel.nonzero_blocks`), which spares the scan of the blocks it flags zero."""
     data = np.ascontiguousarray(data)
     if not SKIP_ZERO_CHUNKS or chunks is None or data.ndim == 0 or data.size == 0:
         dsid.write(h5s.ALL, h5s.ALL, data)
@@ -472,7 +506,9 @@ def _write_rows(dsid: h5d.DatasetID, data: np.ndarray, chunks: tuple[int, ...] |
         if np.count_nonzero(data.reshape(-1).view(np.uint8)):
             dsid.write(h5s.ALL, h5s.ALL, data)
         return
-    nz = _nonzero_chunks(data, chunks)
+    nz = _hinted_nonzero_chunks(data, chunks, nonzero_blocks) if USE_BLOCK_HINTS and nonzero_blocks is not None else None
+    if nz is None:
+        nz = _nonzero_chunks(data, chunks)
     if nz.all():
         dsid.write(h5s.ALL, h5s.ALL, data)
         return
@@ -515,7 +551,7 @@ def _write_channel(
     contents = {"data": data} if with_data and chunks is None else {"shape": data.shape, "dtype": data.dtype}
     ds = group.create_dataset(name, **contents, **kwargs)
     if with_data and chunks is not None:
-        _write_rows(ds.id, data, chunks)
+        _write_rows(ds.id, data, chunks, ch.nonzero_blocks)
     ds.attrs["units"] = ch.units
     ds.attrs["dim_names"] = json.dumps(list(ch.dim_names))
     if ch.description:
@@ -596,7 +632,7 @@ class _Template:
             if _value_key(arr) != self.values[key]:
                 h5a.open(gid, key.encode()).write(arr, mtype=self.mtypes[key])
         for name, ch in channels.items():
-            _write_rows(h5d.open(gid, name.encode()), ch.data, self.chunks[name])
+            _write_rows(h5d.open(gid, name.encode()), ch.data, self.chunks[name], ch.nonzero_blocks)
 
     def close(self) -> None:
         self.file.close()
@@ -649,7 +685,11 @@ class _SummaryAccumulator:
         for name in sorted(channels):
             ch = channels[name]
             d = np.asarray(ch.data)
-            self.add_channel(name, ch.units, ch.dim_names, d.dtype, d.shape, iter((d,)))
+            # a field its producer flags all +0.0 (an unloaded shear field) is not read: its min and max are 0.0.
+            # Only then: a min / max over a few strided blocks costs more than over the whole contiguous array
+            hinted_zero = USE_BLOCK_HINTS and ch.nonzero_blocks is not None and not ch.nonzero_blocks[1].any()
+            parts = (np.zeros(1 if d.size else 0, d.dtype),) if hinted_zero else (d,)
+            self.add_channel(name, ch.units, ch.dim_names, d.dtype, d.shape, iter(parts))
 
     def result(self) -> dict[str, Any]:
         """{"n_samples", "duration_s", "channels"}: min / max None where a channel has no finite value."""

@@ -69,6 +69,14 @@ class BlockSparse:
             out[:, k:k + w] = self.blocks[m, :, :w]
         return out
 
+    def nonzero_blocks(self, r: int) -> tuple[int, np.ndarray]:
+        """Row r's blocks as `sensors.data.recording.Channel.nonzero_blocks` takes them: (block, flags), a flag per
+        block of the taxel axis, False where the block is not listed (all +0.0)."""
+        a, b = self._span(r)
+        mask = np.zeros(-(-self.shape[2] // self.block), bool)
+        mask[self.index[a:b, 1]] = True
+        return self.block, mask
+
     def __getitem__(self, key):
         if isinstance(key, (int, np.integer)):
             r = int(key) + (self.shape[0] if key < 0 else 0)

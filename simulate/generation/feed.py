@@ -665,7 +665,9 @@ def write_packed_shard(cfg: SceneConfig, out_dir: str, packed: PackedShard, sens
         with shard_writer(cfg, Path(out_dir), packed.shard, sensor_attrs, mjcf) as w:
             for ep_id, attrs, piece, row in packed.episodes:
                 arrays = pieces[piece]
-                ch = {name: Channel(arrays[name][row] if per_ep else arrays[name], units, dims, desc)
+                # a field sent as its blocks tells the writer which of them are zero (the same file, less scanning)
+                ch = {name: Channel(arrays[name][row] if per_ep else arrays[name], units, dims, desc,
+                                    arrays[name].nonzero_blocks(row) if isinstance(arrays[name], BlockSparse) else None)
                       for name, (units, dims, desc, per_ep) in packed.specs.items()}
                 w.add_episode(ep_id, ch, attrs)
             t1 = time.perf_counter()
