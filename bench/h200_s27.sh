@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# The device calls of session 27 (issue 16), one H200: `bash bench/h200_s27.sh H`. Logs and result files go to $OUT.
+# H: velostat 16384 as typed with the writers taking the feed's zero-block flags (Channel.nonzero_blocks, the
+#    default) against PIEZOTWIN_BLOCK_HINTS=0 (scanned, as before), alternated in one call, stepping alone once.
+# C: cnt_pdms 8192 as typed, flags against none, alternated (its shear field is sent as blocks).
+source "$(dirname "$0")/h100_lib.sh"  # environment, cli (plain CLI + MuJoCo Warp alone), pack, warm
+case "$1" in
+H)  warm velostat
+    cli velostat 16384 h200-s27-velostat-hints-a
+    PIEZOTWIN_BLOCK_HINTS=0 cli velostat 16384 h200-s27-velostat-scan-a noalone
+    cli velostat 16384 h200-s27-velostat-hints-b noalone
+    PIEZOTWIN_BLOCK_HINTS=0 cli velostat 16384 h200-s27-velostat-scan-b noalone
+    pack H ;;
+C)  warm cnt_pdms
+    cli cnt_pdms 8192 h200-s27-cnt_pdms-hints-a noalone
+    PIEZOTWIN_BLOCK_HINTS=0 cli cnt_pdms 8192 h200-s27-cnt_pdms-scan-a noalone
+    cli cnt_pdms 8192 h200-s27-cnt_pdms-hints-b noalone
+    PIEZOTWIN_BLOCK_HINTS=0 cli cnt_pdms 8192 h200-s27-cnt_pdms-scan-b noalone
+    pack C ;;
+esac
