@@ -93,7 +93,11 @@ USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w
             "user-cli-h200-s25-cnt_pdms-whole.json", "user-cli-h200-s25-cnt_pdms-blocks2.json",
             "user-cli-h200-s25-ntype.json", "user-cli-h200-s25-ntype-whole.json", "user-cli-h200-s25-ntype-blocks2.json",
             "user-cli-h200-s25-ntype-blocks3.json", "user-cli-h200-s25-ntype-s22code.json",
-            "user-cli-h200-s25-ntype-processes.json", "user-cli-h200-s25-ntype-driver.json"]
+            "user-cli-h200-s25-ntype-processes.json", "user-cli-h200-s25-ntype-driver.json",
+            "user-cli-h200-s27-velostat-hints-a.json", "user-cli-h200-s27-velostat-scan-a.json",
+            "user-cli-h200-s27-velostat-hints-b.json", "user-cli-h200-s27-velostat-scan-b.json",
+            "user-cli-h200-s27-cnt_pdms-hints-a.json", "user-cli-h200-s27-cnt_pdms-scan-a.json",
+            "user-cli-h200-s27-cnt_pdms-hints-b.json", "user-cli-h200-s27-cnt_pdms-scan-b.json"]
 # session 22: the physics processes' GPU stepping in turns against side by side (PIEZOTWIN_GPU_TURNS=0), velostat
 # 16384 episodes, (file, turns); the first pair in one call in the order run, the third an earlier call on the same day
 # session 23: the same for cnt_pdms 8192 (bench/h200_s23.sh; A: in turns with stepping alone, another call; B: side by side
@@ -128,6 +132,17 @@ STEP_AB = [("velostat", "16384, 7.69 ms (default now)", "user-cli-h200-s24-velos
            ("fabric_1", "4096, 5 ms (before)", "user-cli-h200-s24-fabric_1-5ms2.json")]
 # session 25's A/B of the taxel fields sent as their non-zero blocks (bench/h200_s25.sh A, B; in the order run, each
 # family in one call on one H200): (family, file, as blocks)
+# session 27: the writers taking the feed's flags of a block field's zero blocks (Channel.nonzero_blocks, the default)
+# against scanning them as before (PIEZOTWIN_BLOCK_HINTS=0), alternated in one call per family on one H200
+# (bench/h200_s27.sh H, C, in the order run): (family, file, flags taken)
+BLOCK_HINTS_AB = [("velostat", "user-cli-h200-s27-velostat-hints-a.json", True),
+                  ("velostat", "user-cli-h200-s27-velostat-scan-a.json", False),
+                  ("velostat", "user-cli-h200-s27-velostat-hints-b.json", True),
+                  ("velostat", "user-cli-h200-s27-velostat-scan-b.json", False),
+                  ("cnt_pdms", "user-cli-h200-s27-cnt_pdms-hints-a.json", True),
+                  ("cnt_pdms", "user-cli-h200-s27-cnt_pdms-scan-a.json", False),
+                  ("cnt_pdms", "user-cli-h200-s27-cnt_pdms-hints-b.json", True),
+                  ("cnt_pdms", "user-cli-h200-s27-cnt_pdms-scan-b.json", False)]
 FIELD_BLOCKS_AB = [("velostat", "user-cli-h200-s25-velostat-blocks1.json", True),
                    ("velostat", "user-cli-h200-s25-velostat-whole.json", False),
                    ("velostat", "user-cli-h200-s25-velostat-blocks2.json", True),
@@ -569,6 +584,22 @@ def bench_user_cli() -> str:
                 "contact stage, whose worlds these runs still stepped in the driver (next table):\n",
                 table(["family", "episodes", "file", "fields sent", "staging GB page-locked", "populated GB",
                        "sensor stage s", "pack s", "writer-seconds", "wait for writers s", "wall s"], blocks)]
+    hints = []
+    for fam, name, flags in BLOCK_HINTS_AB:
+        if got := _feed_run(name, fam):
+            r, t = got
+            hints.append([fam, r["episodes"], f"`{name}`", "flags" if flags else "scanned",
+                          num(t.get("writers: episodes")), num(t.get("wait for writers")), num(t.get("simulate")),
+                          num(r["seconds"]), pct(r["of_raw"]) if r.get("of_raw") is not None else "–"])
+    if hints:
+        out += ["The writers told which taxel blocks of a field sent as blocks are zero (session 27, `Channel.nonzero_blocks` "
+                "from the feed's `BlockSparse`; `PIEZOTWIN_BLOCK_HINTS=0` scans them as before), alternated in one call per "
+                "family on one H200, in the order run. The files are the same. velostat's writer-seconds fall (its "
+                "pressure and deformation fields are zero on most blocks, its shear field on all); cnt_pdms sends only "
+                "its shear field as blocks, and its runs spread more between repeats than the flags move them. The wall "
+                "moves within what the runs repeat to: the driver's sensor stage and the first batch remain:\n",
+                table(["family", "episodes", "file", "zero blocks", "writer-seconds", "wait for writers s", "sensor stage s",
+                       "wall s", "of the disk's raw speed"], hints)]
     stage = []
     for label, name in NTYPE_PROCESSES_AB:
         if got := _feed_run(name, "ntype"):
@@ -933,6 +964,21 @@ def bench_writer() -> str:
                 "alone where the stepping bounds:\n\n"
                 + table(["family", "episodes", "run", "compression", "writer-s", "wait for writers (s)", "run (s)",
                          "samples/s", "of raw", "of stepping alone"], erows))
+    hint = load("writer-episode-cpu-s27-hints.json")
+    if hint:
+        hrows = []
+        for fam, r in hint["families"].items():
+            b, h = r["base"]["lz4"]["ms_per_episode"], r["head"]["lz4"]["ms_per_episode"]
+            hrows.append([fam, num(b["total"], 2), num(h["total"], 2), num(b["data"], 2), num(h["data"], 2),
+                          num(b["other"], 2), num(h["other"], 2)])
+        out += ("\n\nThe flags of a block field's zero blocks (session 27, `writer-episode-cpu-s27-hints.json`, lz4): the "
+                "GPU feed sends a field loaded on at most half its taxel blocks as those blocks (`BlockSparse`), and its "
+                "writers now take the flags with the episode (`Channel.nonzero_blocks`) instead of scanning the dense "
+                "array for zero chunks (\"data\") and an all-zero field for the summary (\"other\"). The bench gives "
+                f"its episodes the flags the device would (their numpy reference, not timed); `{hint['base']}` scans. "
+                f"Same files; best of {hint['repeats']} on {hint['machine']} (ms CPU per episode):\n\n"
+                + table(["family", f"total, {hint['base']}", "total, now", f"data, {hint['base']}", "data, now",
+                         f"other, {hint['base']}", "other, now"], hrows))
     if srows:
         out += ("\n\nWriters in parallel (lz4; spawned processes, one shard per task, as the GPU feed's pool; wall "
                 "time, on the shared machine):\n\n"
