@@ -13,6 +13,13 @@ the relative R drift over the hold, measured and compensated (`learn.experiments
 by force band; per band of membership also the share of loading-ramp samples the tracker puts in the creep stage,
 whose R change eq. 2 then subtracts as if it were creep (why the experiment keeps the paper's band).
 Writes bench/results/velostat-hold-kinds-<tag>.json.
+
+    python bench/bench_velostat_hold_kinds.py --parts 8 [--variant "LABEL=FIELD=VALUE,FIELD=VALUE" ...]
+
+`--parts N` (session 27): instead, the paper's band only, on film parts 0..N-1 (`sensor.film.field_seed`), the
+preset and each `--variant` (scene overrides): the R drift removed per part and kind of hold, and per hold the
+share of its samples whose delta lies above the band (the tracker calls them loading and leaves their creep in)
+against the R the hold starts at. Writes bench/results/velostat-hold-kinds-parts-<tag>.json.
 """
 
 from __future__ import annotations
@@ -31,12 +38,12 @@ sys.path.insert(0, str(ROOT))
 BANDS_N = ((0.0, 3.0), (3.0, 8.0), (8.0, 16.0))  # learn.experiments.velostat.FORCE_BANDS_N
 
 
-def _protocols(kind: str, n: int, seed: int):
+def _protocols(kind: str, n: int, seed: int, base: list[str] | None = None):
     from scenes import load_scene
     from simulate.protocols.indenter import make_episode_protocol
 
-    over = [f"protocol.kind={kind}"] + (["protocol.staircase_max_n=15", "protocol.step_hold_s=5"]
-                                        if kind == "velostat_staircase" else [])
+    over = [*(base or []), f"protocol.kind={kind}"] + (["protocol.staircase_max_n=15", "protocol.step_hold_s=5"]
+                                                       if kind == "velostat_staircase" else [])
     c = load_scene("velostat", over)
     return c, [make_episode_protocol(c, seed + i, i) for i in range(n)]
 
@@ -71,12 +78,81 @@ def score(tracker, cfg, protos, r: np.ndarray) -> dict:
     return out
 
 
+R_SPLIT_OHM = 1000.0  # holds that start below / above this R (the low-resistivity domains at 8-15 N read below)
+
+
+def over_band(tracker, cfg, protos, r: np.ndarray) -> list[tuple[float, float]]:
+    """Per hold of >= 2 s: (R at its start (ohm, smoothed), share of its samples with delta above the band)."""
+    from learn.experiments.velostat import holds
+
+    rate, hi = cfg.sampling.sample_rate_hz, tracker.bounds[1]
+    out = []
+    for i, p in enumerate(protos):
+        sm, (d, _) = tracker.smoothed(r[i]), tracker.delta(r[i])
+        for h in holds(_target(cfg, p), int(2 * rate)):
+            a, b = h.start + tracker.smooth, h.stop - 1
+            out.append((float(sm[a]), float(np.mean(d[a:b] > hi))))
+    return out
+
+
+def parts(n_parts: int, variants: list[tuple[str, list[str]]], episodes: int) -> dict:
+    """The paper's band on film parts 0..n_parts-1 for each variant (label, overrides): see the module docstring."""
+    import bench_velostat_silhouette as S
+    from learn.experiments.velostat import PAPER
+    from learn.models.velostat import CreepTracker
+    from scenes import load_scene
+    from sensors.registry import make_sensor
+    from simulate.characterize.velostat import run
+
+    res: dict = {}
+    for label, over in variants:
+        rows = []
+        for part in range(n_parts):
+            base = [f"sensor.film.field_seed={part}", *over]
+            cfg = load_scene("velostat", base)
+            _, fo = run(cfg, make_sensor(cfg, "numpy", "cpu"), S.staircases(cfg, S.SPEEDS_MM_PER_MIN), "ideal")
+            tr = CreepTracker(domain="conductance", smooth=5, lag=5, bounds=tuple(PAPER["bounds"])).fit(
+                list(fo["resistance_measured"].astype(float)))
+            row = {"part": part}
+            hold_rows = []
+            for kind in ("velostat_steps", "velostat_staircase"):
+                c, protos = _protocols(kind, episodes, 1000, base)
+                _, out = run(c, make_sensor(c, "numpy", "cpu"), protos, "mujoco")
+                r = out["resistance_measured"].astype(float)
+                row[kind] = score(tr, c, protos, r)["removed_frac"]
+                hold_rows += over_band(tr, c, protos, r)
+            h = np.asarray(hold_rows)
+            low = h[:, 0] < R_SPLIT_OHM
+            row["over_band_share"] = {"below_1k": float(h[low, 1].mean()) if low.any() else None,
+                                      "above_1k": float(h[~low, 1].mean()) if (~low).any() else None,
+                                      "holds_below_1k": int(low.sum()), "holds": len(h)}
+            rows.append(row)
+            print(f"{label:40s} part {part}: removed {100 * row['velostat_steps']:.0f} / "
+                  f"{100 * row['velostat_staircase']:.0f} %, delta over the band {100 * (row['over_band_share']['below_1k'] or 0):.0f} % "
+                  f"of samples in holds below 1 kohm ({row['over_band_share']['holds_below_1k']} holds), "
+                  f"{100 * (row['over_band_share']['above_1k'] or 0):.0f} % above", flush=True)
+        res[label] = {"overrides": over, "parts": rows}
+    return res
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--tag", default="cpu")
     ap.add_argument("--episodes", type=int, default=24, help="episodes of each kind")
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results")
+    ap.add_argument("--parts", type=int, default=0, help="film parts 0..N-1, the paper's band only (see the docstring)")
+    ap.add_argument("--variant", action="append", default=[], help="LABEL=FIELD=VALUE,FIELD=VALUE (with --parts)")
     a = ap.parse_args()
+    if a.parts:
+        variants = [("preset", [])] + [(v.split("=", 1)[0], v.split("=", 1)[1].split(",")) for v in a.variant]
+        t0 = time.perf_counter()
+        res = {"host": platform.node(), "episodes_per_kind": a.episodes, "load": "mujoco", "band": "paper (eqs. 8-9)",
+               "r_split_ohm": R_SPLIT_OHM, "variants": parts(a.parts, variants, a.episodes)}
+        res["seconds"] = time.perf_counter() - t0
+        f = a.out / f"velostat-hold-kinds-parts-{a.tag}.json"
+        f.write_text(json.dumps(res, indent=1) + "\n")
+        print(f"wrote {f} ({res['seconds']:.0f} s)")
+        return
     import bench_velostat_silhouette as S
     from learn.experiments.velostat import PAPER
     from learn.models.velostat import CreepTracker

@@ -1773,7 +1773,7 @@ def _velostat_silhouette() -> list[str]:
 def _velostat_hold_kinds() -> list[str]:
     """bench/results/velostat-hold-kinds-*.json (bench/bench_velostat_hold_kinds.py): the R drift the creep compensation
     removes per kind of hold and per membership band, and the loading samples it takes for creep (session 26)."""
-    files = sorted((ROOT / "bench" / "results").glob("velostat-hold-kinds-*.json"))
+    files = sorted(f for f in (ROOT / "bench" / "results").glob("velostat-hold-kinds-*.json") if "-parts-" not in f.name)
     d = load(files[-1]) if files else None
     if not d:
         return []
@@ -1796,13 +1796,40 @@ def _velostat_hold_kinds() -> list[str]:
                   rows), ""]
 
 
-def _velostat_one_speed(runs: dict[str, Any]) -> list[str]:
-    """The experiment at one crosshead speed (3 mm/min) in every folder beside the recorded quick runs (speeds drawn
-    from 1-6 mm/min), quick seeds 0-2, and the outcome of the rule written before scoring
-    (bench/results/velostat-one-speed-rule.md; session 24)."""
+def _velostat_hold_parts() -> list[str]:
+    """bench/results/velostat-hold-kinds-parts-*.json (bench/bench_velostat_hold_kinds.py --parts): the R drift the
+    compensation removes with the paper's band on each film part, and where it fails (session 27)."""
+    files = sorted((ROOT / "bench" / "results").glob("velostat-hold-kinds-parts-*.json"))
+    d = load(files[-1]) if files else None
+    if not d:
+        return []
+    rows = []
+    for label, v in d["variants"].items():
+        for r in v["parts"]:
+            o = r["over_band_share"]
+            rows.append([label, str(r["part"]), f"{100 * r['velostat_steps']:.0f} %", f"{100 * r['velostat_staircase']:.0f} %",
+                         f"{o['holds_below_1k']} of {o['holds']}", f"{100 * (o['below_1k'] or 0):.0f} %",
+                         f"{100 * (o['above_1k'] or 0):.0f} %"])
+    return ["### Where the compensation fails: film parts and the readout (`" + rel(files[-1]) + "`)\n\n"
+            f"The paper's band on film parts 0-{len(next(iter(d['variants'].values()))['parts']) - 1} "
+            f"(`sensor.film.field_seed`), {d['episodes_per_kind']} presses from zero and {d['episodes_per_kind']} "
+            "staircases each, MuJoCo load; the preset's readout and the force channel oversampled 16x "
+            "(`sensor.readout.oversampling=16`). Per part: the R drift removed per kind of hold; the holds that start "
+            f"below {d['r_split_ohm']:.0f} ohm (a low-resistivity domain at 8-15 N), and the share of hold samples whose "
+            "0.5 s delta lies above the band's upper edge, where the tracker calls the hold loading and leaves its creep "
+            "in. A part whose presses read low removes less; a quieter sample removes that failure:\n",
+            table(["readout", "part", "presses from zero", "staircase steps", "holds below 1 kohm",
+                   "delta over the band, below 1 kohm", "above 1 kohm"], rows), ""]
+
+
+def _velostat_candidate(runs: dict[str, Any], glob: str, rec_label: str, cand_label: str, heading: str, intro: str,
+                        rule: str) -> list[str]:
+    """A candidate default of the velostat experiment beside the recorded quick runs, quick seeds 0-2, and the outcome
+    of its rule written before scoring (`rule`): adopted only if the targets met over the three seeds rise and no
+    target met on every recorded seed is lost."""
     import importlib
 
-    files = sorted((ROOT / "bench" / "results").glob("velostat-one-speed-quick*.json"))
+    files = sorted((ROOT / "bench" / "results").glob(glob))
     cand = {int(m.get("seed", 0) or 0): m for p in files if (m := load(p)) and "findings" in m}
     if not cand:
         return []
@@ -1812,8 +1839,8 @@ def _velostat_one_speed(runs: dict[str, Any]) -> list[str]:
         base = runs.get("quick" if sd == 0 else f"quick seed {sd}")
         if not base:
             continue
-        pair[f"seed {sd}, 1-6 mm/min (recorded)"] = base
-        pair[f"seed {sd}, 3 mm/min"] = c
+        pair[f"seed {sd}, {rec_label} (recorded)"] = base
+        pair[f"seed {sd}, {cand_label}"] = c
         fb, fc = E.target_flags(base), E.target_flags(c)
         n_rec += sum(bool(v) for v in fb.values())
         n_cand += sum(bool(v) for v in fc.values())
@@ -1826,17 +1853,40 @@ def _velostat_one_speed(runs: dict[str, Any]) -> list[str]:
     complete = seeds == [0, 1, 2]
     broken = sorted({k for sd, k in lost if always and k in always})
     adopted = complete and n_cand > n_rec and not broken
-    verdict = (f"Targets met over the seeds: {n_rec} recorded, {n_cand} at one speed"
-               + (f"; a target met on every recorded seed and lost at one speed: {', '.join(broken)}" if broken else "")
+    verdict = (f"Targets met over the seeds: {n_rec} recorded, {n_cand} with the candidate"
+               + (f"; a target met on every recorded seed and lost with it: {', '.join(broken)}" if broken else "")
                + (f": **{'adopted' if adopted else 'not adopted'}**" if complete else
                   f" (seeds {', '.join(map(str, seeds))} only: the rule needs 0-2)"))
-    return ["### One crosshead speed per test series (session 24, rule written before scoring)\n\n"
-            "The paper states one machine speed outside its speed sweep (Fig. 3a, 3 mm/min) and none for the Fig. 6 "
-            "staircases, the sect. 4.1 calibrations or the Fig. 23 A-E presses; ours draws one per press from 1-6 mm/min "
-            "(Fig. 5's speeds). The candidate runs every folder at 3 mm/min (`--set protocol.loading_speeds_m_per_s=[5e-05]`); "
-            "the film is unchanged. Rule (`bench/results/velostat-one-speed-rule.md`): adopt only if the targets met over "
-            "quick seeds 0-2 rise and none met on every recorded seed is lost. " + verdict + ".\n",
-            E.targets_table(pair) + "\n"]
+    return [f"### {heading}\n\n{intro} Rule (`{rule}`): adopt only if the targets met over quick seeds 0-2 rise and "
+            "none met on every recorded seed is lost. " + verdict + ".\n", E.targets_table(pair) + "\n"]
+
+
+def _velostat_one_speed(runs: dict[str, Any]) -> list[str]:
+    """One crosshead speed (3 mm/min) in every folder, session 24 (bench/results/velostat-one-speed-rule.md)."""
+    return _velostat_candidate(
+        runs, "velostat-one-speed-quick*.json", "1-6 mm/min", "3 mm/min",
+        "One crosshead speed per test series (session 24, rule written before scoring)",
+        "The paper states one machine speed outside its speed sweep (Fig. 3a, 3 mm/min) and none for the Fig. 6 "
+        "staircases, the sect. 4.1 calibrations or the Fig. 23 A-E presses; ours draws one per press from 1-6 mm/min "
+        "(Fig. 5's speeds). The candidate runs every folder at 3 mm/min (`--set protocol.loading_speeds_m_per_s=[5e-05]`); "
+        "the film is unchanged.", "bench/results/velostat-one-speed-rule.md")
+
+
+def _velostat_oversampling(runs: dict[str, Any]) -> list[str]:
+    """The force channel oversampled 16x (session 27, bench/results/velostat-oversampling-rule.md)."""
+    return _velostat_candidate(
+        runs, "velostat-oversampling-quick*.json", "one conversion per sample", "16 conversions per sample",
+        "The force channel oversampled (session 27, rule written before scoring)",
+        "The creep compensation fails where the film reads low: at 50 uA a 1 mV rms sample is 20 ohm of R, and on a "
+        "low-resistivity domain at 8-15 N the 0.5 s delta of a hold then crosses the paper's upper band edge, so the "
+        "tracker calls it loading (`bench/bench_velostat_hold_kinds.py` over film parts). The candidate reads each "
+        "sample as the sum of 16 conversions shifted by 2 (ST AN2668; `sensor.readout.oversampling=16`: noise / 4, "
+        "14-bit codes); the film is unchanged. `piezotwin calibrate velostat` meets every row with it too. With the "
+        "quieter sample the compensation removes well over half the drift on every seed, but the K-means of eq. 3 as "
+        "printed (one-sample deltas) then finds its loading cluster higher, and the band's upper edge passes 2x the "
+        "paper's: at 1 mV the noise had held it there. The paper gives no detection cycle, which sets how far a ramp "
+        "moves R in one sample. The option stays (`sensor.readout.oversampling`, default 1).",
+        "bench/results/velostat-oversampling-rule.md")
 
 
 def _ntype_linear() -> list[str]:
@@ -1928,7 +1978,9 @@ def experiment(family: str) -> str:
         out.append(velostat_design_rule("sobolev"))
         out += _velostat_silhouette()
         out += _velostat_hold_kinds()
+        out += _velostat_hold_parts()
         out += _velostat_one_speed(runs)
+        out += _velostat_oversampling(runs)
     if family == "ntype":  # issue 14's targets on the paper's task, one column per recorded run and seed
         import importlib
 

@@ -492,7 +492,7 @@ def reread(r_true: np.ndarray, cfg, scale: float, rng: np.random.Generator) -> n
     v = np.minimum(ro.current_a * np.asarray(r_true, np.float64), ro.compliance_v)
     if scale <= 0:
         return v / ro.current_a
-    _, va = quantise(v + rng.standard_normal(len(v)) * ro.noise_v * scale, ro.adc_bits, ro.adc_range_v)
+    _, va = quantise(v + rng.standard_normal(len(v)) * ro.sample_noise_v * scale, ro.sample_bits, ro.adc_range_v)
     return va.astype(np.float64) / ro.current_a
 
 
@@ -511,7 +511,7 @@ def readout_sensitivity(fit_on: list[Sequence], te: list[Sequence], cfg, tracker
         for name, kw in (("paper", {**tracker_kw, **PAPER_READING}), ("ours", dict(tracker_kw))):
             t = CreepTracker(seed=seed, **kw).fit(fr)
             a, b, _ = r_drift(t, te, tr_, rate)
-            out.append({"noise_scale": scale, "noise_ohm": scale * cfg.sensor.readout.noise_v / cfg.sensor.readout.current_a,
+            out.append({"noise_scale": scale, "noise_ohm": scale * cfg.sensor.readout.sample_noise_v / cfg.sensor.readout.current_a,
                         "reading": name, "smooth": t.smooth, "lag": t.lag, "period_s": t.lag / rate, "kmeans_bounds": list(t.kmeans_bounds_),
                         "silhouette": t.silhouette_, "r_drift_removed_frac": float(1 - np.mean(b) / np.mean(a))})
     return out
@@ -525,8 +525,8 @@ def hold_diagnostics(d: np.ndarray, cfg) -> dict[str, Any]:
     compensated, time to the first creep-stage sample (s), creep -> loading flips within the hold), with the
     readout's resolution in ohm (noise rms and ADC step, both at the force channel: V / I)."""
     r = cfg.sensor.readout
-    out: dict[str, Any] = {"noise_ohm": r.noise_v / r.current_a,
-                           "adc_step_ohm": r.adc_range_v / 2 ** r.adc_bits / r.current_a, "bands": []}
+    out: dict[str, Any] = {"noise_ohm": r.sample_noise_v / r.current_a,  # of a reported sample
+                           "adc_step_ohm": r.adc_range_v / 2 ** r.sample_bits / r.current_a, "bands": []}
     for lo, hi in FORCE_BANDS_N:
         m = (d[:, 0] >= lo) & (d[:, 0] < hi) if len(d) else np.zeros(0, bool)
         if not m.any():

@@ -235,7 +235,8 @@ def fit_recording(cfg, runs: Seq[Run], *, min_force_n: float = 0.5, max_nfev: in
     after.gain = float(after.gain * np.exp(-np.mean(r1)))
     ea, pa = fit_errors(after, m, runs, min_force_n)
     sig = float(np.nanmedian([r.noise_sigma for r in runs]))
-    noise_v = float(m.current_a * sig / after.gain) if np.isfinite(sig) else float(cfg.sensor.readout.noise_v)
+    # the board's noise per reported sample (whatever it averages): written with oversampling 1 (save_preset)
+    noise_v = float(m.current_a * sig / after.gain) if np.isfinite(sig) else float(cfg.sensor.readout.sample_noise_v)
     return VelostatFit(before, after, m, eb, ea, pb, pa, noise_v, sig,
                        {"nfev": int(res.nfev), "status": int(res.status), "message": str(res.message),
                         "cost": float(res.cost), "theta": res.x.tolist(), "names": list(FitParams.NAMES)})
@@ -256,7 +257,9 @@ def write_fitted_preset(preset: str, fit: VelostatFit, out: str | Path, source: 
     creep["amplitude"] = float(f"{a.amplitude:.5g}")
     creep["saturation_pressure_pa"] = float(f"{a.p_c_pa:.5g}")
     creep["times_s"] = [float(f"{t:.4g}") for t in a.times_s]
-    sensor.setdefault("readout", {})["noise_v"] = float(f"{fit.noise_v:.4g}")
+    readout = sensor.setdefault("readout", {})
+    readout["noise_v"] = float(f"{fit.noise_v:.4g}")
+    readout["oversampling"] = 1  # the fitted noise is the reported sample's: no averaging on top of it
     data["name"] = f"{data.get('name', 'velostat')}_fitted"
     head = (f"# Fitted by `piezotwin fit {preset} {source}` (sensors/velostat/fit.py).\n"
             f"# Fit error (rms of ln reading, loaded samples): before {fit.err_before['rms_log']:.4f}, after {fit.err_after['rms_log']:.4f}.\n"

@@ -164,7 +164,7 @@ def readout_params(cfg: SceneConfig, xy: np.ndarray) -> ReadoutParams:
     return ReadoutParams(
         r_force_ohm=r_force, v_x=v_x, r_x_ohm=r_x, v_y=v_y, r_y_ohm=r_y, current_a=r.current_a,
         compliance_v=r.compliance_v, input_resistance_ohm=r.input_resistance_ohm, drive_v=r.drive_v,
-        adc_bits=r.adc_bits, adc_range_v=r.adc_range_v, size_x_m=lx, size_y_m=ly, x_sign=1.0,
+        adc_bits=r.sample_bits, adc_range_v=r.adc_range_v, size_x_m=lx, size_y_m=ly, x_sign=1.0,
     )
 
 
@@ -189,7 +189,7 @@ class VelostatSensor:
         self.n_taxels = cfg.pad.n_taxels
 
     def noise(self, seeds: list[int], n_steps: int) -> np.ndarray:
-        sd = self.cfg.sensor.readout.noise_v
+        sd = self.cfg.sensor.readout.sample_noise_v  # per reported sample (the conversions averaged)
         return np.stack(
             [np.random.default_rng([int(s), 1]).standard_normal((n_steps, 3)) * sd for s in seeds]
         ).astype(np.float32)
@@ -281,8 +281,10 @@ class VelostatSensor:
             "family": self.family,
             "paper": "velostat",
             "sample_rate_hz": self.cfg.sampling.sample_rate_hz,
-            "adc_bits": r.adc_bits,
+            "adc_bits": r.sample_bits,  # of a reported sample's code
             "adc_range_v": r.adc_range_v,
+            "adc_oversampling": r.oversampling,
+            "noise_v_per_sample": r.sample_noise_v,
             "adc_channels": "force,x,y",
             "n_taxels": self.n_taxels,
             "taxel_area_m2": self.area,
