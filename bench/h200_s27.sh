@@ -18,3 +18,11 @@ C)  warm cnt_pdms
     PIEZOTWIN_BLOCK_HINTS=0 cli cnt_pdms 8192 h200-s27-cnt_pdms-scan-b noalone
     pack C ;;
 esac
+# P: velostat 16384 as typed with its driver under cProfile (what the sensor stage spends, now that the writers take
+#    the flags), after a warm-up run.
+if [ "$1" = P ]; then
+    warm velostat
+    prof velostat-h200-s27 -- generate velostat -o /tmp/prof-out --episodes 16384
+    cp $OUT/r/logs/profile-velostat-h200-s27.txt $OUT/ 2>/dev/null
+    pack P
+fi
