@@ -26,3 +26,14 @@ if [ "$1" = P ]; then
     cp $OUT/r/logs/profile-velostat-h200-s27.txt $OUT/ 2>/dev/null
     pack P
 fi
+# U: velostat 16384 as typed with the calibration unit index made on the device (the host's numpy pass over the
+#    centroids waited on the interpreter the feed's threads hold), twice (stepping alone with the first), then its
+#    driver under cProfile again.
+if [ "$1" = U ]; then
+    warm velostat
+    cli velostat 16384 h200-s27-velostat-unit-a
+    cli velostat 16384 h200-s27-velostat-unit-b noalone
+    prof velostat-unit-h200-s27 -- generate velostat -o /tmp/prof-out --episodes 16384
+    cp $OUT/r/logs/profile-velostat-unit-h200-s27.txt $OUT/ 2>/dev/null
+    pack U
+fi

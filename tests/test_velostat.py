@@ -253,9 +253,13 @@ def test_device_path_equals_host_path():
         else:
             np.testing.assert_array_equal(dev[k], host[k], err_msg=k)
     # the frame-sums kernel against its numpy reference: float64 values to 1e-12, the film input exactly
-    p32, sums = frame_sums_device(wp.array(pr.reshape(E * T, -1), dtype=wp.float64, device="cpu"), s.xy, s.area)
+    p32, sums, unit = frame_sums_device(wp.array(pr.reshape(E * T, -1), dtype=wp.float64, device="cpu"), s.xy, s.area,
+                                        units=s.unit_grid())
     fz, cxy = force_centroid_numpy(pr, s.xy, s.area)
     np.testing.assert_array_equal(p32.numpy().reshape(E, T, -1), pr.astype(np.float32))
+    # the unit index made in the kernel is unit_of's on the kernel's own centroids, every frame (-1 unloaded)
+    np.testing.assert_array_equal(unit.numpy().reshape(E, T), s.unit_of(sums.numpy().reshape(E, T, 3)[..., 1:]))
+    assert (unit.numpy() == -1).any() and len(np.unique(unit.numpy())) > 3
     got = sums.numpy().reshape(E, T, 3)
     np.testing.assert_allclose(got[..., 0], fz, rtol=1e-12, atol=0)
     np.testing.assert_allclose(got[..., 1:], cxy, rtol=1e-12, atol=1e-15)

@@ -188,6 +188,11 @@ def velostat_frame_sums(
     area: wp.float64,  # taxel cell area (m^2)
     p32: wp.array(dtype=wp.float32),  # [E*T*N] out: the film's input, float32(pressure) (numpy's astype)
     sums: wp.array2d(dtype=wp.float64),  # [E*T, 3] out: force (N), centroid x, y (m; NaN unloaded)
+    size_x: wp.float64,  # pad size (m), for the calibration unit under the centroid
+    size_y: wp.float64,
+    units_x: int,  # calibration units along x, y
+    units_y: int,
+    unit: wp.array(dtype=wp.int16),  # [E*T] out: unit index iy * units_x + ix under the centroid (-1 unloaded)
 ):
     f = wp.tid()
     n_taxels = pressure.shape[1]
@@ -205,25 +210,37 @@ def velostat_frame_sums(
     fz = s * area
     sums[f, 0] = fz
     if fz > wp.float64(0.0):
-        sums[f, 1] = sx * area / fz
-        sums[f, 2] = sy * area / fz
+        cx = sx * area / fz
+        cy = sy * area / fz
+        sums[f, 1] = cx
+        sums[f, 2] = cy
+        # VelostatSensor.unit_of's float64 arithmetic, in its order (truncation toward zero, then clipped)
+        ix = wp.clamp(int((cx / size_x + wp.float64(0.5)) * wp.float64(units_x)), 0, units_x - 1)
+        iy = wp.clamp(int((cy / size_y + wp.float64(0.5)) * wp.float64(units_y)), 0, units_y - 1)
+        unit[f] = wp.int16(iy * units_x + ix)
     else:
         nan = wp.float64(wp.nan)
         sums[f, 1] = nan
         sums[f, 2] = nan
+        unit[f] = wp.int16(-1)
 
 
-def frame_sums_device(pressure: wp.array, xy: np.ndarray, area: float, p32: wp.array | None = None):
+def frame_sums_device(pressure: wp.array, xy: np.ndarray, area: float, p32: wp.array | None = None,
+                      units: tuple[float, float, int, int] = (1.0, 1.0, 1, 1)):
     """A float64 load field on the device, flat (E T, N) -> (float32 film input [E*T*N], [E*T, 3] float64
-    force and contact centroid), both on its device (`velostat_frame_sums`)."""
+    force and contact centroid, [E*T] int16 calibration unit under the centroid), all on its device
+    (`velostat_frame_sums`). units: (pad size x, y (m), units along x, y) of the unit grid."""
     dev = pressure.device
     F, N = pressure.shape
     p32 = wp.empty(F * N, dtype=wp.float32, device=dev) if p32 is None else p32
     sums = wp.empty((F, 3), dtype=wp.float64, device=dev)
+    unit = wp.empty(F, dtype=wp.int16, device=dev)
     xs = wp.array(np.ascontiguousarray(xy[:, 0], np.float64), dtype=wp.float64, device=dev)
     ys = wp.array(np.ascontiguousarray(xy[:, 1], np.float64), dtype=wp.float64, device=dev)
-    wp.launch(velostat_frame_sums, dim=F, inputs=[pressure, xs, ys, wp.float64(area), p32, sums], device=dev)
-    return p32, sums
+    sx, sy, ux, uy = units
+    wp.launch(velostat_frame_sums, dim=F, inputs=[pressure, xs, ys, wp.float64(area), p32, sums, wp.float64(sx),
+                                                  wp.float64(sy), int(ux), int(uy), unit], device=dev)
+    return p32, sums, unit
 
 
 def run_film_warp(pressure: np.ndarray, p: FilmParams, device: str = "cpu", state: np.ndarray | None = None):

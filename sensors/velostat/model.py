@@ -222,11 +222,14 @@ class VelostatSensor:
             raise ValueError(f"need one seed per episode ({E}); got {len(seeds)}")
         dev = self.device
         size = E * T * N
-        p32, sums = frame_sums_device(pressure, self.xy, self.area, scratch("velostat p32", size, wp.float32, dev))
+        p32, sums, unit = frame_sums_device(pressure, self.xy, self.area, scratch("velostat p32", size, wp.float32, dev),
+                                            self.unit_grid())
         cond, _ = run_film_device(p32, (E, T, N), self.fp, dev, out=scratch("velostat cond", size, wp.float32, dev))
         ro = run_readout_device(cond, (E, T, N), self.noise(seeds, T), self.rp, dev)
         s = to_host(sums, "velostat sums").reshape(E, T, 3)
-        return self._outputs(s[..., 0], s[..., 1:], ro)
+        # the unit index made on the device: the host's pass over the centroids ran ~10x slower in the GPU feed's
+        # driver than alone (each numpy step waits for the interpreter its threads hold; bench/probe_unit_of.py)
+        return self._outputs(s[..., 0], s[..., 1:], ro, to_host(unit, "velostat unit").reshape(E, T))
 
     def conductance(self, pressure: np.ndarray) -> np.ndarray:
         """pressure [E,T,N] -> film conductance [E,T,N] (S) by the selected backend."""
@@ -254,17 +257,24 @@ class VelostatSensor:
         fz, cxy = force_centroid_numpy(pressure, self.xy, self.area)
         return self._outputs(fz, cxy, ro)
 
-    def _outputs(self, fz: np.ndarray, cxy: np.ndarray, ro: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """force [E,T] (N), contact centroid [E,T,2] (m) and the readout's arrays -> OUTPUTS, each [E, T, ...]."""
+    def _outputs(self, fz: np.ndarray, cxy: np.ndarray, ro: dict[str, np.ndarray],
+                 unit: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """force [E,T] (N), contact centroid [E,T,2] (m) and the readout's arrays -> OUTPUTS, each [E, T, ...];
+        unit: the calibration unit index [E,T] where made already (the device path), else unit_of(cxy)."""
         out = {
             "force": fz.astype(np.float32),
             "contact_xy": cxy.astype(np.float32),
-            "unit": self.unit_of(cxy),
+            "unit": self.unit_of(cxy) if unit is None else np.array(unit, np.int16),
         }
         out.update(ro)
         out["adc"] = out["adc"].astype(np.int16 if self.rp.adc_bits <= 15 else np.int32)
         out.pop("touch")
         return out
+
+    def unit_grid(self) -> tuple[float, float, int, int]:
+        """(pad size x, y (m), calibration units along x, y): the grid `unit_of` reads positions on."""
+        s, pad = self.cfg.sensor, self.cfg.pad
+        return float(pad.size_x_m), float(pad.size_y_m), int(s.units_x), int(s.units_y)
 
     def unit_of(self, xy: np.ndarray) -> np.ndarray:
         """Calibration unit index (iy * units_x + ix) of positions [..., 2]; -1 for NaN."""
