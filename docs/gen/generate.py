@@ -97,7 +97,8 @@ USER_CLI = ["user-cli-h100.json", "user-cli-h100-cnt.json", "user-cli-h100-cnt-w
             "user-cli-h200-s27-velostat-hints-a.json", "user-cli-h200-s27-velostat-scan-a.json",
             "user-cli-h200-s27-velostat-hints-b.json", "user-cli-h200-s27-velostat-scan-b.json",
             "user-cli-h200-s27-cnt_pdms-hints-a.json", "user-cli-h200-s27-cnt_pdms-scan-a.json",
-            "user-cli-h200-s27-cnt_pdms-hints-b.json", "user-cli-h200-s27-cnt_pdms-scan-b.json"]
+            "user-cli-h200-s27-cnt_pdms-hints-b.json", "user-cli-h200-s27-cnt_pdms-scan-b.json",
+            "user-cli-h200-s27-velostat-unit-a.json", "user-cli-h200-s27-velostat-unit-b.json"]
 # session 22: the physics processes' GPU stepping in turns against side by side (PIEZOTWIN_GPU_TURNS=0), velostat
 # 16384 episodes, (file, turns); the first pair in one call in the order run, the third an earlier call on the same day
 # session 23: the same for cnt_pdms 8192 (bench/h200_s23.sh; A: in turns with stepping alone, another call; B: side by side
