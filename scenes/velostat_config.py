@@ -9,7 +9,6 @@ from __future__ import annotations
 from typing import Annotated, Literal
 
 import numpy as np
-
 from pydantic import Field, model_validator
 
 from scenes.base import Between, Fraction, NonNeg, Pos, Strict

@@ -138,8 +138,9 @@ class Channel:
     description: str = ""
     # what the producer already knows of the data's zeros (the GPU feed: a field sent as its non-zero taxel blocks,
     # simulate.contact.field_blocks.BlockSparse): (block, mask), mask[k] False where entries [k * block, (k + 1) *
-    # block) of axis 1 are all +0.0 over the whole episode. The writer then neither scans those blocks for zero
-    # chunks nor for the summary's min / max; the file and its content hash are the same (a hint, not stored)
+    # block) of axis 1 are all +0.0 over the whole episode. The writer then does not scan those blocks for zero
+    # chunks, nor an all-zero field for the summary's min / max; the file and its content hash are the same (a
+    # hint, not stored)
     nonzero_blocks: tuple[int, np.ndarray] | None = None
 
     def __post_init__(self) -> None:
