@@ -197,13 +197,11 @@ def calibration_split(seqs: list[Sequence], valid_share: float = 0.1) -> dict[st
 
 
 def unit_of(xy_m: np.ndarray, cfg) -> np.ndarray:
-    """Calibration unit (iy * units_x + ix) of decoded positions [T, 2]; -1 where NaN (no touch)."""
-    s, pad = cfg.sensor, cfg.pad
-    ok = np.isfinite(xy_m).all(-1)
-    z = np.nan_to_num(xy_m)
-    ix = np.clip(((z[:, 0] / pad.size_x_m + 0.5) * s.units_x).astype(int), 0, s.units_x - 1)
-    iy = np.clip(((z[:, 1] / pad.size_y_m + 0.5) * s.units_y).astype(int), 0, s.units_y - 1)
-    return np.where(ok, iy * s.units_x + ix, -1)
+    """Calibration unit (iy * units_x + ix) of decoded positions [T, 2]; -1 where NaN (no touch): the sensor's
+    unit grid (sensors.velostat.model.unit_index), as int."""
+    from sensors.velostat.model import unit_index
+
+    return unit_index(xy_m, cfg).astype(int)
 
 
 def holds(target: np.ndarray, min_len: int, min_force: float = 0.5) -> list[slice]:

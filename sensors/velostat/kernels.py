@@ -225,8 +225,8 @@ def velostat_frame_sums(
         unit[f] = wp.int16(-1)
 
 
-def frame_sums_device(pressure: wp.array, xy: np.ndarray, area: float, p32: wp.array | None = None,
-                      units: tuple[float, float, int, int] = (1.0, 1.0, 1, 1)):
+def frame_sums_device(pressure: wp.array, xy: np.ndarray, area: float, p32: wp.array | None = None, *,
+                      units: tuple[float, float, int, int]):
     """A float64 load field on the device, flat (E T, N) -> (float32 film input [E*T*N], [E*T, 3] float64
     force and contact centroid, [E*T] int16 calibration unit under the centroid), all on its device
     (`velostat_frame_sums`). units: (pad size x, y (m), units along x, y) of the unit grid."""

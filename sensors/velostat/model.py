@@ -108,6 +108,17 @@ def film_domains(cfg: SceneConfig, seed: int) -> tuple[np.ndarray, np.ndarray]:
     return cell, centre
 
 
+def unit_index(xy: np.ndarray, cfg: SceneConfig) -> np.ndarray:
+    """Calibration unit (iy * units_x + ix, int16) of positions [..., 2] (m) on the sensor's unit grid; -1 where NaN.
+    The GPU path makes the same in its frame-sums kernel (sensors/velostat/kernels.py velostat_frame_sums)."""
+    s, pad = cfg.sensor, cfg.pad
+    ok = np.isfinite(xy).all(-1)
+    z = np.nan_to_num(xy)
+    ix = np.clip(((z[..., 0] / pad.size_x_m + 0.5) * s.units_x).astype(int), 0, s.units_x - 1)
+    iy = np.clip(((z[..., 1] / pad.size_y_m + 0.5) * s.units_y).astype(int), 0, s.units_y - 1)
+    return np.where(ok, iy * s.units_x + ix, -1).astype(np.int16)
+
+
 def taxel_xy(cfg: SceneConfig) -> np.ndarray:
     from sensors.taxels import taxel_xy_m  # geometry helper (numpy only)
 
@@ -223,7 +234,7 @@ class VelostatSensor:
         dev = self.device
         size = E * T * N
         p32, sums, unit = frame_sums_device(pressure, self.xy, self.area, scratch("velostat p32", size, wp.float32, dev),
-                                            self.unit_grid())
+                                            units=self.unit_grid())
         cond, _ = run_film_device(p32, (E, T, N), self.fp, dev, out=scratch("velostat cond", size, wp.float32, dev))
         ro = run_readout_device(cond, (E, T, N), self.noise(seeds, T), self.rp, dev)
         s = to_host(sums, "velostat sums").reshape(E, T, 3)
@@ -277,13 +288,8 @@ class VelostatSensor:
         return float(pad.size_x_m), float(pad.size_y_m), int(s.units_x), int(s.units_y)
 
     def unit_of(self, xy: np.ndarray) -> np.ndarray:
-        """Calibration unit index (iy * units_x + ix) of positions [..., 2]; -1 for NaN."""
-        s, pad = self.cfg.sensor, self.cfg.pad
-        ok = np.isfinite(xy).all(-1)
-        z = np.nan_to_num(xy)
-        ix = np.clip(((z[..., 0] / pad.size_x_m + 0.5) * s.units_x).astype(int), 0, s.units_x - 1)
-        iy = np.clip(((z[..., 1] / pad.size_y_m + 0.5) * s.units_y).astype(int), 0, s.units_y - 1)
-        return np.where(ok, iy * s.units_x + ix, -1).astype(np.int16)
+        """Calibration unit index (iy * units_x + ix) of positions [..., 2]; -1 for NaN (`unit_index`)."""
+        return unit_index(xy, self.cfg)
 
     def attrs(self) -> dict:
         r = self.cfg.sensor.readout
